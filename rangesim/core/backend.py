@@ -1,0 +1,39 @@
+"""Mitsuba 3 / Dr.Jit variant selection, done once per process.
+
+``cuda_ad_rgb`` when Dr.Jit finds a CUDA device, else ``llvm_ad_rgb``; the environment
+variable ``RANGESIM_VARIANT`` overrides both.
+"""
+from __future__ import annotations
+
+import os
+from types import ModuleType
+
+from rangesim.core.errors import RangesimError
+
+
+def choose_variant() -> str:
+    """Name of the Mitsuba variant this process should use."""
+    override = os.environ.get("RANGESIM_VARIANT", "").strip()
+    if override:
+        return override
+    import drjit as dr
+
+    return "cuda_ad_rgb" if dr.has_backend(dr.JitBackend.CUDA) else "llvm_ad_rgb"
+
+
+def mitsuba() -> ModuleType:
+    """The ``mitsuba`` module with a variant set (choosing one on first use)."""
+    import mitsuba as mi
+
+    if mi.variant() is None:
+        variant = choose_variant()
+        if variant not in mi.variants():
+            raise RangesimError(
+                f"unknown Mitsuba variant {variant!r}; available: {', '.join(mi.variants())}",
+                source="RANGESIM_VARIANT",
+            )
+        try:
+            mi.set_variant(variant)
+        except Exception as exc:  # e.g. cuda requested without a GPU
+            raise RangesimError(f"cannot use Mitsuba variant {variant!r}: {exc}") from exc
+    return mi

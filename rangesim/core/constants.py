@@ -1,0 +1,28 @@
+"""Codes defined once and imported everywhere (status codes, file channel names)."""
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class Status(IntEnum):
+    """Per-pixel outcome of a scan, stored in ``RangeScan.status`` (uint8)."""
+
+    VALID = 0
+    #: the camera ray hits no surface (within the ray's maximum length)
+    MISS = 1
+    #: the camera sees the surface but the laser sheet cannot reach it
+    SHADOW = 2
+    #: the return signal is below the sensor's ``min_signal``
+    DROPOUT = 3
+    #: the surface lies outside the sensor's working range [near, far]
+    OUT_OF_RANGE = 4
+
+
+#: human-readable names of the status codes, for legends and reports
+STATUS_NAMES = {
+    Status.VALID: "valid",
+    Status.MISS: "no surface",
+    Status.SHADOW: "laser shadow",
+    Status.DROPOUT: "dropout",
+    Status.OUT_OF_RANGE: "out of range",
+}

@@ -1,0 +1,62 @@
+"""Rigid transforms: look-at poses (OpenCV camera axes) and Euler rotations."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world pose of a camera at ``position`` looking at ``target``.
+
+    The camera frame is OpenCV's: x right, y down (opposite ``up`` as seen in the image),
+    z forward.
+
+    Parameters
+    ----------
+    position, target, up : array_like, shape (3,)
+        World coordinates of the camera centre and the point it looks at, and the world
+        direction that appears upwards in the image.
+
+    Returns
+    -------
+    (4, 4) float64 camera-to-world transform.
+
+    Raises
+    ------
+    ValueError
+        If position equals target, or ``up`` is parallel to the viewing direction.
+    """
+    position = np.asarray(position, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - position
+    norm = np.linalg.norm(forward)
+    if not np.isfinite(norm) or norm == 0:
+        raise ValueError("view position and look_at coincide")
+    z = forward / norm
+    up = np.asarray(up, dtype=np.float64)
+    down = -(up - np.dot(up, z) * z)
+    if np.linalg.norm(down) < 1e-9 * max(np.linalg.norm(up), 1e-300):
+        raise ValueError("view 'up' is parallel to the viewing direction")
+    y = down / np.linalg.norm(down)
+    x = np.cross(y, z)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, position
+    return pose
+
+
+def object_transform(translate=(0, 0, 0), rotate_deg=(0, 0, 0), scale=1.0) -> np.ndarray:
+    """4x4 object-to-world transform: scale, then rotate, then translate.
+
+    ``rotate_deg`` are extrinsic X, Y, Z Euler angles in degrees (rotate about the world
+    x axis first, then y, then z), as in ``scipy.spatial.transform.Rotation.from_euler("xyz")``.
+    ``scale`` is a scalar or a (3,) per-axis factor.
+    """
+    m = np.eye(4)
+    rot = Rotation.from_euler("xyz", np.asarray(rotate_deg, dtype=np.float64), degrees=True)
+    m[:3, :3] = rot.as_matrix() * np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
+    m[:3, 3] = np.asarray(translate, dtype=np.float64)
+    return m
+
+
+def transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 transform to (N, 3) points."""
+    return points @ matrix[:3, :3].T + matrix[:3, 3]

@@ -1,0 +1,151 @@
+"""Scan files: :func:`save_scan` / :func:`load_scan` pick the format by extension.
+
+Writers: ``.exr`` (the native format, exact), ``.npz`` (exact), ``.ply`` (valid points
+only, export). Readers: ``.exr`` and ``.npz``; other modules add readers for more
+formats with :func:`register_reader`. Every save goes through :func:`atomic_path`,
+so a failed write never leaves a partial file.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import RangeScan
+from rangesim.io.atomic import atomic_path
+from rangesim.io.exr import read_exr, write_exr
+from rangesim.io.npz import read_npz, write_npz
+from rangesim.io.ply import write_ply
+
+__all__ = [
+    "atomic_path",
+    "load_scan",
+    "read_exr",
+    "read_npz",
+    "register_reader",
+    "save_scan",
+    "write_exr",
+    "write_npz",
+    "write_ply",
+]
+
+Reader = Callable[..., RangeScan]
+Writer = Callable[[RangeScan, Path], None]
+
+#: lower-case suffix -> writer(scan, path); writers write directly, save_scan makes it atomic
+_WRITERS: dict[str, Writer] = {".exr": write_exr, ".npz": write_npz, ".ply": write_ply}
+#: lower-case suffix -> reader(path, **kwargs) -> RangeScan
+_READERS: dict[str, Reader] = {}
+
+
+def _suffix(path: Path) -> str:
+    return path.suffix.lower()
+
+
+def _describe_suffix(path: Path) -> str:
+    return f"{path.suffix!r} files" if path.suffix else "files without an extension"
+
+
+def register_reader(suffixes: str | Iterable[str], func: Reader) -> None:
+    """Make :func:`load_scan` read files with these extensions through ``func``.
+
+    Parameters
+    ----------
+    suffixes : str or iterable of str
+        Extensions such as ``".pcd"`` or ``"pcd"``; matched case-insensitively. A
+        later registration for the same suffix replaces the earlier one.
+    func : callable
+        ``func(path: Path, **kwargs) -> RangeScan``; should raise
+        :class:`RangesimError` for bad files.
+    """
+    if isinstance(suffixes, str):
+        suffixes = [suffixes]
+    for suffix in suffixes:
+        suffix = suffix.lower()
+        _READERS[suffix if suffix.startswith(".") else "." + suffix] = func
+
+
+register_reader(".exr", read_exr)
+register_reader(".npz", read_npz)
+
+
+def save_scan(scan: RangeScan, path: str | Path) -> Path:
+    """Write ``scan`` atomically; the format follows the extension.
+
+    Parameters
+    ----------
+    scan : RangeScan
+    path : str or Path
+        ``.exr``, ``.npz`` or ``.ply`` (any case). Missing parent directories are created.
+
+    Returns
+    -------
+    Path
+        The path written.
+
+    Raises
+    ------
+    RangesimError
+        For an unsupported extension or data the format cannot store exactly.
+    """
+    path = Path(path)
+    writer = _WRITERS.get(_suffix(path))
+    if writer is None:
+        supported = ", ".join(sorted(_WRITERS))
+        raise RangesimError(
+            f"cannot write scans as {_describe_suffix(path)};"
+            f" supported: {supported}",
+            path,
+        )
+    with atomic_path(path) as tmp:
+        try:
+            writer(scan, tmp)
+        except RangesimError as exc:
+            if exc.source != str(tmp):
+                raise
+            # the writer only saw the temporary name; the user knows the final one
+            relabelled = RangesimError(str(exc).replace(str(tmp), str(path), 1))
+            relabelled.source = str(path)
+            raise relabelled from exc
+    return path
+
+
+def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
+    """Read a scan; the reader is chosen by extension (see :func:`register_reader`).
+
+    Parameters
+    ----------
+    path : str or Path
+    **kwargs
+        Passed to the reader (for formats that need e.g. an image size).
+
+    Returns
+    -------
+    RangeScan
+
+    Raises
+    ------
+    RangesimError
+        If the file is missing, its extension has no reader, or it cannot be read.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise RangesimError("no such file", path)
+    if not path.is_file():
+        raise RangesimError("not a file", path)
+    reader = _READERS.get(_suffix(path))
+    if reader is None:
+        supported = ", ".join(sorted(_READERS))
+        raise RangesimError(
+            f"cannot read scans from {_describe_suffix(path)};"
+            f" supported: {supported}",
+            path,
+        )
+    try:
+        return reader(path, **kwargs)
+    except RangesimError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError) as exc:
+        # safety net for registered readers that let a parser error through
+        raise RangesimError(f"cannot read scan ({type(exc).__name__}: {exc})", path) from exc

@@ -1,0 +1,108 @@
+"""NumPy ``.npz`` scan files: every field with its exact dtype, plus meta and pose.
+
+Arrays: one per RangeScan field, named after it (``xyz_true`` only when present);
+``pose`` (4, 4) float64; ``meta`` a 0-d unicode array holding JSON; and
+``rangesim_format_version`` a 0-d int. Nothing is pickled, so files load with
+``allow_pickle=False``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan
+from rangesim.io.exr import decode_meta, encode_meta
+
+FORMAT_VERSION = 1
+VERSION_KEY = "rangesim_format_version"
+#: local-file-header signature that starts every non-empty zip archive, and the empty one's
+ZIP_MAGIC, EMPTY_ZIP_MAGIC = b"PK\x03\x04", b"PK\x05\x06"
+
+
+def write_npz(scan: RangeScan, path: str | Path) -> None:
+    """Write ``scan`` to a compressed ``.npz`` at ``path`` (directly; not atomic).
+
+    Use :func:`rangesim.io.save_scan` for an atomic write.
+
+    Parameters
+    ----------
+    scan : RangeScan
+    path : str or Path
+        Target file, written as given (numpy's habit of appending ``.npz`` is avoided).
+    """
+    arrays: dict[str, np.ndarray] = {}
+    for field, dtype, _ in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
+        value = getattr(scan, field)
+        if value is not None:
+            arrays[field] = np.asarray(value, dtype=dtype)
+    arrays["pose"] = np.asarray(scan.pose, dtype=np.float64)
+    arrays["meta"] = np.array(encode_meta(scan.meta, path))
+    arrays[VERSION_KEY] = np.array(FORMAT_VERSION)
+    # a file object, because np.savez appends ".npz" to any path not ending in exactly that
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+
+
+def read_npz(path: str | Path) -> RangeScan:
+    """Read a scan written by :func:`write_npz`; every array comes back bit-exact.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    RangeScan
+
+    Raises
+    ------
+    RangesimError
+        If the file is missing, not a readable npz, or lacks a rangesim array.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RangesimError("no such file", path)
+    # our own handle: np.load leaks the one it opens when the zip is corrupt
+    with open(path, "rb") as fh:
+        # np.load would try other formats and report e.g. "pickled data" for plain garbage
+        if fh.read(len(ZIP_MAGIC)) not in (ZIP_MAGIC, EMPTY_ZIP_MAGIC):
+            raise RangesimError("not an .npz file (no zip signature)", path)
+        fh.seek(0)
+        try:
+            with np.load(fh, allow_pickle=False) as data:
+                # read everything now: a truncated archive may only fail on member access
+                arrays: dict[str, np.ndarray] = {key: data[key] for key in data.files}
+        except Exception as exc:  # zipfile, zlib, numpy format and OS errors alike
+            raise RangesimError(
+                f"not a readable .npz file ({type(exc).__name__}: {exc})", path
+            ) from exc
+    return _scan_from_arrays(arrays, path)
+
+
+def _scan_from_arrays(arrays: dict[str, np.ndarray], path: Path) -> RangeScan:
+    try:
+        version = int(arrays[VERSION_KEY]) if VERSION_KEY in arrays else FORMAT_VERSION
+    except (TypeError, ValueError) as exc:
+        raise RangesimError(f"corrupt {VERSION_KEY} ({exc})", path) from exc
+    if version > FORMAT_VERSION:
+        raise RangesimError(
+            f"rangesim npz format version {version} is newer than this reader"
+            f" ({FORMAT_VERSION}); update rangesim",
+            path,
+        )
+    fields: dict[str, Any] = {}
+    for field, _, _ in PIXEL_FIELDS:
+        if field not in arrays:
+            raise RangesimError(f"not a rangesim scan: missing array {field}", path)
+        fields[field] = arrays[field]
+    for field, _, _ in OPTIONAL_PIXEL_FIELDS:
+        fields[field] = arrays.get(field)
+    try:
+        meta = decode_meta(str(arrays["meta"])) if "meta" in arrays else {}
+        pose = arrays["pose"] if "pose" in arrays else np.eye(4)
+        return RangeScan(**fields, pose=pose, meta=meta)
+    except ValueError as exc:  # bad JSON, wrong shapes
+        raise RangesimError(f"inconsistent scan: {exc}", path) from exc

@@ -1,0 +1,224 @@
+"""Scenes: objects (meshes, primitives) in world coordinates, plus an optional view.
+
+All geometry is converted to millimetres on load; sensors work in millimetres.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+import trimesh
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.geometry import look_at, object_transform
+from rangesim.core.tomlfile import check_keys, read_toml
+from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh, validate_mesh
+from rangesim.scene.primitives import make_primitive
+
+#: length units accepted in scene files, in millimetres
+UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "inch": 25.4}
+
+OBJECT_KEYS = {
+    "name", "mesh", "model", "primitive", "params", "translate", "rotate_deg", "scale",
+    "albedo", "units", "material", "size", "radius", "height", "sections", "subdivisions",
+}
+VIEW_KEYS = {"position", "look_at", "up"}
+SCENE_KEYS = {"units", "object", "view", "name", "description"}
+
+
+@dataclass
+class SceneObject:
+    """One object of a scene.
+
+    Attributes
+    ----------
+    name : str
+    mesh : trimesh.Trimesh
+        Triangles in world coordinates, millimetres; face order as in the source.
+    albedo : float
+        Diffuse reflectance at the laser wavelength, 0..1.
+    source : str
+        Where the geometry came from (file path, primitive or model name).
+    material : dict
+        Material table for the rendered mode (``albedo`` keeps its meaning for diffuse).
+    """
+
+    name: str
+    mesh: trimesh.Trimesh
+    albedo: float = 0.6
+    source: str = ""
+    material: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def watertight(self) -> bool:
+        """True for a closed, consistently wound mesh (its back faces are never visible)."""
+        return bool(self.mesh.is_watertight and self.mesh.is_winding_consistent)
+
+
+@dataclass
+class Scene:
+    """Objects in world coordinates (mm) and the default view.
+
+    Attributes
+    ----------
+    objects : list of SceneObject
+        Object index in this list is the ``part`` label of scans.
+    view : (4, 4) float64 or None
+        Default camera-to-world pose; None lets ``scan`` choose one that frames the objects.
+    source : str
+        The scene file, or a description of where the scene came from.
+    """
+
+    objects: list[SceneObject]
+    view: np.ndarray | None = None
+    source: str = "scene"
+    _mitsuba: Any = field(default=None, repr=False, compare=False)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) axis-aligned bounding box of all objects, mm."""
+        corners = np.vstack([o.mesh.bounds for o in self.objects])
+        return np.stack([corners.min(axis=0), corners.max(axis=0)])
+
+    def mitsuba_scene(self):
+        """The Mitsuba scene of these objects, built once and cached (see ``mitsuba_scene``)."""
+        if self._mitsuba is None:
+            from rangesim.scene.mitsuba_scene import build_mitsuba_scene
+
+            self._mitsuba = build_mitsuba_scene(self)
+        return self._mitsuba
+
+    def framing_pose(self, distance: float, direction=(0.0, -1.0, 1.4)) -> np.ndarray:
+        """A pose looking at the centre of the bounding box from ``distance`` mm along ``direction``."""
+        centre = self.bounds.mean(axis=0)
+        d = np.asarray(direction, dtype=np.float64)
+        return look_at(centre + distance * d / np.linalg.norm(d), centre, up=(0, 0, 1))
+
+    @property
+    def bounding_radius(self) -> float:
+        """Radius (mm) of the sphere around the bounding-box centre enclosing every vertex."""
+        centre = self.bounds.mean(axis=0)
+        return float(max(np.linalg.norm(o.mesh.vertices - centre, axis=1).max() for o in self.objects))
+
+
+def load_scene(source) -> Scene:
+    """Build a :class:`Scene` from a scene file, a mesh file, a mesh, or a list of meshes.
+
+    Parameters
+    ----------
+    source : str, Path, trimesh.Trimesh, Scene or list of trimesh.Trimesh
+        A ``.toml`` scene file (see the README for its keys), any mesh file trimesh reads
+        (one object, millimetres, no view), or meshes already in memory (millimetres).
+
+    Raises
+    ------
+    RangesimError
+        Any problem with the file or its contents, with the file named.
+    """
+    if isinstance(source, Scene):
+        return source
+    if isinstance(source, trimesh.Trimesh):
+        source = [source]
+    if isinstance(source, (list, tuple)):
+        return _scene_from_meshes(source)
+    path = Path(source)
+    if path.suffix.lower() == ".toml":
+        return _scene_from_toml(path)
+    if path.suffix.lower() in MESH_SUFFIXES:
+        mesh = load_mesh(path)
+        return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path))
+    if not path.exists():
+        raise RangesimError("no such scene or mesh file", source=path)
+    raise RangesimError(
+        f"unknown scene file type {path.suffix!r}; use .toml or a mesh ({', '.join(MESH_SUFFIXES)})",
+        source=path,
+    )
+
+
+def _scene_from_meshes(meshes: Iterable[trimesh.Trimesh]) -> Scene:
+    objects = []
+    for k, mesh in enumerate(meshes):
+        if not isinstance(mesh, trimesh.Trimesh):
+            raise RangesimError(f"scene item {k} is a {type(mesh).__name__}, not a trimesh.Trimesh")
+        objects.append(SceneObject(f"object{k}", validate_mesh(mesh, f"mesh {k}"), source="memory"))
+    if not objects:
+        raise RangesimError("scene has no objects")
+    return Scene(objects, source="memory")
+
+
+def _unit_scale(value: str, where: str, source) -> float:
+    if value not in UNITS_MM:
+        raise RangesimError(
+            f"unknown units {value!r} in {where}; use one of {', '.join(UNITS_MM)}", source=source
+        )
+    return UNITS_MM[value]
+
+
+def _vector(table: dict, key: str, default, where: str, source) -> np.ndarray:
+    value = np.asarray(table.get(key, default), dtype=np.float64)
+    if value.shape != (3,) or not np.all(np.isfinite(value)):
+        raise RangesimError(f"{where}.{key} must be 3 finite numbers", source=source)
+    return value
+
+
+def _scene_from_toml(path: Path) -> Scene:
+    data = read_toml(path)
+    check_keys(data, SCENE_KEYS, "the scene", path)
+    scene_mm = _unit_scale(data.get("units", "mm"), "units", path)
+    tables = data.get("object", [])
+    if isinstance(tables, dict):
+        tables = [tables]
+    if not tables:
+        raise RangesimError("scene has no [[object]] tables", source=path)
+    objects = [_object_from_table(t, k, scene_mm, path) for k, t in enumerate(tables)]
+    view = None
+    if "view" in data:
+        v = data["view"]
+        check_keys(v, VIEW_KEYS, "[view]", path)
+        try:
+            view = look_at(
+                _vector(v, "position", None, "view", path) * scene_mm,
+                _vector(v, "look_at", (0, 0, 0), "view", path) * scene_mm,
+                _vector(v, "up", (0, 0, 1), "view", path),
+            )
+        except ValueError as exc:
+            raise RangesimError(str(exc), source=path) from exc
+    return Scene(objects, view=view, source=str(path))
+
+
+def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObject:
+    where = f"[[object]] {k}"
+    check_keys(t, OBJECT_KEYS, where, path)
+    name = str(t.get("name", f"object{k}"))
+    kinds = [key for key in ("mesh", "model", "primitive") if key in t]
+    if len(kinds) != 1:
+        raise RangesimError(f"{where} ({name}) needs exactly one of mesh, model, primitive", source=path)
+    if "mesh" in t:
+        mesh_path = (path.parent / t["mesh"]).resolve()
+        mesh, origin = load_mesh(mesh_path), str(mesh_path)
+    elif "model" in t:
+        raise RangesimError(
+            f"{where} ({name}): built-in CAD model {t['model']!r} is not available in this "
+            "version; use a mesh file or primitives",
+            source=path,
+        )
+    else:
+        mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
+    # the object's own units (for a mesh file), else the scene's
+    object_mm = _unit_scale(t["units"], where, path) if "units" in t else scene_mm
+    scale = np.asarray(t.get("scale", 1.0), dtype=np.float64)
+    if not np.all(np.isfinite(scale)) or np.any(scale <= 0) or scale.shape not in ((), (3,)):
+        raise RangesimError(f"{where}.scale must be a positive number or 3 of them", source=path)
+    albedo = float(t.get("albedo", 0.6))
+    if not 0.0 <= albedo <= 1.0:
+        raise RangesimError(f"{where}.albedo must lie in 0..1, got {albedo}", source=path)
+    matrix = object_transform(
+        _vector(t, "translate", (0, 0, 0), where, path) * scene_mm,
+        _vector(t, "rotate_deg", (0, 0, 0), where, path),
+        scale * object_mm,
+    )
+    mesh = mesh.copy()
+    mesh.apply_transform(matrix)
+    return SceneObject(name, mesh, albedo=albedo, source=origin, material=dict(t.get("material", {})))

@@ -1,0 +1,256 @@
+"""Sensor descriptions: camera, laser sheet, working range and noise, from TOML or a dict.
+
+Presets live in the repository's ``sensors/`` folder (``RANGESIM_SENSORS`` adds another
+folder). Every key is documented in ``sensors/README.md``; lengths are millimetres.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.tomlfile import check_keys, read_toml
+
+#: the repository's preset folder (the package is installed in editable mode from the repo)
+PRESET_DIR = Path(__file__).resolve().parents[2] / "sensors"
+
+SWEEPS = ("rotating", "translating")
+MODES = ("geometric",)
+
+#: every table and key a sensor accepts, with defaults (None: required)
+SCHEMA: dict[str, dict[str, Any]] = {
+    "camera": {"width": None, "height": None, "fov_deg": None, "aperture_mm": 5.0},
+    "laser": {
+        "baseline": None,
+        "sweep": "rotating",
+        "step": 0.5,
+        "tilt_deg": None,  # translating sweep: default aims the sheet at mid-range on the axis
+        "stripe_width": 0.0,
+        "wavelength_nm": 670.0,
+    },
+    "range": {"near": None, "far": None},
+    "noise": {
+        "sigma_px": 0.0,
+        "quantization_px": 0.0,
+        "min_signal": 0.0,
+        "speckle_contrast": 0.0,
+    },
+}
+TOP_KEYS = {"name", "description", "mode", *SCHEMA}
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A laser-stripe triangulation sensor.
+
+    Attributes
+    ----------
+    params : dict
+        Nested tables ``camera``, ``laser``, ``range``, ``noise`` with every key filled in
+        (defaults applied), as in the TOML file.
+    name, description, mode : str
+    source : str
+        The preset name, file or "dict" the sensor came from.
+    """
+
+    params: Mapping[str, Mapping[str, Any]]
+    name: str = "sensor"
+    description: str = ""
+    mode: str = "geometric"
+    source: str = "dict"
+
+    # -- convenient views of the parameters -------------------------------------------
+    @property
+    def width(self) -> int:
+        return int(self.params["camera"]["width"])
+
+    @property
+    def height(self) -> int:
+        return int(self.params["camera"]["height"])
+
+    @property
+    def focal_px(self) -> float:
+        """Focal length in pixels, from the horizontal field of view."""
+        return self.width / 2 / math.tan(math.radians(self.params["camera"]["fov_deg"]) / 2)
+
+    @property
+    def K(self) -> np.ndarray:
+        """3x3 pinhole intrinsics; pixel (row i, col j) looks along K^-1 (j + .5, i + .5, 1)."""
+        f = self.focal_px
+        return np.array([[f, 0, self.width / 2], [0, f, self.height / 2], [0, 0, 1]], float)
+
+    @property
+    def laser_origin(self) -> np.ndarray:
+        """(3,) laser origin in the camera frame, mm: on the camera's +x axis at ``baseline``."""
+        return np.array([self.params["laser"]["baseline"], 0.0, 0.0])
+
+    @property
+    def reference_distance(self) -> float:
+        """Distance (mm) at which a white target facing the sensor returns signal 1: mid-range."""
+        r = self.params["range"]
+        return 0.5 * (r["near"] + r["far"])
+
+    @property
+    def tilt_rad(self) -> float:
+        """Translating sweep: angle of the sheet from the optical axis, towards the camera (rad)."""
+        tilt = self.params["laser"]["tilt_deg"]
+        if tilt is None:
+            return math.atan2(self.params["laser"]["baseline"], self.reference_distance)
+        return math.radians(tilt)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict with the TOML's keys (what ``load_sensor`` accepts back)."""
+        out: dict[str, Any] = {"name": self.name, "description": self.description, "mode": self.mode}
+        for table, values in self.params.items():
+            out[table] = {k: v for k, v in values.items() if v is not None}
+        return out
+
+    def with_params(self, changes: Mapping[str, Any]) -> "Sensor":
+        """A copy with dotted keys replaced, e.g. ``{"noise.sigma_px": 0, "laser.baseline": 90}``."""
+        data = self.to_dict()
+        for dotted, value in changes.items():
+            table, _, key = dotted.partition(".")
+            if not key:
+                data[table] = value
+            else:
+                data.setdefault(table, {})[key] = value
+        return sensor_from_dict(data, source=f"{self.source} (modified)")
+
+
+def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
+    """Validate a sensor description and fill in defaults.
+
+    Raises
+    ------
+    RangesimError
+        Unknown tables or keys, missing required keys, or values out of range
+        (non-positive resolution, field of view or baseline, near >= far, ...).
+    """
+    data = copy.deepcopy(dict(data))
+    check_keys(data, TOP_KEYS, "the sensor", source)
+    params: dict[str, dict[str, Any]] = {}
+    for table, defaults in SCHEMA.items():
+        given = data.get(table, {})
+        if not isinstance(given, Mapping):
+            raise RangesimError(f"[{table}] must be a table", source=source)
+        check_keys(given, set(defaults), f"[{table}]", source)
+        filled = {}
+        for key, default in defaults.items():
+            value = given.get(key, default)
+            if value is None and default is None and key != "tilt_deg":
+                raise RangesimError(f"missing required key {table}.{key}", source=source)
+            filled[key] = value
+        params[table] = filled
+    mode = str(data.get("mode", "geometric"))
+    if mode not in MODES:
+        raise RangesimError(
+            f"mode {mode!r} is not available; available: {', '.join(MODES)}", source=source
+        )
+    _validate(params, source)
+    return Sensor(
+        params=params,
+        name=str(data.get("name", Path(str(source)).stem)),
+        description=str(data.get("description", "")),
+        mode=mode,
+        source=str(source),
+    )
+
+
+def _number(params, table, key, source, *, positive=False, nonneg=False, integer=False, upper=None):
+    value = params[table][key]
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise RangesimError(f"{table}.{key} must be a number, got {value!r}", source=source) from None
+    if not math.isfinite(number):
+        raise RangesimError(f"{table}.{key} must be finite, got {value!r}", source=source)
+    if positive and number <= 0:
+        raise RangesimError(f"{table}.{key} must be positive, got {value!r}", source=source)
+    if nonneg and number < 0:
+        raise RangesimError(f"{table}.{key} must not be negative, got {value!r}", source=source)
+    if upper is not None and number >= upper:
+        raise RangesimError(f"{table}.{key} must be below {upper}, got {value!r}", source=source)
+    if integer:
+        if number != int(number):
+            raise RangesimError(f"{table}.{key} must be an integer, got {value!r}", source=source)
+        params[table][key] = int(number)
+    else:
+        params[table][key] = number
+
+
+def _validate(params: dict[str, dict[str, Any]], source) -> None:
+    for key in ("width", "height"):
+        _number(params, "camera", key, source, positive=True, integer=True)
+    _number(params, "camera", "fov_deg", source, positive=True, upper=180)
+    _number(params, "camera", "aperture_mm", source, positive=True)
+    _number(params, "laser", "baseline", source, positive=True)
+    _number(params, "laser", "step", source, positive=True)
+    _number(params, "laser", "stripe_width", source, nonneg=True)
+    _number(params, "laser", "wavelength_nm", source, positive=True)
+    if params["laser"]["tilt_deg"] is not None:
+        _number(params, "laser", "tilt_deg", source)
+        if abs(params["laser"]["tilt_deg"]) >= 89:
+            raise RangesimError("laser.tilt_deg must lie within (-89, 89)", source=source)
+    if params["laser"]["sweep"] not in SWEEPS:
+        raise RangesimError(
+            f"laser.sweep must be one of {', '.join(SWEEPS)}, got {params['laser']['sweep']!r}",
+            source=source,
+        )
+    _number(params, "range", "near", source, positive=True)
+    _number(params, "range", "far", source, positive=True)
+    if params["range"]["near"] >= params["range"]["far"]:
+        raise RangesimError(
+            f"range.near ({params['range']['near']}) must be less than range.far "
+            f"({params['range']['far']})",
+            source=source,
+        )
+    for key in ("sigma_px", "quantization_px", "speckle_contrast"):
+        _number(params, "noise", key, source, nonneg=True)
+    _number(params, "noise", "min_signal", source, nonneg=True)
+
+
+def preset_dirs() -> list[Path]:
+    """Folders searched for preset names: ``$RANGESIM_SENSORS`` first, then ``sensors/``."""
+    dirs = [Path(p) for p in os.environ.get("RANGESIM_SENSORS", "").split(os.pathsep) if p]
+    return dirs + [PRESET_DIR]
+
+
+def preset_names() -> list[str]:
+    """Names of the available presets."""
+    return sorted({p.stem for d in preset_dirs() if d.is_dir() for p in d.glob("*.toml")})
+
+
+def load_sensor(spec: "str | Path | Mapping[str, Any] | Sensor") -> Sensor:
+    """A :class:`Sensor` from a preset name, a TOML path, or a dict with the TOML's keys.
+
+    Examples
+    --------
+    >>> sensor = load_sensor("white_scanner")
+    >>> quiet = sensor.with_params({"noise.sigma_px": 0.0})
+    """
+    if isinstance(spec, Sensor):
+        return spec
+    if isinstance(spec, Mapping):
+        return sensor_from_dict(spec, source="dict")
+    text = str(spec)
+    path = Path(text)
+    if path.suffix.lower() == ".toml" or os.sep in text:
+        data = read_toml(path)
+        data.setdefault("name", path.stem)
+        return sensor_from_dict(data, source=str(path))
+    for folder in preset_dirs():
+        candidate = folder / f"{text}.toml"
+        if candidate.is_file():
+            data = read_toml(candidate)
+            data.setdefault("name", text)
+            return sensor_from_dict(data, source=str(candidate))
+    raise RangesimError(
+        f"unknown sensor preset; available: {', '.join(preset_names()) or '(none found)'}",
+        source=text,
+    )
