@@ -17,7 +17,7 @@ def default_pose(scene: Scene, sensor: Sensor) -> np.ndarray:
 
     The camera looks at the bounding-box centre from above and in front (elevation about
     54 degrees) at a distance where the bounding sphere fills 90 % of the narrower field of
-    view, but no closer than ``near`` + radius and no further than mid-range when possible.
+    view, kept inside [near + radius, far - radius] where the working range allows.
     """
     if scene.view is not None:
         return scene.view
@@ -25,8 +25,8 @@ def default_pose(scene: Scene, sensor: Sensor) -> np.ndarray:
     fov = math.radians(sensor.params["camera"]["fov_deg"])
     narrow = 2 * math.atan(math.tan(fov / 2) * min(1.0, sensor.height / sensor.width))
     fit = radius / math.sin(0.45 * narrow)
-    near = sensor.params["range"]["near"]
-    distance = max(fit, near + radius, sensor.reference_distance)
+    near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
+    distance = min(max(fit, near + radius), max(near + radius, far - radius))
     return scene.framing_pose(distance)
 
 
@@ -58,6 +58,8 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0)
     ...                      scan.meta["sensor"]["camera"]["width"])
     True
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise RangesimError(f"seed must be a non-negative integer, got {seed!r}")
     scene = load_scene(scene)
     sensor = load_sensor(sensor)
     if pose is None:

@@ -1,0 +1,155 @@
+"""Scene files, sensor presets and their validation errors."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import rangesim as rs
+from rangesim.core.constants import Status
+from tests.conftest import QUIET_SENSOR, make_sensor
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("name", ["white_scanner", "cyberware_3030", "inria_laser"])
+def test_presets_load_with_documented_keys(name):
+    sensor = rs.load_sensor(name)
+    assert sensor.name == name
+    assert sensor.params["laser"]["sweep"] in ("rotating", "translating")
+    K = sensor.K
+    assert K[0, 2] == sensor.width / 2 and K[1, 2] == sensor.height / 2
+    assert rs.load_sensor(sensor.to_dict()).params == sensor.params
+
+
+def test_cyberware_preset_matches_the_stanford_grid():
+    sensor = rs.load_sensor("cyberware_3030")
+    assert (sensor.width, sensor.height) == (512, 400)
+    assert sensor.params["laser"]["sweep"] == "translating" and sensor.params["laser"]["step"] == 0.5
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"camera.width": 0}, "camera.width must be positive"),
+        ({"camera.height": -5}, "camera.height must be positive"),
+        ({"laser.baseline": 0.0}, "laser.baseline must be positive"),
+        ({"range.near": 500.0, "range.far": 400.0}, "must be less than range.far"),
+        ({"range.near": 400.0, "range.far": 400.0}, "must be less than range.far"),
+        ({"laser.sweep": "wobbling"}, "laser.sweep must be one of"),
+        ({"noise.sigma_px": float("nan")}, "must be finite"),
+        ({"laser.basline": 10.0}, "unknown key(s) basline"),
+    ],
+)
+def test_bad_sensor_values_raise_one_line_errors(change, message):
+    with pytest.raises(rs.RangesimError) as err:
+        make_sensor(**change)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_unknown_preset_lists_the_available_ones():
+    with pytest.raises(rs.RangesimError, match="unknown sensor preset.*white_scanner"):
+        rs.load_sensor("no_such_scanner")
+
+
+def test_sensor_toml_file_and_error_names_the_file(tmp_path):
+    good = write(tmp_path / "mine.toml", """
+[camera]
+width = 32
+height = 24
+fov_deg = 30
+[laser]
+baseline = 100
+[range]
+near = 100
+far = 500
+""")
+    assert rs.load_sensor(good).name == "mine"
+    bad = write(tmp_path / "bad.toml", "[camera]\nwidth = 32\nheight = 24\nfov_deg = 30\n[laser]\nbaseline = 1\n")
+    with pytest.raises(rs.RangesimError, match=r"bad\.toml: missing required key range\.near"):
+        rs.load_sensor(bad)
+    broken = write(tmp_path / "broken.toml", "[camera\nwidth = ")
+    with pytest.raises(rs.RangesimError, match="broken.toml: invalid TOML"):
+        rs.load_sensor(broken)
+
+
+def test_scene_file_units_transforms_and_view(tmp_path):
+    trimesh.creation.box(extents=[0.1, 0.1, 0.1]).export(tmp_path / "cube_m.stl")
+    scene_file = write(tmp_path / "s.toml", """
+units = "cm"
+[[object]]
+name = "cube"
+mesh = "cube_m.stl"
+units = "m"
+translate = [1, 2, 3]
+rotate_deg = [0, 0, 45]
+albedo = 0.9
+[[object]]
+primitive = "sphere"
+radius = 2
+[view]
+position = [0, -30, 40]
+look_at = [0, 0, 0]
+""")
+    scene = rs.load_scene(scene_file)
+    cube, sphere = scene.objects
+    assert cube.name == "cube" and cube.albedo == 0.9 and cube.watertight
+    # 0.1 m cube = 100 mm, rotated 45 degrees about z, centred at (10, 20, 30) mm
+    np.testing.assert_allclose(cube.mesh.bounds.mean(axis=0), [10, 20, 30], atol=1e-5)
+    np.testing.assert_allclose(np.ptp(cube.mesh.vertices[:, 0]), 100 * np.sqrt(2), rtol=1e-6)  # STL stores float32
+    np.testing.assert_allclose(np.linalg.norm(sphere.mesh.vertices, axis=1), 20.0, rtol=1e-9)
+    np.testing.assert_allclose(scene.view[:3, 3], [0, -300, 400])
+    np.testing.assert_allclose(scene.view[:3, 2], [0, 0.6, -0.8])  # looks at the origin
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("", "no such mesh file"),
+        ("solid empty\nendsolid empty\n", "mesh"),
+        ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", "NaN or infinite"),
+    ],
+)
+def test_bad_meshes_raise_one_line_errors(tmp_path, content, message):
+    name = "part.stl" if content.startswith("solid") else "part.obj"
+    path = tmp_path / name
+    if content:
+        path.write_text(content)
+    with pytest.raises(rs.RangesimError) as err:
+        rs.load_scene(path)
+    assert message in str(err.value) and str(path) in str(err.value)
+
+
+def test_scene_errors_name_the_file(tmp_path):
+    missing = write(tmp_path / "m.toml", '[[object]]\nmesh = "nowhere.stl"\n')
+    with pytest.raises(rs.RangesimError, match="nowhere.stl: no such mesh file"):
+        rs.load_scene(missing)
+    typo = write(tmp_path / "t.toml", '[[object]]\nprimitive = "box"\nsize = [1, 1, 1]\nalbedoo = 1\n')
+    with pytest.raises(rs.RangesimError, match="t.toml: unknown key.*albedoo"):
+        rs.load_scene(typo)
+    with pytest.raises(rs.RangesimError, match="no such scene"):
+        rs.load_scene(tmp_path / "nothing.xyz")
+
+
+def test_default_pose_frames_a_scene_without_view():
+    mesh = trimesh.creation.icosphere(radius=40.0)
+    sensor = make_sensor(**{"range.near": 200.0, "range.far": 600.0})
+    scan = rs.scan(mesh, sensor)
+    # the whole object is seen, inside the working range, not touching the border
+    assert scan.valid.sum() > 0.2 * scan.valid.size
+    seen = scan.status != Status.MISS
+    assert not seen[0].any() and not seen[-1].any() and not seen[:, 0].any() and not seen[:, -1].any()
+    assert (scan.status != Status.OUT_OF_RANGE).all()
+
+
+def test_standin_green_piece_scene_scans():
+    scan = rs.scan(REPO / "scenes" / "green_piece.toml", dict(QUIET_SENSOR, name="q"))
+    assert set(np.unique(scan.part[scan.valid])) >= {0, 1, 2, 3, 4}
+    assert scan.count(Status.SHADOW) > 0
