@@ -118,8 +118,10 @@ class Sensor:
             table, _, key = dotted.partition(".")
             if not key:
                 data[table] = value
+            elif not isinstance(data.setdefault(table, {}), dict):
+                raise RangesimError(f"cannot set {dotted}: {table!r} is not a table", source=self.source)
             else:
-                data.setdefault(table, {})[key] = value
+                data[table][key] = value
         return sensor_from_dict(data, source=f"{self.source} (modified)")
 
 
@@ -164,6 +166,8 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
 
 def _number(params, table, key, source, *, positive=False, nonneg=False, integer=False, upper=None):
     value = params[table][key]
+    if isinstance(value, bool):  # float(True) == 1.0: a boolean is never meant as a number
+        raise RangesimError(f"{table}.{key} must be a number, got {value!r}", source=source)
     try:
         number = float(value)
     except (TypeError, ValueError):

@@ -1,6 +1,7 @@
 """The geometric laser-stripe scanner: visibility, signal and noise decided by physical rules.
 
-Steps (each in its own module, each vectorised over all pixels):
+Steps (each in its own module; all per-pixel work runs as fused Dr.Jit kernels on the
+Mitsuba variant's backend, LLVM on the CPU or CUDA on a GPU):
 
 1. ``rays``: one ``ray_intersect`` of all camera rays (pinhole, OpenCV axes).
 2. ``laser``: the sheet that lights each hit and where its light comes from.
@@ -8,7 +9,8 @@ Steps (each in its own module, each vectorised over all pixels):
    laser is behind the visible surface.
 4. ``signal``: Lambertian return with inverse-square falloff -> status 3 below ``min_signal``.
 5. working range on the true depth -> status 4 outside [near, far].
-6. ``mixed_pixels``: centroid shift where a finite-width stripe straddles a depth edge.
+6. ``mixed_pixels`` (NumPy, near depth edges only): centroid shift where a finite-width
+   stripe straddles a depth edge.
 7. ``noise`` + ``triangulation``: peak localisation error (Gaussian, speckle, quantisation)
    moves the point inside the laser sheet along the camera-ray/sheet intersection.
 
@@ -16,16 +18,17 @@ Precedence of status codes: miss (1) > out of range (4) > laser shadow (2) > dro
 """
 from __future__ import annotations
 
+import drjit as dr
 import numpy as np
 
 import rangesim
+from rangesim.core.backend import mitsuba
 from rangesim.core.constants import Status
-from rangesim.core.geometry import transform_points
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.laser import sheet_through
 from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
-from rangesim.sensor.noise import peak_error_px, speckle_sigma_mm
+from rangesim.sensor.noise import peak_error_px, pixel_random, speckle_sigma_mm
 from rangesim.sensor.rays import cast_primary
 from rangesim.sensor.shadows import occluded
 from rangesim.sensor.signal import return_signal
@@ -39,83 +42,67 @@ MIN_SHEET_ANGLE = 1e-3
 
 def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeScan:
     """Scan ``scene`` from camera-to-world ``pose``; see the module docstring."""
+    mi = mitsuba()
     p = sensor.params
     h, w = sensor.height, sensor.width
     K = sensor.K
-    f = K[0, 0]
+    f = float(K[0, 0])
     near, far = p["range"]["near"], p["range"]["far"]
     mscene = scene.mitsuba_scene()
     watertight = np.array([o.watertight for o in scene.objects])
-    albedos = np.array([o.albedo for o in scene.objects], dtype=np.float64)
 
-    # 1. primary rays: directions with z = 1, so t * d / |d| has depth t / |d|
-    hits = cast_primary(mscene, K, h, w, pose, MAX_RAY_FACTOR * far * _max_ray_stretch(K, h, w), watertight)
-    n_pix = h * w
-    jj, ii = np.meshgrid(np.arange(w), np.arange(h))
-    rays = np.stack(
-        [(jj.ravel() + 0.5 - K[0, 2]) / f, (ii.ravel() + 0.5 - K[1, 2]) / K[1, 1], np.ones(n_pix)], axis=1
-    )
+    # 1. primary rays
+    corner = float(np.hypot(np.hypot(w / 2 / f, h / 2 / K[1, 1]), 1.0))  # longest ray of unit depth
+    hits = cast_primary(mscene, K, h, w, pose, MAX_RAY_FACTOR * far * corner, watertight)
     hit = hits.hit
-    points = np.full((n_pix, 3), np.nan)
-    points[hit] = rays[hit] * (hits.t[hit] / np.linalg.norm(rays[hit], axis=1))[:, None]
-    rot = pose[:3, :3]
-    normals = np.full((n_pix, 3), np.nan)
-    normals[hit] = hits.normal_world[hit] @ rot  # world -> camera
-    flip = np.einsum("ij,ij->i", normals[hit], points[hit]) > 0
-    normals[np.flatnonzero(hit)[flip]] *= -1  # the visible side faces the camera
+    rays = hits.rays
+    points = dr.normalize(rays) * hits.t  # camera frame, mm
+    to_camera = mi.Transform4f(np.linalg.inv(pose).tolist())
+    normals = dr.normalize(to_camera @ hits.normal_world)
+    normals = dr.select(dr.dot(normals, points) > 0, -normals, normals)  # visible side faces the camera
 
-    # 2-5. laser geometry, shadows, signal, working range (on the hit pixels only)
-    status = np.full(n_pix, Status.MISS, dtype=np.uint8)
-    sources = np.full((n_pix, 3), np.nan)
-    sheet_n = np.full((n_pix, 3), np.nan)
-    signal = np.zeros(n_pix)
-    idx = np.flatnonzero(hit)
-    ph = points[idx]
-    sources[idx], sheet_n[idx] = sheet_through(ph, p["laser"]["sweep"], p["laser"]["baseline"], sensor.tilt_rad)
-    signal[idx], cos_i = return_signal(
-        albedos[hits.part[idx]], normals[idx], ph, sources[idx], sensor.reference_distance
-    )
-    in_range = (ph[:, 2] >= near) & (ph[:, 2] <= far)
+    # 2-5. laser geometry, shadows, signal, working range
+    sources, sheet_n = sheet_through(points, p["laser"]["sweep"], p["laser"]["baseline"], sensor.tilt_rad)
+    albedo = dr.gather(mi.Float, mi.Float(np.array([o.albedo for o in scene.objects], np.float32)), hits.part, hit)
+    signal, cos_i = return_signal(albedo, normals, points, sources, sensor.reference_distance)
+    in_range = hit & (points.z >= near) & (points.z <= far)
+    to_world = mi.Transform4f(pose.tolist())
     blocked = occluded(
-        mscene,
-        transform_points(pose, ph),
-        hits.normal_world[idx],
-        transform_points(pose, sources[idx]),
+        mscene, to_world @ mi.Point3f(points), hits.normal_world, to_world @ mi.Point3f(sources),
         active=in_range & (cos_i > 0),
     )
-    shadow = (cos_i <= 0) | blocked
-    lit = ~shadow
-    signal[idx[shadow]] = 0.0
-    n_dot_r = np.abs(np.einsum("ij,ij->i", sheet_n[idx], rays[idx]))
-    weak = (signal[idx] < p["noise"]["min_signal"]) | (signal[idx] <= 0) | (n_dot_r < MIN_SHEET_ANGLE)
-    status[idx] = np.select(
-        [~in_range, shadow, weak], [Status.OUT_OF_RANGE, Status.SHADOW, Status.DROPOUT], Status.VALID
-    )
-    valid = status == Status.VALID
+    lit = hit & (cos_i > 0) & ~blocked
+    signal = dr.select(lit, signal, 0.0)
+    weak = (signal < p["noise"]["min_signal"]) | (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
+    status = dr.select(~in_range, int(Status.OUT_OF_RANGE), dr.select(~lit, int(Status.SHADOW), dr.select(weak, int(Status.DROPOUT), int(Status.VALID))))
+    status = mi.UInt32(dr.select(hit, status, int(Status.MISS)))
+    dr.eval(points, normals, sources, sheet_n, signal, status, lit)
 
-    # 6. mixed pixels at depth edges
-    lit_all = np.zeros(n_pix, dtype=bool)
-    lit_all[idx] = lit
+    # 6. mixed pixels at depth edges (NumPy on the few pixels near an edge)
+    valid_np = np.array(status, dtype=np.uint8) == Status.VALID
+    points_np = _to_numpy3(points)
+    signal_np = np.array(signal, dtype=np.float32)
     window = peak_window_px(p["laser"]["stripe_width"], f, near)
-    shift = stripe_mixing_shift(
-        points.reshape(h, w, 3), sheet_n.reshape(h, w, 3), lit_all.reshape(h, w),
-        signal.reshape(h, w), valid.reshape(h, w), p["laser"]["stripe_width"], window,
-    ).ravel()
+    if window:
+        shift_np = stripe_mixing_shift(
+            points_np.reshape(h, w, 3), _to_numpy3(sheet_n).reshape(h, w, 3),
+            np.array(lit, dtype=bool).reshape(h, w), signal_np.reshape(h, w),
+            valid_np.reshape(h, w), p["laser"]["stripe_width"], window,
+        ).ravel()
+        shift = mi.Float(shift_np.astype(np.float32))
+    else:
+        shift = dr.zeros(mi.Float, h * w)
 
-    # 7. noise: random numbers drawn for every pixel, so a pixel's noise depends only on the seed
-    rng = np.random.default_rng(seed)
-    gaussian = rng.standard_normal(n_pix)
-    phase = rng.random(n_pix)
-    v = np.flatnonzero(valid)
-    dzdu = depth_per_pixel(points[v], sheet_n[v], rays[v], f)
-    speckle_px = speckle_sigma_mm(
-        points[v], sources[v], p["noise"]["speckle_contrast"], p["laser"]["wavelength_nm"],
-        p["camera"]["aperture_mm"],
-    ) / dzdu
-    sigma = np.hypot(p["noise"]["sigma_px"], speckle_px)
-    error = peak_error_px(sigma, p["noise"]["quantization_px"], gaussian[v], phase[v])
-    measured = np.full((n_pix, 3), np.nan)
-    measured[v] = triangulate(points[v], sheet_n[v], rays[v], shift[v] + error, f)
+    # 7. peak localisation noise, triangulated against the sheet
+    gaussian, phase = pixel_random(np.random.default_rng(seed), h * w)
+    speckle_mm = speckle_sigma_mm(
+        points, sources, p["noise"]["speckle_contrast"], p["laser"]["wavelength_nm"], p["camera"]["aperture_mm"]
+    )
+    speckle_px = speckle_mm / depth_per_pixel(points, sheet_n, rays, f)
+    sigma = dr.sqrt(p["noise"]["sigma_px"] ** 2 + dr.square(speckle_px))
+    error = peak_error_px(sigma, p["noise"]["quantization_px"], gaussian, phase)
+    measured = triangulate(points, sheet_n, rays, shift + error, f)
+    measured = dr.select(mi.Bool(valid_np), measured, dr.nan)
 
     meta = {
         "sensor": sensor.to_dict(),
@@ -129,24 +116,32 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
         "objects": [o.name for o in scene.objects],
         "peak_window_px": window,
         "recast_rays": hits.recast,
+        "variant": mi.variant(),
         "units": "mm",
     }
-    xyz = measured.reshape(h, w, 3).astype(np.float32)
+    xyz = _to_numpy3(measured).reshape(h, w, 3)
+    miss = ~np.array(hit, dtype=bool)
+    points_np[miss] = np.nan
+    normals_np = _to_numpy3(normals)
+    normals_np[miss] = np.nan
     return RangeScan(
         depth=xyz[..., 2].copy(),
         xyz=xyz,
-        valid=valid.reshape(h, w),
-        normal=normals.reshape(h, w, 3).astype(np.float32),
-        intensity=signal.reshape(h, w).astype(np.float32),
-        part=hits.part.reshape(h, w),
-        face=hits.face.reshape(h, w),
-        status=status.reshape(h, w),
+        valid=valid_np.reshape(h, w),
+        normal=normals_np.reshape(h, w, 3),
+        intensity=signal_np.reshape(h, w),
+        part=np.array(hits.part, dtype=np.int32).reshape(h, w),
+        face=np.array(hits.face, dtype=np.int32).reshape(h, w),
+        status=np.array(status, dtype=np.uint8).reshape(h, w),
         pose=pose,
         meta=meta,
-        xyz_true=points.reshape(h, w, 3).astype(np.float32),
+        xyz_true=points_np.reshape(h, w, 3),
     )
 
 
-def _max_ray_stretch(K, h, w) -> float:
-    """Length of the longest pixel ray with unit depth (corner pixel), so maxt covers far."""
-    return float(np.hypot(np.hypot(w / 2 / K[0, 0], h / 2 / K[1, 1]), 1.0))
+def _to_numpy3(vector) -> np.ndarray:
+    """(N, 3) float32 NumPy array from a Dr.Jit 3-vector."""
+    out = np.empty((dr.width(vector), 3), dtype=np.float32)
+    for k in range(3):
+        out[:, k] = np.asarray(vector[k])
+    return out

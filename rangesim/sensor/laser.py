@@ -1,4 +1,4 @@
-"""Laser-sheet geometry of the two sweep types, in the camera frame (mm).
+"""Laser-sheet geometry of the two sweep types, in the camera frame (mm), on Dr.Jit arrays.
 
 The laser origin L sits on the camera's +x axis at ``baseline``. The stripe is seen by the
 camera as a near-vertical line, so the peak is localised along the image rows (u).
@@ -15,15 +15,19 @@ translating
 """
 from __future__ import annotations
 
-import numpy as np
+import math
+
+import drjit as dr
+
+from rangesim.core.backend import mitsuba
 
 
-def sheet_through(points: np.ndarray, sweep: str, baseline: float, tilt_rad: float):
+def sheet_through(points, sweep: str, baseline: float, tilt_rad: float):
     """Laser source position and unit sheet normal for the sheet that lights each point.
 
     Parameters
     ----------
-    points : (N, 3) float array
+    points : mi.Vector3f, N points
         Surface points, camera frame, mm.
     sweep : {"rotating", "translating"}
     baseline : float
@@ -33,24 +37,21 @@ def sheet_through(points: np.ndarray, sweep: str, baseline: float, tilt_rad: flo
 
     Returns
     -------
-    source : (N, 3) float array
-        Where the light lighting each point comes from, mm.
-    normal : (N, 3) float array
+    source : mi.Vector3f
+        Where the light that reaches each point comes from, mm.
+    normal : mi.Vector3f
         Unit normal of the sheet through each point (sign arbitrary).
     """
-    px, pz = points[:, 0], points[:, 2]
-    source = np.zeros_like(points)
-    normal = np.zeros_like(points)
+    mi = mitsuba()
+    zero = dr.zeros(mi.Float, dr.width(points))
     if sweep == "rotating":
-        source[:, 0] = baseline
+        source = mi.Vector3f(baseline + zero, zero, zero)
         # plane through L containing P - L and the y axis: normal = (P - L) x y
-        nx, nz = -pz, px - baseline
-        length = np.hypot(nx, nz)
-        normal[:, 0], normal[:, 2] = nx / length, nz / length
+        normal = dr.normalize(mi.Vector3f(-points.z, zero, points.x - baseline))
     elif sweep == "translating":
         # sheet direction (-sin t, 0, cos t); normal (cos t, 0, sin t)
-        source[:, 0] = px + np.tan(tilt_rad) * pz
-        normal[:, 0], normal[:, 2] = np.cos(tilt_rad), np.sin(tilt_rad)
+        source = mi.Vector3f(points.x + math.tan(tilt_rad) * points.z, zero, zero)
+        normal = mi.Vector3f(math.cos(tilt_rad) + zero, zero, math.sin(tilt_rad) + zero)
     else:
         raise ValueError(f"unknown sweep {sweep!r}")
     return source, normal

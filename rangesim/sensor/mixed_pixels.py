@@ -68,7 +68,7 @@ def stripe_mixing_shift(points, sheet_normal, lit, signal, measured, stripe_widt
     marks = np.zeros_like(lit)
     marks[:, 1:] |= brk
     marks[:, :-1] |= brk
-    near_edge = ndimage.binary_dilation(marks, structure=np.ones((1, 2 * window + 1), bool))
+    near_edge = ndimage.maximum_filter1d(marks, size=2 * window + 1, axis=1)
     rows, cols = np.nonzero(measured & near_edge)
     if len(rows) == 0:
         return shift

@@ -2,64 +2,60 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+import drjit as dr
 import numpy as np
 
 from rangesim.core.backend import mitsuba
 
+#: shift (pixels) of the second ray cast by the shared-edge guard
+RECAST_OFFSET_PX = 1e-3
+
 
 @dataclass
 class PrimaryHits:
-    """What each camera ray hit, flattened row-major over the image (N = H * W).
+    """What each camera ray hit, as evaluated Dr.Jit arrays over N = H * W pixels (row-major).
 
     Attributes
     ----------
-    t : (N,) float32
-        Distance (mm) along the unit camera ray to the hit; inf on a miss.
-    normal_world : (N, 3) float32
-        Geometric normal of the hit triangle as wound in the mesh (not flipped); NaN on a miss.
-    part, face : (N,) int32
+    rays : mi.Vector3f
+        Camera-frame ray through each pixel centre, z component 1.
+    t : mi.Float
+        Distance (mm) along the unit ray to the hit; inf on a miss.
+    normal_world : mi.Vector3f
+        Geometric normal of the hit triangle as wound in the mesh (not flipped).
+    part, face : mi.Int32
         Object index and triangle index within it; -1 on a miss.
     recast : int
         Number of rays cast a second time by the shared-edge guard.
     """
 
-    t: np.ndarray
-    normal_world: np.ndarray
-    part: np.ndarray
-    face: np.ndarray
+    rays: Any
+    t: Any
+    normal_world: Any
+    part: Any
+    face: Any
     recast: int = 0
 
     @property
-    def hit(self) -> np.ndarray:
-        return np.isfinite(self.t)
+    def hit(self):
+        return dr.isfinite(self.t)
 
 
-def pixel_directions(K: np.ndarray, height: int, width: int, offset=(0.0, 0.0), index=None):
-    """Dr.Jit (3, N) camera-frame ray directions K^-1 (j + 0.5, i + 0.5, 1), z component 1.
-
-    ``offset`` = (du, dv) shifts every sample point in pixels (used to re-cast rays);
-    ``index`` selects flat pixel indices (default: all pixels, row-major).
-    """
-    import drjit as dr
-
+def pixel_rays(K: np.ndarray, width: int, index, offset: float = 0.0):
+    """Camera-frame rays K^-1 (j + 0.5, i + 0.5, 1) (z = 1) for flat pixel indices ``index``."""
     mi = mitsuba()
-    if index is None:
-        idx = dr.arange(mi.UInt32, height * width)
-    else:
-        idx = mi.UInt32(np.asarray(index, dtype=np.uint32))
-    col = mi.Float(idx % width) + (0.5 + offset[0])
-    row = mi.Float(idx // width) + (0.5 + offset[1])
+    col = mi.Float(index % width) + (0.5 + offset)
+    row = mi.Float(index // width) + (0.5 + offset)
     return mi.Vector3f((col - K[0, 2]) / K[0, 0], (row - K[1, 2]) / K[1, 1], 1.0)
 
 
-def _intersect(mscene, pose: np.ndarray, d_cam, maxt: float):
-    """Intersect rays (camera-frame directions ``d_cam``) and return numpy arrays."""
-    import drjit as dr
-
+def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
+    """Intersect camera-frame rays; returns (t, normal_world, part, face, world directions)."""
     mi = mitsuba()
-    to_world = mi.Transform4f(pose.astype(np.float32).tolist())
-    d_world = dr.normalize(to_world @ d_cam)
+    to_world = mi.Transform4f(pose.tolist())
+    d_world = dr.normalize(to_world @ rays)
     ray = mi.Ray3f(mi.Point3f(*(float(c) for c in pose[:3, 3])), d_world)
     ray.maxt = maxt
     si = mscene.scene.ray_intersect(ray)
@@ -67,15 +63,7 @@ def _intersect(mscene, pose: np.ndarray, d_cam, maxt: float):
     t = dr.select(hit, si.t, dr.inf)
     part = mscene.part_index(si)
     face = dr.select(hit, mi.Int32(si.prim_index), -1)
-    n = dr.select(hit, si.n, dr.nan)
-    dr.eval(t, part, face, n)
-    return (
-        np.array(t, dtype=np.float32),
-        np.ascontiguousarray(np.array(n, dtype=np.float32).T),
-        np.array(part, dtype=np.int32),
-        np.array(face, dtype=np.int32),
-        np.ascontiguousarray(np.array(d_world, dtype=np.float32).T),
-    )
+    return t, si.n, part, face, d_world
 
 
 def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHits:
@@ -84,8 +72,8 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     Embree can let a ray through an edge shared by two triangles (Mitsuba #1149). On a closed
     mesh that shows up as a miss inside the silhouette (all four neighbours hit) or as a hit
     on the inside of the far wall (a back face of a watertight object). Only those rays are
-    cast again with a 1e-3 pixel shift, and the new hit replaces the old one when it is
-    plausible (front facing, or any hit for a former miss).
+    cast again, shifted by 1e-3 pixel, and the new hit replaces the old one when it is
+    plausible (a front face, or any hit for a former miss).
 
     Parameters
     ----------
@@ -97,26 +85,31 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     watertight : (n_objects,) bool
         Which objects are closed (their back faces can never be visible).
     """
-    t, n, part, face, d_world = _intersect(mscene, pose, pixel_directions(K, height, width), maxt)
-    hits = PrimaryHits(t, n, part, face)
-    suspect = _leak_suspects(hits, d_world, np.asarray(watertight, bool), height, width)
-    if suspect.any():
-        index = np.flatnonzero(suspect)
-        d_again = pixel_directions(K, height, width, offset=(1e-3, 1e-3), index=index)
-        t2, n2, part2, face2, d2 = _intersect(mscene, pose, d_again, maxt)
-        back2 = np.einsum("ij,ij->i", n2, d2) > 0
-        ok = np.isfinite(t2) & ~(back2 & np.asarray(watertight, bool)[np.maximum(part2, 0)])
-        for old, new in ((hits.t, t2), (hits.normal_world, n2), (hits.part, part2), (hits.face, face2)):
-            old[index[ok]] = new[ok]
-        hits.recast = len(index)
-    return hits
+    mi = mitsuba()
+    n_pix = height * width
+    index = dr.arange(mi.UInt32, n_pix)
+    rays = pixel_rays(K, width, index)
+    t, n, part, face, d_world = _intersect(mscene, pose, rays, maxt)
+    closed = mi.Bool(np.asarray(watertight, dtype=bool))
+    dr.eval(t, n, part, face, d_world)
 
-
-def _leak_suspects(hits: PrimaryHits, d_world, watertight, height, width) -> np.ndarray:
-    hit = hits.hit
-    back = hit & (np.einsum("ij,ij->i", hits.normal_world, d_world) > 0)
-    back &= watertight[np.maximum(hits.part, 0)]
-    grid = hit.reshape(height, width)
-    enclosed = np.zeros_like(grid)
-    enclosed[1:-1, 1:-1] = grid[:-2, 1:-1] & grid[2:, 1:-1] & grid[1:-1, :-2] & grid[1:-1, 2:]
-    return back | (~hit & enclosed.ravel())
+    hit = dr.isfinite(t)
+    back = hit & (dr.dot(n, d_world) > 0) & dr.gather(mi.Bool, closed, part, hit)
+    col, row = index % width, index // width
+    inner = (col > 0) & (col < width - 1) & (row > 0) & (row < height - 1)
+    enclosed = inner
+    for step in (1, width):
+        enclosed &= dr.gather(mi.Bool, hit, index + step, inner)
+        enclosed &= dr.gather(mi.Bool, hit, index - step, inner)
+    suspect = back | (~hit & enclosed)
+    recast = int(dr.count(suspect)[0]) if dr.width(suspect) else 0
+    if recast:
+        sel = dr.compress(suspect)
+        t2, n2, part2, face2, d2 = _intersect(mscene, pose, pixel_rays(K, width, sel, RECAST_OFFSET_PX), maxt)
+        ok = dr.isfinite(t2) & ~((dr.dot(n2, d2) > 0) & dr.gather(mi.Bool, closed, part2, dr.isfinite(t2)))
+        dr.scatter(t, t2, sel, ok)
+        dr.scatter(n, n2, sel, ok)
+        dr.scatter(part, part2, sel, ok)
+        dr.scatter(face, face2, sel, ok)
+        dr.eval(t, n, part, face)
+    return PrimaryHits(rays, t, n, part, face, recast)

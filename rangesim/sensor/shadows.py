@@ -1,50 +1,36 @@
 """Laser shadows: one vectorised ``ray_test`` from each surface point towards its laser source."""
 from __future__ import annotations
 
-import numpy as np
+import drjit as dr
 
 from rangesim.core.backend import mitsuba
 
 
-def occluded(mscene, points_world, normals_world, sources_world, active) -> np.ndarray:
+def occluded(mscene, points_world, normals_world, sources_world, active):
     """True where scene geometry blocks the segment from a surface point to its laser source.
 
     Parameters
     ----------
     mscene : MitsubaScene
-    points_world, normals_world, sources_world : (N, 3) float arrays
+    points_world, normals_world, sources_world : mi.Vector3f / mi.Point3f
         Surface points, their unit normals (either orientation) and the laser sources, world
         frame, mm.
-    active : (N,) bool
+    active : mi.Bool
         Which points to test; the others return False.
 
     Notes
     -----
-    Shadow rays start slightly off the surface, on the laser's side, by 1e-5 of the scene's
-    coordinate magnitude (float32 intersections are accurate to a few ulps), so a surface
-    never shadows itself.
+    Shadow rays start slightly off the surface, on the laser's side, by 1e-6 of the point's
+    distance from the origin plus 1e-4 mm (float32 intersections are accurate to a few ulps),
+    so a surface never shadows itself.
     """
-    result = np.zeros(len(points_world), dtype=bool)
-    index = np.flatnonzero(active)
-    if len(index) == 0:
-        return result
     mi = mitsuba()
-    p = points_world[index].astype(np.float64)
-    n = normals_world[index].astype(np.float64)
-    s = sources_world[index].astype(np.float64)
-    to_source = s - p
-    side = np.sign(np.einsum("ij,ij->i", n, to_source))[:, None]
-    eps = 1e-5 * (1.0 + np.abs(p).max())
-    origin = p + side * n * eps
-    to_source = s - origin
-    length = np.linalg.norm(to_source, axis=1)
-    direction = to_source / length[:, None]
-
-    def vec(a, cls):
-        a = np.ascontiguousarray(a.T, dtype=np.float32)
-        return cls(a[0], a[1], a[2])
-
-    ray = mi.Ray3f(vec(origin, mi.Point3f), vec(direction, mi.Vector3f))
-    ray.maxt = mi.Float(length.astype(np.float32))
-    result[index] = np.array(mscene.scene.ray_test(ray), dtype=bool)
-    return result
+    to_source = sources_world - points_world
+    side = dr.sign(dr.dot(normals_world, to_source))
+    eps = 1e-4 + 1e-6 * dr.norm(points_world)
+    origin = points_world + normals_world * (side * eps)
+    to_source = sources_world - origin
+    length = dr.norm(to_source)
+    ray = mi.Ray3f(mi.Point3f(origin), to_source / length)
+    ray.maxt = length
+    return mscene.scene.ray_test(ray, active) & active

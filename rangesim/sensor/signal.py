@@ -10,33 +10,35 @@ Grazing surfaces (cos -> 0) therefore drop out, as on real scanners.
 """
 from __future__ import annotations
 
-import numpy as np
+import drjit as dr
 
 
-def return_signal(albedo, normals, points, sources, reference_distance):
+def return_signal(albedo, normals, points, sources, reference_distance: float):
     """Relative return signal and the cosine of the laser's incidence angle.
 
     Parameters
     ----------
-    albedo : (N,) float array
+    albedo : mi.Float
         Diffuse reflectance 0..1.
-    normals : (N, 3) float array
+    normals : mi.Vector3f
         Unit surface normals facing the camera, camera frame.
-    points, sources : (N, 3) float arrays
+    points, sources : mi.Vector3f
         Surface points and laser source positions, camera frame, mm (camera at the origin).
     reference_distance : float
         Distance (mm) at which a white facing target returns 1.
 
     Returns
     -------
-    signal : (N,) float array, 0 where the laser is behind the surface
-    cos_incidence : (N,) float array, negative where the laser is behind the surface
+    signal : mi.Float, 0 where the laser is behind the surface
+    cos_incidence : mi.Float, negative where the laser is behind the surface
     """
     to_laser = sources - points
-    d_laser = np.linalg.norm(to_laser, axis=1)
-    d_camera = np.linalg.norm(points, axis=1)
-    cos_i = np.einsum("ij,ij->i", normals, to_laser) / d_laser
-    cos_e = -np.einsum("ij,ij->i", normals, points) / d_camera
+    d2_laser = dr.squared_norm(to_laser)
+    d2_camera = dr.squared_norm(points)
+    cos_i = dr.dot(normals, to_laser) * dr.rsqrt(d2_laser)
+    cos_e = -dr.dot(normals, points) * dr.rsqrt(d2_camera)
     z2 = reference_distance**2
-    signal = albedo * np.clip(cos_i, 0, None) * np.clip(cos_e, 0, None) * (z2 / d_laser**2) * (z2 / d_camera**2)
+    # dr.select, not dr.maximum: LLVM 14's x86 backend cannot lower llvm.maximum
+    facing = (cos_i > 0) & (cos_e > 0)
+    signal = dr.select(facing, albedo * cos_i * cos_e * (z2 / d2_laser) * (z2 / d2_camera), 0.0)
     return signal, cos_i

@@ -8,41 +8,41 @@ on the optical axis this is z^2 / (f b), the classic law sigma_z = z^2 sigma_u /
 """
 from __future__ import annotations
 
-import numpy as np
+import drjit as dr
+
+from rangesim.core.backend import mitsuba
 
 
-def depth_per_pixel(points, sheet_normal, rays, focal_px):
+def depth_per_pixel(points, sheet_normal, rays, focal_px: float):
     """|dz/du| (mm per pixel of peak shift along the row) at each point.
 
     Parameters
     ----------
-    points, sheet_normal, rays : (N, 3) float arrays
+    points, sheet_normal, rays : mi.Vector3f
         Surface points (mm), unit sheet normals, and camera rays with z component 1.
     focal_px : float
     """
-    n_dot_r = np.einsum("ij,ij->i", sheet_normal, rays)
-    return np.abs(points[:, 2] * sheet_normal[:, 0] / (focal_px * n_dot_r))
+    return dr.abs(points.z * sheet_normal.x / (focal_px * dr.dot(sheet_normal, rays)))
 
 
-def triangulate(points, sheet_normal, rays, shift_px, focal_px):
+def triangulate(points, sheet_normal, rays, shift_px, focal_px: float):
     """Points reported for peaks shifted by ``shift_px`` columns from the true position.
 
     Parameters
     ----------
-    points : (N, 3) float array
+    points : mi.Vector3f
         True surface points, mm (they define the sheet offset n . P).
-    sheet_normal : (N, 3) float array
-    rays : (N, 3) float array
+    sheet_normal : mi.Vector3f
+    rays : mi.Vector3f
         Camera rays through the pixel centres, z component 1.
-    shift_px : (N,) float array
+    shift_px : mi.Float
         Peak position error along the row, pixels (0 gives back ``points``).
     focal_px : float
 
     Returns
     -------
-    (N, 3) float array of reported points, mm, on the sheets.
+    mi.Vector3f of reported points, mm, on the sheets.
     """
-    shifted = rays.copy()
-    shifted[:, 0] += shift_px / focal_px
-    offset = np.einsum("ij,ij->i", sheet_normal, points)
-    return shifted * (offset / np.einsum("ij,ij->i", sheet_normal, shifted))[:, None]
+    mi = mitsuba()
+    shifted = mi.Vector3f(rays.x + shift_px / focal_px, rays.y, rays.z)
+    return shifted * (dr.dot(sheet_normal, points) / dr.dot(sheet_normal, shifted))

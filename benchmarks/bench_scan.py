@@ -1,0 +1,491 @@
+#!/usr/bin/env python
+"""Speed of a full ``rangesim.scan`` against bare ray casting on the same rays.
+
+Scene: a bumpy icosphere (>= 300k triangles by default, radius ~80 mm) on a ground plane,
+millimetres, built deterministically. Sensor: white_scanner with a SIZE x SIZE camera and a
+field of view that the object fills at the fixed pose.
+
+Timed (each: one warm-up / cold run, then the median of --repeat runs):
+
+* ``rangesim.scan``: the whole geometric scan (primary rays, shared-edge guard, laser
+  shadows, signal, working range, mixed pixels, noise, labels, RangeScan).
+* ``open3d``: ``o3d.t.geometry.RaycastingScene().cast_rays`` on the same rays, t_hit only.
+* ``mitsuba ray_intersect``: ``scene.ray_intersect`` of the Mitsuba scene rangesim built,
+  same rays, ``si.t`` copied to NumPy.
+* ``mitsuba preliminary``: ``scene.ray_intersect_preliminary``, same rays, ``t`` to NumPy.
+
+Usage::
+
+    python benchmarks/bench_scan.py [--size 1024] [--triangles 327680] [--repeat 5]
+                                    [--json OUT.json] [--profile]
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import datetime
+import functools
+import io
+import json
+import math
+import os
+import platform
+import pstats
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: the target: a full scan within this factor of Open3D's bare depth
+TARGET_RATIO = 1.5
+#: distance (mm) from the camera to the object's centre: mid working range of white_scanner
+VIEW_DISTANCE = 350.0
+#: fraction of the narrower field of view the object's bounding sphere fills
+FILL = 0.85
+
+
+# -- scene, sensor, pose ---------------------------------------------------------------------
+def bumpy_sphere(triangles: int, radius: float = 80.0):
+    """Icosphere with at least ``triangles`` faces, radially displaced by a sum of sines."""
+    import trimesh
+
+    subdivisions = max(0, math.ceil(math.log(max(triangles, 20) / 20, 4) - 1e-12))
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    u = np.asarray(mesh.vertices, dtype=np.float64)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    x, y, z = u.T
+    bumps = (
+        np.sin(7.0 * x + 0.3) * np.sin(6.0 * y + 1.1)
+        + 0.7 * np.sin(11.0 * z + 0.5)
+        + 0.5 * np.sin(17.0 * x - 13.0 * y + 9.0 * z)
+    ) / 2.2
+    r = radius * (1.0 + 0.06 * bumps)  # +-6 % of the radius: concave dents, self-shadows
+    return trimesh.Trimesh(vertices=u * r[:, None], faces=mesh.faces, process=False)
+
+
+def ground_plane(z: float, half: float = 250.0, cells: int = 8):
+    """A flat square grid at height ``z`` (2 * cells^2 triangles), normal +z."""
+    import trimesh
+
+    g = np.linspace(-half, half, cells + 1)
+    xx, yy = np.meshgrid(g, g)
+    vertices = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)], axis=1)
+    k = np.arange(cells * cells)
+    i, j = k // cells, k % cells
+    a = i * (cells + 1) + j
+    b, c, d = a + 1, a + cells + 1, a + cells + 2
+    faces = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+
+
+def build_sensor(size: int, object_radius: float):
+    import rangesim as rs
+
+    half_angle = math.asin(object_radius / VIEW_DISTANCE) / FILL
+    fov = math.degrees(2 * half_angle)
+    return rs.load_sensor("white_scanner").with_params(
+        {"camera.width": size, "camera.height": size, "camera.fov_deg": round(fov, 3)}
+    )
+
+
+def build_pose(centre: np.ndarray) -> np.ndarray:
+    from rangesim.core.geometry import look_at
+
+    direction = np.array([0.35, -1.0, 0.9])
+    direction /= np.linalg.norm(direction)
+    return look_at(centre + VIEW_DISTANCE * direction, centre, up=(0, 0, 1))
+
+
+def world_rays(sensor, pose) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centre (3,) and unit world directions (N, 3), row-major over pixels."""
+    K = sensor.K
+    h, w = sensor.height, sensor.width
+    jj, ii = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    d = np.stack(
+        [(jj.ravel() + 0.5 - K[0, 2]) / K[0, 0], (ii.ravel() + 0.5 - K[1, 2]) / K[1, 1],
+         np.ones(h * w)], axis=1,
+    )
+    d = d @ pose[:3, :3].T
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    return pose[:3, 3].copy(), d
+
+
+# -- timing ----------------------------------------------------------------------------------
+def timed(fn, repeat: int):
+    """(cold seconds, median seconds, all warm times, last result)."""
+    t0 = time.perf_counter()
+    result = fn()
+    cold = time.perf_counter() - t0
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return cold, statistics.median(times), times, result
+
+
+def cpu_info() -> dict:
+    info = {"os.cpu_count": os.cpu_count()}
+    try:
+        info["affinity"] = len(os.sched_getaffinity(0))
+    except AttributeError:
+        pass
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                info["model"] = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return info
+
+
+# -- per-stage profile -----------------------------------------------------------------------
+#: functions called by scan_geometric (looked up in its module's namespace), and inside
+#: cast_primary (looked up in rangesim.sensor.rays): wrapped with timers at run time only
+GEOMETRIC_STAGES = (
+    "cast_primary", "sheet_through", "return_signal", "transform_points", "occluded",
+    "stripe_mixing_shift", "peak_window_px", "depth_per_pixel", "speckle_sigma_mm",
+    "peak_error_px", "triangulate", "RangeScan",
+)
+RAYS_STAGES = ("pixel_directions", "_intersect", "_leak_suspects")
+
+
+def stage_breakdown(scene, sensor, pose, repeat: int) -> list[tuple[str, float, int]]:
+    """Median per-call-site seconds of each stage over ``repeat`` scans (library untouched:
+    module attributes are wrapped with timers for the duration and restored afterwards)."""
+    import rangesim as rs
+    import rangesim.sensor.geometric as geo
+    import rangesim.sensor.rays as rays_mod
+
+    totals: dict[str, list[float]] = {}
+    counts: dict[str, int] = {}
+    current: dict[str, float] = {}
+
+    def wrap(label, fn):
+        @functools.wraps(fn)
+        def inner(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                current[label] = current.get(label, 0.0) + time.perf_counter() - t0
+                counts[label] = counts.get(label, 0) + 1
+        return inner
+
+    class TimedScene:
+        """Delegates to the Mitsuba scene; ``ray_test`` is evaluated and timed on the spot
+        (Dr.Jit is lazy: otherwise its cost lands on the later ``np.array``)."""
+
+        def __init__(self, inner):
+            self._inner = inner
+
+        def __getattr__(self, name):
+            return getattr(self._inner, name)
+
+        def ray_test(self, *args, **kwargs):
+            import drjit as dr
+
+            t0 = time.perf_counter()
+            result = self._inner.ray_test(*args, **kwargs)
+            dr.eval(result)
+            current["occluded/ray_test (Embree, evaluated)"] = (
+                current.get("occluded/ray_test (Embree, evaluated)", 0.0) + time.perf_counter() - t0
+            )
+            counts["occluded/ray_test (Embree, evaluated)"] = (
+                counts.get("occluded/ray_test (Embree, evaluated)", 0) + 1
+            )
+            return result
+
+    mscene = scene.mitsuba_scene()
+    inner_scene = mscene.scene
+    mscene.scene = TimedScene(inner_scene)
+    saved = []
+    for name in GEOMETRIC_STAGES:
+        saved.append((geo, name, getattr(geo, name)))
+        setattr(geo, name, wrap(name, getattr(geo, name)))
+    for name in RAYS_STAGES:
+        saved.append((rays_mod, name, getattr(rays_mod, name)))
+        setattr(rays_mod, name, wrap(f"cast_primary/{name}", getattr(rays_mod, name)))
+    try:
+        for _ in range(repeat):
+            current.clear()
+            t0 = time.perf_counter()
+            rs.scan(scene, sensor, pose=pose, seed=0)
+            total = time.perf_counter() - t0
+            staged = sum(v for k, v in current.items() if "/" not in k)
+            current["(numpy glue in scan_geometric, rest)"] = total - staged
+            current["TOTAL scan"] = total
+            for k, v in current.items():
+                totals.setdefault(k, []).append(v)
+    finally:
+        mscene.scene = inner_scene
+        for module, name, fn in saved:
+            setattr(module, name, fn)
+    rows = [(k, statistics.median(v), counts.get(k, 0) // repeat) for k, v in totals.items()]
+    sub = {"cast_primary": [f"cast_primary/{n}" for n in RAYS_STAGES],
+           "occluded": ["occluded/ray_test (Embree, evaluated)"]}
+    names = ["TOTAL scan"]
+    for n in GEOMETRIC_STAGES:
+        names += [n] + sub.get(n, [])
+    names.append("(numpy glue in scan_geometric, rest)")
+    order = {k: i for i, k in enumerate(names)}
+    rows.sort(key=lambda r: order.get(r[0], 999))
+    return rows
+
+
+def line_breakdown(scene, sensor, pose, repeat: int, top: int = 15) -> list[tuple[int, float, str]]:
+    """Median seconds per source line of ``scan_geometric`` (calls made on a line count
+    towards it), from a ``sys.settrace`` tracer on that one function: the numpy glue."""
+    import linecache
+
+    import rangesim as rs
+    import rangesim.sensor.geometric as geo
+
+    code = geo.scan_geometric.__code__
+    per_run: list[dict[int, float]] = []
+    state: dict = {}
+
+    def local(frame, event, arg):
+        now = time.perf_counter()
+        last = state.get("line")
+        if last is not None:
+            acc = per_run[-1]
+            acc[last] = acc.get(last, 0.0) + now - state["t"]
+        state["line"] = frame.f_lineno if event == "line" else None
+        state["t"] = time.perf_counter()
+        return local
+
+    def tracer(frame, event, arg):
+        if event == "call" and frame.f_code is code:
+            state["line"] = None
+            return local
+        return None
+
+    for _ in range(repeat):
+        per_run.append({})
+        sys.settrace(tracer)
+        try:
+            rs.scan(scene, sensor, pose=pose, seed=0)
+        finally:
+            sys.settrace(None)
+    lines = sorted({k for run in per_run for k in run})
+    med = {k: statistics.median(run.get(k, 0.0) for run in per_run) for k in lines}
+    rows = sorted(med.items(), key=lambda kv: -kv[1])[:top]
+    filename = code.co_filename
+    return [(k, v, linecache.getline(filename, k).strip()) for k, v in rows]
+
+
+def cprofile_scan(scene, sensor, pose, top: int = 25) -> str:
+    import rangesim as rs
+
+    prof = cProfile.Profile()
+    prof.enable()
+    rs.scan(scene, sensor, pose=pose, seed=0)
+    prof.disable()
+    out = io.StringIO()
+    stats = pstats.Stats(prof, stream=out).strip_dirs()
+    stats.sort_stats("cumulative").print_stats(top)
+    out.write("\n--- sorted by own time (tottime) ---\n")
+    stats.sort_stats("tottime").print_stats(15)
+    return out.getvalue()
+
+
+# -- main ------------------------------------------------------------------------------------
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--size", type=int, default=1024, help="image width = height (pixels)")
+    ap.add_argument("--triangles", type=int, default=327680,
+                    help="minimum triangle count of the object (icosphere: 20 * 4^k)")
+    ap.add_argument("--repeat", type=int, default=5, help="timed runs after the warm-up")
+    ap.add_argument("--json", type=Path, help="write the figures to this JSON file")
+    ap.add_argument("--profile", action="store_true",
+                    help="also print a per-stage breakdown and a cProfile of one scan")
+    args = ap.parse_args(argv)
+    if args.size < 2 or args.repeat < 1 or args.triangles < 1:
+        ap.error("--size >= 2, --repeat >= 1, --triangles >= 1")
+
+    import drjit as dr
+    import open3d as o3d
+    import scipy
+    import trimesh
+
+    import rangesim as rs
+    from rangesim.core.backend import mitsuba
+
+    mi = mitsuba()  # sets the variant rangesim uses (RANGESIM_VARIANT overrides)
+
+    # scene -----------------------------------------------------------------------------
+    t0 = time.perf_counter()
+    sphere = bumpy_sphere(args.triangles)
+    plane = ground_plane(float(sphere.vertices[:, 2].min()) - 0.5)
+    scene = rs.load_scene([sphere, plane])
+    t_load = time.perf_counter() - t0
+    n_tri = sum(len(o.mesh.faces) for o in scene.objects)
+    object_radius = float(np.linalg.norm(sphere.vertices, axis=1).max())
+    sensor = build_sensor(args.size, object_radius)
+    pose = build_pose(np.zeros(3))
+    origin, dirs = world_rays(sensor, pose)
+    n_rays = len(dirs)
+
+    cpu = cpu_info()
+    print("rangesim scan benchmark")
+    print(f"  date        {datetime.date.today().isoformat()}")
+    print(f"  machine     {cpu.get('model', platform.processor() or platform.machine())}; "
+          f"cores: os.cpu_count={cpu['os.cpu_count']}, usable={cpu.get('affinity', '?')}")
+    print(f"  python      {platform.python_version()}  numpy {np.__version__}  scipy {scipy.__version__}")
+    print(f"  rangesim    {rs.__version__}  mitsuba {mi.__version__} (variant {mi.variant()})  "
+          f"drjit {dr.__version__}")
+    print(f"  open3d      {o3d.__version__}  trimesh {trimesh.__version__}")
+    print(f"  scene       bumpy icosphere {len(scene.objects[0].mesh.faces):,} tris "
+          f"(r <= {object_radius:.1f} mm, watertight={scene.objects[0].watertight}) + ground "
+          f"plane {len(scene.objects[1].mesh.faces)} tris = {n_tri:,} triangles; "
+          f"load_scene {t_load:.2f} s")
+    print(f"  sensor      white_scanner, {sensor.width}x{sensor.height}, "
+          f"fov {sensor.params['camera']['fov_deg']:.2f} deg, range "
+          f"[{sensor.params['range']['near']:.0f}, {sensor.params['range']['far']:.0f}] mm; "
+          f"camera {VIEW_DISTANCE:.0f} mm from the object centre")
+    print(f"  rays        {n_rays:,} per run; repeat {args.repeat} (median), after 1 cold run")
+    print()
+
+    results: dict[str, dict] = {}
+
+    # 1. rangesim full scan (the cold run builds the Mitsuba scene/BVH and compiles kernels)
+    def run_scan():
+        return rs.scan(scene, sensor, pose=pose, seed=0)
+
+    cold, med, times, scan = timed(run_scan, args.repeat)
+    results["rangesim.scan (full)"] = {"cold_s": cold, "median_s": med, "times_s": times}
+    mscene = scene.mitsuba_scene()
+
+    # 2. Open3D bare depth
+    o3d_scene = o3d.t.geometry.RaycastingScene()
+    for obj in scene.objects:
+        o3d_scene.add_triangles(
+            o3d.core.Tensor(np.asarray(obj.mesh.vertices, dtype=np.float32)),
+            o3d.core.Tensor(np.asarray(obj.mesh.faces, dtype=np.uint32)),
+        )
+    rays6 = np.empty((n_rays, 6), dtype=np.float32)
+    rays6[:, :3] = origin
+    rays6[:, 3:] = dirs
+    o3d_rays = o3d.core.Tensor(rays6)
+
+    def run_open3d():
+        return o3d_scene.cast_rays(o3d_rays)["t_hit"].numpy()
+
+    cold, med, times, t_o3d = timed(run_open3d, args.repeat)
+    results["open3d cast_rays (t_hit)"] = {"cold_s": cold, "median_s": med, "times_s": times}
+
+    # 3. Mitsuba bare ray_intersect / ray_intersect_preliminary on the same rays
+    d32 = np.ascontiguousarray(dirs.T, dtype=np.float32)
+    mi_ray = mi.Ray3f(mi.Point3f(*(float(c) for c in origin)), mi.Vector3f(d32[0], d32[1], d32[2]))
+    dr.eval(mi_ray.d)
+
+    def run_mitsuba():
+        si = mscene.scene.ray_intersect(mi_ray)
+        return np.array(si.t, dtype=np.float32)
+
+    def run_mitsuba_pre():
+        pi = mscene.scene.ray_intersect_preliminary(mi_ray)
+        return np.array(pi.t, dtype=np.float32)
+
+    cold, med, times, t_mi = timed(run_mitsuba, args.repeat)
+    results["mitsuba ray_intersect (t)"] = {"cold_s": cold, "median_s": med, "times_s": times}
+    cold, med, times, t_mi_pre = timed(run_mitsuba_pre, args.repeat)
+    results["mitsuba preliminary (t)"] = {"cold_s": cold, "median_s": med, "times_s": times}
+
+    # agreement with Open3D ------------------------------------------------------------------
+    t_true = np.linalg.norm(scan.xyz_true.reshape(-1, 3).astype(np.float64), axis=1)  # NaN on miss
+    rs_hit = np.isfinite(t_true)
+
+    def agreement(t_other):
+        t_other = np.asarray(t_other, dtype=np.float64)
+        o_hit = np.isfinite(t_other)
+        both = rs_hit & o_hit
+        close = both.copy()
+        close[both] = np.abs(t_other[both] - t_true[both]) < 1e-3 * t_true[both]
+        either = int(np.count_nonzero(rs_hit | o_hit))
+        return {
+            "either_hit": either,
+            "both_hit": int(np.count_nonzero(both)),
+            "only_rangesim": int(np.count_nonzero(rs_hit & ~o_hit)),
+            "only_other": int(np.count_nonzero(o_hit & ~rs_hit)),
+            "agree": int(np.count_nonzero(close)),
+            "fraction": float(np.count_nonzero(close) / max(either, 1)),
+        }
+
+    agree = {"open3d": agreement(t_o3d), "mitsuba ray_intersect": agreement(t_mi)}
+
+    # report ---------------------------------------------------------------------------------
+    base = results["open3d cast_rays (t_hit)"]["median_s"]
+    for r in results.values():
+        r["rays_per_s"] = n_rays / r["median_s"]
+        r["ratio_to_open3d"] = r["median_s"] / base
+    name_w = max(len(k) for k in results) + 2
+    print(f"{'name':<{name_w}}{'median s':>10}{'min s':>9}{'cold s':>9}{'Mrays/s':>9}{'x Open3D':>10}")
+    for name, r in results.items():
+        print(f"{name:<{name_w}}{r['median_s']:>10.3f}{min(r['times_s']):>9.3f}{r['cold_s']:>9.3f}"
+              f"{r['rays_per_s'] / 1e6:>9.2f}{r['ratio_to_open3d']:>10.2f}")
+    print()
+    status_counts = {rs.Status(s).name.lower(): int(n) for s, n in zip(*np.unique(scan.status, return_counts=True))}
+    print(f"scan: {status_counts}; recast rays (shared-edge guard): {scan.meta['recast_rays']}")
+    for name, a in agree.items():
+        print(f"agreement rangesim true distance vs {name}: {a['fraction'] * 100:.3f} % of the "
+              f"{a['either_hit']:,} pixels hit by either ({a['agree']:,} agree to 1e-3 t; "
+              f"only rangesim hits {a['only_rangesim']}, only {name} hits {a['only_other']})"
+              f" -> {'OK' if a['fraction'] > 0.99 else 'BELOW 99 %'}")
+    ratio = results["rangesim.scan (full)"]["ratio_to_open3d"]
+    verdict = "PASS" if ratio <= TARGET_RATIO else "FAIL"
+    cores = cpu.get("affinity", cpu["os.cpu_count"])
+    print(f"target: full scan within {TARGET_RATIO}x of Open3D bare depth on 2 CPU cores: "
+          f"{verdict} (ratio {ratio:.2f}; this machine: {cores} usable cores)")
+
+    profile = None
+    if args.profile:
+        print("\nper-stage breakdown of rangesim.scan (median of "
+              f"{args.repeat} runs; indented rows are inside the row above)")
+        rows = stage_breakdown(scene, sensor, pose, args.repeat)
+        total = next(v for k, v, _ in rows if k == "TOTAL scan")
+        for k, v, calls in rows:
+            label = ("    " + k.split("/", 1)[1]) if "/" in k else k
+            note = f"  ({calls} call{'s' if calls != 1 else ''})" if calls else ""
+            print(f"  {label:<40}{v:>9.3f} s{100 * v / total:>7.1f} %{note}")
+        print(f"\nslowest lines of scan_geometric (median of {args.repeat} runs, settrace; "
+              "a line's time includes the calls it makes)")
+        lines = line_breakdown(scene, sensor, pose, args.repeat)
+        for lineno, v, text in lines:
+            print(f"  geometric.py:{lineno:<4}{v:>8.3f} s  {text[:90]}")
+        print("\ncProfile of one warm rangesim.scan (top 25 by cumulative time)")
+        text = cprofile_scan(scene, sensor, pose)
+        print(text)
+        profile = {
+            "stages": [{"name": k, "median_s": v, "calls": c} for k, v, c in rows],
+            "lines": [{"line": n, "median_s": v, "source": t} for n, v, t in lines],
+        }
+
+    if args.json:
+        payload = {
+            "date": datetime.date.today().isoformat(),
+            "cpu": cpu,
+            "versions": {
+                "python": platform.python_version(), "numpy": np.__version__,
+                "rangesim": rs.__version__, "mitsuba": mi.__version__, "drjit": dr.__version__,
+                "open3d": o3d.__version__, "trimesh": trimesh.__version__,
+            },
+            "variant": mi.variant(),
+            "size": args.size, "rays": n_rays, "triangles": n_tri, "repeat": args.repeat,
+            "fov_deg": sensor.params["camera"]["fov_deg"], "pose": pose.tolist(),
+            "results": results, "agreement": agree, "status_counts": status_counts,
+            "target": {"ratio": ratio, "limit": TARGET_RATIO, "pass": verdict == "PASS"},
+            "profile": profile,
+        }
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(payload, indent=2))
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,338 @@
+"""The ``rangesim`` command: scan a scene, list sensor presets, describe a scan file.
+
+A thin layer over the library: every command is one call into :mod:`rangesim`, and every
+user error (a :class:`~rangesim.core.errors.RangesimError`, an ``OSError``, Ctrl-C) is
+reported as one line ``rangesim: error: <message>`` on stderr, without a traceback
+(``RANGESIM_DEBUG=1`` adds one).
+
+Exit codes: 0 success, 2 user error (bad input, bad file, bad option), 1 internal error,
+130 interrupted.
+
+Examples
+--------
+::
+
+    rangesim scan scenes/green_piece.toml --sensor white_scanner --out out/scan.exr \\
+        --preview out/scan.png --set noise.sigma_px=0
+    rangesim sensors
+    rangesim info out/scan.exr
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import tomllib
+import traceback
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rangesim import __version__
+from rangesim.core.constants import STATUS_NAMES, Status
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import RangeScan
+from rangesim.io import atomic_path, load_scan, save_scan
+from rangesim.sensor import load_sensor, preset_names, scan
+from rangesim.viz import save_preview
+
+PROG = "rangesim"
+DEFAULT_SENSOR = "white_scanner"
+#: extensions ``save_scan`` writes and ``save_preview`` accepts, checked before any work
+SCAN_SUFFIXES = (".exr", ".npz", ".ply")
+PREVIEW_SUFFIXES = (".png",)
+
+EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+# -- small helpers ----------------------------------------------------------------------
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _debug() -> bool:
+    return os.environ.get("RANGESIM_DEBUG", "") not in ("", "0")
+
+
+def _error(message: str) -> None:
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
+
+
+def _os_error_message(exc: OSError) -> str:
+    """``<file>: <reason>`` for an OSError (``[Errno 13] ...`` reads badly)."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    return f"{exc.filename}: {reason}" if exc.filename else reason
+
+
+def _check_suffix(path: Path, allowed: Sequence[str], what: str) -> None:
+    """Reject an output extension before any work is done."""
+    if path.suffix.lower() not in allowed:
+        found = f"{path.suffix!r} files" if path.suffix else "files without an extension"
+        raise RangesimError(
+            f"cannot write {what} as {found}; supported: {', '.join(allowed)}", source=path
+        )
+
+
+def _parse_setting(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` from ``--set``; VALUE is a TOML value, or a plain string if not one.
+
+    Examples
+    --------
+    >>> _parse_setting("noise.sigma_px=0"), _parse_setting("laser.sweep=translating")
+    (('noise.sigma_px', 0), ('laser.sweep', 'translating'))
+    """
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise RangesimError(f"--set expects KEY=VALUE (e.g. noise.sigma_px=0), got {text!r}")
+    try:
+        document = tomllib.loads(f"value = {raw}")
+    except tomllib.TOMLDecodeError:
+        return key, raw.strip()  # a bare word such as `translating`
+    if set(document) != {"value"}:  # e.g. "1\nother = 2": more than one value
+        raise RangesimError(f"--set {key}: not a single value: {raw!r}")
+    return key, document["value"]
+
+
+def _load_pose(path: Path) -> np.ndarray:
+    """A 4x4 camera-to-world matrix from ``.npy`` or ``.json`` (nested list, or {"pose": ...})."""
+    if not path.is_file():
+        raise RangesimError("no such pose file", source=path)
+    suffix = path.suffix.lower()
+    data: Any
+    if suffix == ".npy":
+        try:
+            data = np.load(path, allow_pickle=False)
+        except (ValueError, EOFError) as exc:
+            raise RangesimError(f"cannot read pose ({type(exc).__name__}: {exc})", source=path) from exc
+    elif suffix == ".json":
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise RangesimError(f"invalid JSON: {exc}", source=path) from exc
+        if isinstance(data, dict) and "pose" in data:
+            data = data["pose"]
+    else:
+        raise RangesimError("pose must be a .json or .npy file", source=path)
+    try:
+        pose = np.asarray(data, dtype=np.float64)
+    except (TypeError, ValueError):
+        pose = np.empty(0)
+    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+        raise RangesimError(
+            f"pose must be a finite 4x4 camera-to-world matrix, got shape {pose.shape}", source=path
+        )
+    # scan() checks this too, but without the file's name
+    rot = pose[:3, :3]
+    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise RangesimError("pose rotation must be orthonormal and right-handed", source=path)
+    return pose
+
+
+@contextmanager
+def _writing(path: Path, tmp: Path | None = None) -> Iterator[None]:
+    """Report a failed write against ``path``, not the temporary name the data went to."""
+    try:
+        yield
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        # mkdir under a regular file says "File exists" or "Not a directory": name the culprit
+        blocker = next((p for p in path.parents if p.exists()), None)
+        if blocker is not None and not blocker.is_dir():
+            reason = f"{blocker} is not a directory"
+        raise RangesimError(f"cannot write file ({reason})", source=path) from exc
+    except RangesimError as exc:
+        if tmp is None or str(tmp) not in str(exc):
+            raise
+        relabelled = RangesimError(str(exc).replace(str(tmp), str(path)))
+        relabelled.source = str(path)
+        raise relabelled from exc
+
+
+def _save_outputs(result: RangeScan, out: Path, preview: Path | None) -> None:
+    """Write the scan and its preview: both, or neither (an old file stays as it was)."""
+    if preview is None:
+        with _writing(out):
+            save_scan(result, out)
+        return
+    # the scan goes to a temporary name that replaces `out` only once the preview is written
+    with _writing(out), atomic_path(out) as tmp:
+        with _writing(out, tmp):
+            save_scan(result, tmp)
+        with _writing(preview):
+            save_preview(result, preview)
+
+
+def _status_counts(result: RangeScan) -> list[tuple[str, int]]:
+    """(name, pixel count) per status: every known code, then any unknown code present."""
+    rows = [(STATUS_NAMES[code], result.count(code)) for code in Status]
+    known = {int(code) for code in Status}
+    for code in np.unique(result.status):
+        if int(code) not in known:
+            rows.append((f"status {int(code)}", result.count(int(code))))
+    return rows
+
+
+def _percent(n: int, total: int) -> str:
+    return f"{100.0 * n / max(total, 1):.1f} %"
+
+
+# -- commands ---------------------------------------------------------------------------
+def cmd_scan(args: argparse.Namespace) -> int:
+    """``rangesim scan``: scan a scene or mesh, write the scan (and preview), summarise."""
+    out = Path(args.out)
+    preview = Path(args.preview) if args.preview else None
+    # cheap checks first, so a typo fails before the scene is loaded and rendered
+    _check_suffix(out, SCAN_SUFFIXES, "scans")
+    if preview is not None:
+        _check_suffix(preview, PREVIEW_SUFFIXES, "previews")
+    changes = dict(_parse_setting(text) for text in args.set)
+    pose = _load_pose(Path(args.pose)) if args.pose else None
+
+    start = time.perf_counter()
+    sensor = load_sensor(args.sensor)
+    if changes:
+        sensor = sensor.with_params(changes)
+    result = scan(args.scene, sensor, pose=pose, seed=args.seed)
+    _save_outputs(result, out, preview)
+    elapsed = time.perf_counter() - start
+
+    h, w = result.shape
+    total = h * w
+    n_valid = int(np.count_nonzero(result.valid))
+    invalid = ", ".join(f"{name} {n:,}" for name, n in _status_counts(result)[1:])
+    written = str(out) if preview is None else f"{out} and {preview}"
+    print(
+        f"Scanned {args.scene} with {sensor.name} (seed {args.seed}): {w} x {h} px (W x H), "
+        f"{n_valid:,} valid ({_percent(n_valid, total)}); {invalid}. "
+        f"Wrote {written} in {elapsed:.2f} s."
+    )
+    return EXIT_OK
+
+
+def cmd_sensors(args: argparse.Namespace) -> int:
+    """``rangesim sensors``: the presets, one a line, with their descriptions."""
+    names = preset_names()
+    if not names:
+        print("no sensor presets found")
+        return EXIT_OK
+    width = max(len(name) for name in names)
+    for name in names:
+        try:
+            description = load_sensor(name).description or "(no description)"
+        except RangesimError as exc:  # one broken preset should not hide the others
+            description = f"(cannot load: {exc})"
+        print(f"{name:<{width}}  {description}")
+    return EXIT_OK
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """``rangesim info``: size, status counts, depth range, sensor and pose of a scan file."""
+    result = load_scan(args.scan_file)
+    h, w = result.shape
+    total = h * w
+    sensor = result.meta.get("sensor") or {}
+    lines = [
+        f"{args.scan_file}: {w} x {h} px (W x H), sensor {sensor.get('name', 'unknown')}, "
+        f"seed {result.meta.get('seed', 'unknown')}"
+    ]
+    counts = _status_counts(result)
+    label = max(len(name) for name, _ in counts)
+    digits = max(len(f"{n:,}") for _, n in counts)
+    lines += [f"  {name:<{label}}  {n:>{digits},}  ({_percent(n, total)})" for name, n in counts]
+    depth = result.depth[result.valid & np.isfinite(result.depth)]
+    if depth.size:
+        lines.append(f"depth: {depth.min():.3f} .. {depth.max():.3f} mm")
+    else:
+        lines.append("depth: no valid pixels")
+    lines.append("pose (camera-to-world):")
+    # rounding first and adding 0.0 turns -0.0 and -1e-17 into a plain 0.0000
+    lines += ["  [" + "  ".join(f"{round(v, 4) + 0.0:10.4f}" for v in row) + " ]" for row in result.pose]
+    print("\n".join(lines))
+    return EXIT_OK
+
+
+# -- parser and entry point ---------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with its three subcommands."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Laser-stripe range-scanner simulator on Mitsuba 3.",
+        epilog="Set RANGESIM_DEBUG=1 to see tracebacks of internal errors.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("scan", help="scan a scene or mesh file", description=(
+        "Scan a scene (.toml) or a mesh file with a sensor and write the range scan."))
+    p.add_argument("scene", metavar="SCENE_OR_MESH", help="scene .toml or mesh (.stl, .obj, .ply, ...)")
+    p.add_argument("--sensor", default=DEFAULT_SENSOR, metavar="NAME_OR_TOML",
+                   help=f"preset name or sensor .toml (default: {DEFAULT_SENSOR})")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help=f"scan file ({', '.join(SCAN_SUFFIXES)})")
+    p.add_argument("--preview", metavar="PNG", help="also write a preview picture (.png)")
+    p.add_argument("--seed", type=int, default=0, metavar="N", help="noise seed (default: 0)")
+    p.add_argument("--pose", metavar="POSE", help="4x4 camera-to-world matrix (.json or .npy); "
+                   "default: the scene's [view], or a pose framing the scene")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a sensor key, e.g. noise.sigma_px=0 (repeatable; TOML values)")
+    p.set_defaults(func=cmd_scan)
+
+    p = sub.add_parser("sensors", help="list the sensor presets",
+                       description="List the sensor presets with their descriptions.")
+    p.set_defaults(func=cmd_sensors)
+
+    p = sub.add_parser("info", help="describe a scan file",
+                       description="Print a scan file's size, status counts, depth range, "
+                       "sensor and pose.")
+    p.add_argument("scan_file", metavar="SCAN_FILE", help="scan file (.exr, .npz)")
+    p.set_defaults(func=cmd_info)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``rangesim`` command line.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        Exit code: 0 success, 2 user error, 1 internal error, 130 interrupted.
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse has printed the usage or the help
+        return exc.code if isinstance(exc.code, int) else EXIT_USER
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        _error("interrupted")
+        return EXIT_INTERRUPTED
+    except (RangesimError, OSError) as exc:
+        if _debug():
+            traceback.print_exc()
+        if isinstance(exc, BrokenPipeError):  # e.g. `rangesim sensors | head -1`
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 -- keeps the exit flush quiet
+            return EXIT_INTERNAL
+        _error(str(exc) if isinstance(exc, RangesimError) else _os_error_message(exc))
+        return EXIT_USER
+    except Exception as exc:  # a bug: one line, the traceback on request
+        if _debug():
+            traceback.print_exc()
+        _error(f"internal error ({type(exc).__name__}: {exc}); "
+               "run with RANGESIM_DEBUG=1 for a traceback")
+        return EXIT_INTERNAL
+
+
+if __name__ == "__main__":
+    sys.exit(main())
