@@ -14,6 +14,15 @@ Timed (each: one warm-up / cold run, then the median of --repeat runs):
   same rays, ``si.t`` copied to NumPy.
 * ``mitsuba preliminary``: ``scene.ray_intersect_preliminary``, same rays, ``t`` to NumPy.
 
+The scene is loaded once and reused; the cold rangesim run includes building the Mitsuba
+scene (Embree BVH) and tracing/compiling the Dr.Jit kernels (compiled kernels may come from
+Dr.Jit's on-disk cache of an earlier process), the cold Open3D run its BVH build. Agreement:
+rangesim's true distance |xyz_true| against Open3D's t_hit, per pixel.
+
+``--profile`` adds, for the warm scan, a per-section and per-line breakdown of
+``scan_geometric`` (sys.settrace; the library is not modified), Dr.Jit's kernel history of one
+scan, and a cProfile listing.
+
 Usage::
 
     python benchmarks/bench_scan.py [--size 1024] [--triangles 327680] [--repeat 5]
@@ -24,7 +33,6 @@ from __future__ import annotations
 import argparse
 import cProfile
 import datetime
-import functools
 import io
 import json
 import math
@@ -143,102 +151,36 @@ def cpu_info() -> dict:
 
 
 # -- per-stage profile -----------------------------------------------------------------------
-#: functions called by scan_geometric (looked up in its module's namespace), and inside
-#: cast_primary (looked up in rangesim.sensor.rays): wrapped with timers at run time only
-GEOMETRIC_STAGES = (
-    "cast_primary", "sheet_through", "return_signal", "transform_points", "occluded",
-    "stripe_mixing_shift", "peak_window_px", "depth_per_pixel", "speckle_sigma_mm",
-    "peak_error_px", "triangulate", "RangeScan",
-)
-RAYS_STAGES = ("pixel_directions", "_intersect", "_leak_suspects")
+# Nothing in the library is changed: a sys.settrace tracer times the source lines of
+# scan_geometric, and Dr.Jit's kernel history times the kernels. Dr.Jit is lazy, so a
+# kernel's time lands on the line that evaluates it (dr.eval, np.array, a reduction), not on
+# the line that records it; the kernel table says what ran.
 
 
-def stage_breakdown(scene, sensor, pose, repeat: int) -> list[tuple[str, float, int]]:
-    """Median per-call-site seconds of each stage over ``repeat`` scans (library untouched:
-    module attributes are wrapped with timers for the duration and restored afterwards)."""
-    import rangesim as rs
+def _geometric_sections():
+    """(first line, title) of each section of scan_geometric: its ``# ...`` comment lines at
+    the function's top indentation (``# 1. primary rays``, ``# 2-5. ...``)."""
+    import inspect
+
     import rangesim.sensor.geometric as geo
-    import rangesim.sensor.rays as rays_mod
 
-    totals: dict[str, list[float]] = {}
-    counts: dict[str, int] = {}
-    current: dict[str, float] = {}
-
-    def wrap(label, fn):
-        @functools.wraps(fn)
-        def inner(*args, **kwargs):
-            t0 = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                current[label] = current.get(label, 0.0) + time.perf_counter() - t0
-                counts[label] = counts.get(label, 0) + 1
-        return inner
-
-    class TimedScene:
-        """Delegates to the Mitsuba scene; ``ray_test`` is evaluated and timed on the spot
-        (Dr.Jit is lazy: otherwise its cost lands on the later ``np.array``)."""
-
-        def __init__(self, inner):
-            self._inner = inner
-
-        def __getattr__(self, name):
-            return getattr(self._inner, name)
-
-        def ray_test(self, *args, **kwargs):
-            import drjit as dr
-
-            t0 = time.perf_counter()
-            result = self._inner.ray_test(*args, **kwargs)
-            dr.eval(result)
-            current["occluded/ray_test (Embree, evaluated)"] = (
-                current.get("occluded/ray_test (Embree, evaluated)", 0.0) + time.perf_counter() - t0
-            )
-            counts["occluded/ray_test (Embree, evaluated)"] = (
-                counts.get("occluded/ray_test (Embree, evaluated)", 0) + 1
-            )
-            return result
-
-    mscene = scene.mitsuba_scene()
-    inner_scene = mscene.scene
-    mscene.scene = TimedScene(inner_scene)
-    saved = []
-    for name in GEOMETRIC_STAGES:
-        saved.append((geo, name, getattr(geo, name)))
-        setattr(geo, name, wrap(name, getattr(geo, name)))
-    for name in RAYS_STAGES:
-        saved.append((rays_mod, name, getattr(rays_mod, name)))
-        setattr(rays_mod, name, wrap(f"cast_primary/{name}", getattr(rays_mod, name)))
-    try:
-        for _ in range(repeat):
-            current.clear()
-            t0 = time.perf_counter()
-            rs.scan(scene, sensor, pose=pose, seed=0)
-            total = time.perf_counter() - t0
-            staged = sum(v for k, v in current.items() if "/" not in k)
-            current["(numpy glue in scan_geometric, rest)"] = total - staged
-            current["TOTAL scan"] = total
-            for k, v in current.items():
-                totals.setdefault(k, []).append(v)
-    finally:
-        mscene.scene = inner_scene
-        for module, name, fn in saved:
-            setattr(module, name, fn)
-    rows = [(k, statistics.median(v), counts.get(k, 0) // repeat) for k, v in totals.items()]
-    sub = {"cast_primary": [f"cast_primary/{n}" for n in RAYS_STAGES],
-           "occluded": ["occluded/ray_test (Embree, evaluated)"]}
-    names = ["TOTAL scan"]
-    for n in GEOMETRIC_STAGES:
-        names += [n] + sub.get(n, [])
-    names.append("(numpy glue in scan_geometric, rest)")
-    order = {k: i for i, k in enumerate(names)}
-    rows.sort(key=lambda r: order.get(r[0], 999))
-    return rows
+    source, first = inspect.getsourcelines(geo.scan_geometric)
+    sections = [(first, "setup")]
+    for k, text in enumerate(source):
+        if text.startswith("    # "):
+            sections.append((first + k, text.strip()[2:]))
+        elif text.startswith("    meta = "):
+            sections.append((first + k, "output: meta, NumPy copies, RangeScan"))
+    return sections
 
 
-def line_breakdown(scene, sensor, pose, repeat: int, top: int = 15) -> list[tuple[int, float, str]]:
-    """Median seconds per source line of ``scan_geometric`` (calls made on a line count
-    towards it), from a ``sys.settrace`` tracer on that one function: the numpy glue."""
+def line_breakdown(scene, sensor, pose, repeat: int):
+    """Median seconds per source line of ``scan_geometric`` over ``repeat`` scans (a line's
+    time includes the calls it makes and the Dr.Jit kernels it waits for).
+
+    Returns (lines, sections, total): lines as (lineno, seconds, text) sorted by time,
+    sections as (title, seconds) in source order, total the median scan time.
+    """
     import linecache
 
     import rangesim as rs
@@ -246,6 +188,7 @@ def line_breakdown(scene, sensor, pose, repeat: int, top: int = 15) -> list[tupl
 
     code = geo.scan_geometric.__code__
     per_run: list[dict[int, float]] = []
+    totals = []
     state: dict = {}
 
     def local(frame, event, arg):
@@ -266,16 +209,62 @@ def line_breakdown(scene, sensor, pose, repeat: int, top: int = 15) -> list[tupl
 
     for _ in range(repeat):
         per_run.append({})
+        t0 = time.perf_counter()
         sys.settrace(tracer)
         try:
             rs.scan(scene, sensor, pose=pose, seed=0)
         finally:
             sys.settrace(None)
-    lines = sorted({k for run in per_run for k in run})
-    med = {k: statistics.median(run.get(k, 0.0) for run in per_run) for k in lines}
-    rows = sorted(med.items(), key=lambda kv: -kv[1])[:top]
-    filename = code.co_filename
-    return [(k, v, linecache.getline(filename, k).strip()) for k, v in rows]
+        totals.append(time.perf_counter() - t0)
+    numbers = sorted({k for run in per_run for k in run})
+    med = {k: statistics.median(run.get(k, 0.0) for run in per_run) for k in numbers}
+    lines = sorted(
+        ((k, v, linecache.getline(code.co_filename, k).strip()) for k, v in med.items()),
+        key=lambda row: -row[1],
+    )
+    sections = _geometric_sections()
+    starts = [s for s, _ in sections]
+    sums = [0.0] * len(sections)
+    for k, v in med.items():
+        i = max(j for j, s in enumerate(starts) if s <= k) if k >= starts[0] else 0
+        sums[i] += v
+    return lines, [(t, v) for (_, t), v in zip(sections, sums)], statistics.median(totals)
+
+
+def kernel_table(scene, sensor, pose) -> tuple[list[dict], float]:
+    """Dr.Jit's kernel history of one warm scan: what ran, how big, how long (ms)."""
+    import re
+
+    import drjit as dr
+
+    import rangesim as rs
+
+    dr.kernel_history_clear()
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        t0 = time.perf_counter()
+        rs.scan(scene, sensor, pose=pose, seed=0)
+        wall = time.perf_counter() - t0
+        history = dr.kernel_history()
+    rows = []
+    for k, entry in enumerate(history):
+        kind = str(entry.get("type", "?")).split(".")[-1]
+        row = {
+            "order": k, "type": kind, "size": entry.get("size"),
+            "ops": entry.get("operation_count"), "exec_ms": float(entry.get("execution_time", 0.0)),
+            "codegen_ms": float(entry.get("codegen_time") or 0.0),
+            "compile_ms": float(entry.get("backend_time") or 0.0),
+        }
+        ir = entry.get("ir")
+        if ir is not None:
+            text = ir.getvalue() if hasattr(ir, "getvalue") else str(ir)
+            calls = sorted({c for c in re.findall(r"call [^@\n]*@([A-Za-z_][\w.]*)", text)
+                            if not c.startswith("llvm.")})
+            # a call through a pointer: Embree (ray_intersect / ray_test) or another host function
+            if re.search(r"call [^@\n]*%", text):
+                calls.append("<indirect call>")
+            row["calls"] = calls
+        rows.append(row)
+    return rows, wall
 
 
 def cprofile_scan(scene, sensor, pose, top: int = 25) -> str:
@@ -444,25 +433,32 @@ def main(argv=None) -> int:
 
     profile = None
     if args.profile:
-        print("\nper-stage breakdown of rangesim.scan (median of "
-              f"{args.repeat} runs; indented rows are inside the row above)")
-        rows = stage_breakdown(scene, sensor, pose, args.repeat)
-        total = next(v for k, v, _ in rows if k == "TOTAL scan")
-        for k, v, calls in rows:
-            label = ("    " + k.split("/", 1)[1]) if "/" in k else k
-            note = f"  ({calls} call{'s' if calls != 1 else ''})" if calls else ""
-            print(f"  {label:<40}{v:>9.3f} s{100 * v / total:>7.1f} %{note}")
-        print(f"\nslowest lines of scan_geometric (median of {args.repeat} runs, settrace; "
-              "a line's time includes the calls it makes)")
-        lines = line_breakdown(scene, sensor, pose, args.repeat)
-        for lineno, v, text in lines:
+        lines, sections, total = line_breakdown(scene, sensor, pose, args.repeat)
+        print(f"\nper-stage breakdown of scan_geometric (median of {args.repeat} traced runs, "
+              f"{total:.3f} s each with the tracer; sections are its # comments)")
+        for title, v in sections:
+            print(f"  {v:>8.3f} s {100 * v / total:>6.1f} %  {title[:80]}")
+        print(f"\nslowest lines of scan_geometric (a line's time includes the calls it makes and "
+              "the Dr.Jit kernels it waits for)")
+        for lineno, v, text in lines[:15]:
             print(f"  geometric.py:{lineno:<4}{v:>8.3f} s  {text[:90]}")
+        kernels, wall = kernel_table(scene, sensor, pose)
+        busy = sum(r["exec_ms"] for r in kernels)
+        print(f"\nDr.Jit kernels of one warm scan ({len(kernels)} launches, {busy:.1f} ms executing "
+              f"of {wall * 1e3:.1f} ms wall; the rest is Python, NumPy and transfers)")
+        print(f"  {'#':>3} {'type':<18}{'size':>10}{'ops':>6}{'exec ms':>9}{'codegen ms':>11}  calls")
+        for r in kernels:
+            if r["exec_ms"] < 0.05 and r["type"] != "JIT":
+                continue
+            print(f"  {r['order']:>3} {r['type']:<18}{r['size'] or 0:>10}{r['ops'] or 0:>6}"
+                  f"{r['exec_ms']:>9.2f}{r['codegen_ms']:>11.2f}  {' '.join(r.get('calls', []))}")
         print("\ncProfile of one warm rangesim.scan (top 25 by cumulative time)")
         text = cprofile_scan(scene, sensor, pose)
         print(text)
         profile = {
-            "stages": [{"name": k, "median_s": v, "calls": c} for k, v, c in rows],
+            "sections": [{"name": t, "median_s": v} for t, v in sections],
             "lines": [{"line": n, "median_s": v, "source": t} for n, v, t in lines],
+            "kernels": kernels, "kernels_wall_s": wall,
         }
 
     if args.json:

@@ -74,24 +74,16 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     lit = hit & (cos_i > 0) & ~blocked
     signal = dr.select(lit, signal, 0.0)
     weak = (signal < p["noise"]["min_signal"]) | (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
-    status = dr.select(~in_range, int(Status.OUT_OF_RANGE), dr.select(~lit, int(Status.SHADOW), dr.select(weak, int(Status.DROPOUT), int(Status.VALID))))
-    status = mi.UInt32(dr.select(hit, status, int(Status.MISS)))
+    status = dr.zeros(mi.UInt32, h * w)  # Status.VALID
+    for code, condition in ((Status.DROPOUT, weak), (Status.SHADOW, ~lit), (Status.OUT_OF_RANGE, ~in_range),
+                            (Status.MISS, ~hit)):  # lowest precedence first
+        status = dr.select(condition, int(code), status)
+    valid = status == int(Status.VALID)
     dr.eval(points, normals, sources, sheet_n, signal, status, lit)
 
-    # 6. mixed pixels at depth edges (NumPy on the few pixels near an edge)
-    valid_np = np.array(status, dtype=np.uint8) == Status.VALID
-    points_np = _to_numpy3(points)
-    signal_np = np.array(signal, dtype=np.float32)
+    # 6. mixed pixels at depth edges
     window = peak_window_px(p["laser"]["stripe_width"], f, near)
-    if window:
-        shift_np = stripe_mixing_shift(
-            points_np.reshape(h, w, 3), _to_numpy3(sheet_n).reshape(h, w, 3),
-            np.array(lit, dtype=bool).reshape(h, w), signal_np.reshape(h, w),
-            valid_np.reshape(h, w), p["laser"]["stripe_width"], window,
-        ).ravel()
-        shift = mi.Float(shift_np.astype(np.float32))
-    else:
-        shift = dr.zeros(mi.Float, h * w)
+    shift = stripe_mixing_shift(points, sheet_n, lit, signal, valid, w, p["laser"]["stripe_width"], window)
 
     # 7. peak localisation noise, triangulated against the sheet
     gaussian, phase = pixel_random(np.random.default_rng(seed), h * w)
@@ -101,8 +93,15 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     speckle_px = speckle_mm / depth_per_pixel(points, sheet_n, rays, f)
     sigma = dr.sqrt(p["noise"]["sigma_px"] ** 2 + dr.square(speckle_px))
     error = peak_error_px(sigma, p["noise"]["quantization_px"], gaussian, phase)
-    measured = triangulate(points, sheet_n, rays, shift + error, f)
-    measured = dr.select(mi.Bool(valid_np), measured, dr.nan)
+    measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + error, f), dr.nan)
+    points = dr.select(hit, points, dr.nan)
+    normals = dr.select(hit, normals, dr.nan)
+    outputs = {
+        "xyz": dr.ravel(measured), "xyz_true": dr.ravel(points), "normal": dr.ravel(normals),
+        "intensity": signal, "status": status, "part": hits.part, "face": hits.face,
+    }
+    dr.eval(*outputs.values())
+    arrays = {name: np.asarray(value) for name, value in outputs.items()}
 
     meta = {
         "sensor": sensor.to_dict(),
@@ -119,29 +118,18 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
         "variant": mi.variant(),
         "units": "mm",
     }
-    xyz = _to_numpy3(measured).reshape(h, w, 3)
-    miss = ~np.array(hit, dtype=bool)
-    points_np[miss] = np.nan
-    normals_np = _to_numpy3(normals)
-    normals_np[miss] = np.nan
+    xyz = arrays["xyz"].reshape(h, w, 3)
+    status_np = arrays["status"].astype(np.uint8).reshape(h, w)
     return RangeScan(
         depth=xyz[..., 2].copy(),
         xyz=xyz,
-        valid=valid_np.reshape(h, w),
-        normal=normals_np.reshape(h, w, 3),
-        intensity=signal_np.reshape(h, w),
-        part=np.array(hits.part, dtype=np.int32).reshape(h, w),
-        face=np.array(hits.face, dtype=np.int32).reshape(h, w),
-        status=np.array(status, dtype=np.uint8).reshape(h, w),
+        valid=status_np == Status.VALID,
+        normal=arrays["normal"].reshape(h, w, 3),
+        intensity=arrays["intensity"].reshape(h, w),
+        part=arrays["part"].reshape(h, w),
+        face=arrays["face"].reshape(h, w),
+        status=status_np,
         pose=pose,
         meta=meta,
-        xyz_true=points_np.reshape(h, w, 3),
+        xyz_true=arrays["xyz_true"].reshape(h, w, 3),
     )
-
-
-def _to_numpy3(vector) -> np.ndarray:
-    """(N, 3) float32 NumPy array from a Dr.Jit 3-vector."""
-    out = np.empty((dr.width(vector), 3), dtype=np.float32)
-    for k in range(3):
-        out[:, k] = np.asarray(vector[k])
-    return out

@@ -12,76 +12,98 @@ the background mixes, the centroid moves by a fraction of a pixel to several pix
 triangulating that column against the sheet puts a phantom point between the surfaces.
 
 So the shift is evaluated only for pixels within W columns of a depth discontinuity
-(|dz| > 0.5 % of z between neighbours) or of a lit/unlit boundary; elsewhere it is 0.
+(|dz| > 0.5 % of z between row neighbours) or of a lit/unlit boundary; elsewhere it is 0.
+All of it runs as Dr.Jit kernels: a break mask over the image, then the windowed centroid
+over the compacted list of pixels near a break.
 """
 from __future__ import annotations
 
 import math
 
-import numpy as np
-from scipy import ndimage
+import drjit as dr
+
+from rangesim.core.backend import mitsuba
 
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 JUMP_RELATIVE = 0.005
+MAX_WINDOW_PX = 16
 
 
 def peak_window_px(stripe_width: float, focal_px: float, near: float) -> int:
     """Half-width W (pixels) of the detector's centroid window: two stripe FWHMs at ``near``."""
     if stripe_width <= 0:
         return 0
-    return int(np.clip(math.ceil(2.0 * stripe_width * focal_px / near), 1, 16))
+    return int(min(max(math.ceil(2.0 * stripe_width * focal_px / near), 1), MAX_WINDOW_PX))
 
 
-def stripe_mixing_shift(points, sheet_normal, lit, signal, measured, stripe_width, window):
+def _near_break(points, lit, measured, width: int, window: int):
+    """Flat indices (mi.UInt32) of measured pixels with a depth or lit/unlit break in their window."""
+    mi = mitsuba()
+    n = dr.width(lit)
+    index = dr.arange(mi.Int32, n)
+    col = index % width
+    has_right = col < width - 1
+    right = mi.UInt32(index + 1)
+    lit_right = dr.gather(mi.Bool, lit, right, has_right)
+    z, z_right = points.z, dr.gather(mi.Float, points.z, right, has_right)
+    nearer = dr.select(z < z_right, z, z_right)
+    jump = lit & lit_right & (dr.abs(z_right - z) > JUMP_RELATIVE * nearer)
+    brk = has_right & (jump | (lit ^ lit_right))  # break between a pixel and its right neighbour
+    dr.eval(brk)
+    near = dr.zeros(mi.Bool, n)
+    for k in range(-window, window + 1):
+        inside = (col + k >= 0) & (col + k < width)
+        near |= dr.gather(mi.Bool, brk, mi.UInt32(index + k), inside)
+    return dr.compress(measured & near)
+
+
+def stripe_mixing_shift(points, sheet_normal, lit, signal, measured, width: int,
+                        stripe_width: float, window: int):
     """Peak shift (pixels along the row) caused by a finite stripe width at depth edges.
 
     Parameters
     ----------
-    points : (H, W, 3) float array
-        True surface points, camera frame, mm (NaN on a miss).
-    sheet_normal : (H, W, 3) float array
+    points : mi.Vector3f, N = H * W pixels row-major
+        True surface points, camera frame, mm.
+    sheet_normal : mi.Vector3f
         Unit normal of the sheet that lights each pixel's point.
-    lit : (H, W) bool
+    lit : mi.Bool
         The laser reaches the point (it can contribute stripe light).
-    signal : (H, W) float array
-        Return signal of each point.
-    measured : (H, W) bool
+    signal : mi.Float
+        Return signal of each point (0 where unlit).
+    measured : mi.Bool
         Pixels that report a point (the shift is computed for these only).
+    width : int
+        Image width W, pixels.
     stripe_width : float
         FWHM of the sheet profile, mm (0: no mixing).
     window : int
-        Detector window half-width W, pixels.
+        Detector window half-width, pixels.
 
     Returns
     -------
-    (H, W) float array of column shifts, 0 away from edges.
+    mi.Float of column shifts, 0 away from edges.
     """
-    height, width = lit.shape
-    shift = np.zeros((height, width))
+    mi = mitsuba()
+    shift = dr.zeros(mi.Float, dr.width(lit))
     if stripe_width <= 0 or window <= 0:
         return shift
-    z = points[..., 2]
-    lit_z = np.where(lit, z, np.nan)
-    with np.errstate(invalid="ignore"):
-        jump = np.abs(np.diff(lit_z, axis=1)) > JUMP_RELATIVE * np.fmin(lit_z[:, 1:], lit_z[:, :-1])
-    brk = jump | (lit[:, 1:] != lit[:, :-1])
-    marks = np.zeros_like(lit)
-    marks[:, 1:] |= brk
-    marks[:, :-1] |= brk
-    near_edge = ndimage.maximum_filter1d(marks, size=2 * window + 1, axis=1)
-    rows, cols = np.nonzero(measured & near_edge)
-    if len(rows) == 0:
+    pixels = _near_break(points, lit, measured, width, window)
+    if dr.width(pixels) == 0:
         return shift
-    offsets = np.arange(-window, window + 1)
-    cc = cols[:, None] + offsets[None, :]
-    inside = (cc >= 0) & (cc < width)
-    cc = np.clip(cc, 0, width - 1)
-    rr = np.broadcast_to(rows[:, None], cc.shape)
-    centre = points[rows, cols]
-    normal = sheet_normal[rows, cols]
-    d = np.einsum("nkj,nj->nk", points[rr, cc] - centre[:, None, :], normal)
-    sigma = stripe_width * FWHM_TO_SIGMA
-    weight = np.where(inside & lit[rr, cc], signal[rr, cc], 0.0) * np.exp(-0.5 * (d / sigma) ** 2)
-    weight = np.nan_to_num(weight)
-    shift[rows, cols] = (weight @ offsets) / weight.sum(axis=1)
+    col = mi.Int32(pixels % width)
+    centre = dr.gather(mi.Vector3f, points, pixels)
+    normal = dr.gather(mi.Vector3f, sheet_normal, pixels)
+    gauss = -0.5 / (stripe_width * FWHM_TO_SIGMA) ** 2
+    total = dr.zeros(mi.Float, dr.width(pixels))
+    moment = dr.zeros(mi.Float, dr.width(pixels))
+    for k in range(-window, window + 1):
+        other = mi.UInt32(mi.Int32(pixels) + k)
+        ok = (col + k >= 0) & (col + k < width)
+        ok &= dr.gather(mi.Bool, lit, other, ok)
+        d = dr.dot(normal, dr.gather(mi.Vector3f, points, other, ok) - centre)
+        weight = dr.select(ok, dr.gather(mi.Float, signal, other, ok) * dr.exp(gauss * d * d), 0.0)
+        total += weight
+        moment += k * weight
+    dr.scatter(shift, moment / total, pixels)
     return shift
