@@ -68,7 +68,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     in_range = hit & (points.z >= near) & (points.z <= far)
     to_world = mi.Transform4f(pose.tolist())
     blocked = occluded(
-        mscene, to_world @ mi.Point3f(points), hits.normal_world, to_world @ mi.Point3f(sources),
+        mscene, hits.point_world, hits.normal_world, to_world @ mi.Point3f(sources),
         active=in_range & (cos_i > 0),
     )
     lit = hit & (cos_i > 0) & ~blocked

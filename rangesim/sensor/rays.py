@@ -23,6 +23,9 @@ class PrimaryHits:
         Camera-frame ray through each pixel centre, z component 1.
     t : mi.Float
         Distance (mm) along the unit ray to the hit; inf on a miss.
+    point_world : mi.Point3f
+        Hit position in the world frame from the triangle's barycentric coordinates (more
+        accurate on the surface than origin + t * direction; shadow rays start from it).
     normal_world : mi.Vector3f
         Geometric normal of the hit triangle as wound in the mesh (not flipped).
     part, face : mi.Int32
@@ -33,6 +36,7 @@ class PrimaryHits:
 
     rays: Any
     t: Any
+    point_world: Any
     normal_world: Any
     part: Any
     face: Any
@@ -52,7 +56,7 @@ def pixel_rays(K: np.ndarray, width: int, index, offset: float = 0.0):
 
 
 def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
-    """Intersect camera-frame rays; returns (t, normal_world, part, face, world directions)."""
+    """Intersect camera-frame rays; returns (t, point, normal, part, face, directions), world frame."""
     mi = mitsuba()
     to_world = mi.Transform4f(pose.tolist())
     d_world = dr.normalize(to_world @ rays)
@@ -63,7 +67,7 @@ def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
     t = dr.select(hit, si.t, dr.inf)
     part = mscene.part_index(si)
     face = dr.select(hit, mi.Int32(si.prim_index), -1)
-    return t, si.n, part, face, d_world
+    return t, si.p, si.n, part, face, d_world
 
 
 def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHits:
@@ -89,9 +93,9 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     n_pix = height * width
     index = dr.arange(mi.UInt32, n_pix)
     rays = pixel_rays(K, width, index)
-    t, n, part, face, d_world = _intersect(mscene, pose, rays, maxt)
+    t, p, n, part, face, d_world = _intersect(mscene, pose, rays, maxt)
     closed = mi.Bool(np.asarray(watertight, dtype=bool))
-    dr.eval(t, n, part, face, d_world)
+    dr.eval(t, p, n, part, face, d_world)
 
     hit = dr.isfinite(t)
     back = hit & (dr.dot(n, d_world) > 0) & dr.gather(mi.Bool, closed, part, hit)
@@ -105,11 +109,12 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     recast = int(dr.count(suspect)[0]) if dr.width(suspect) else 0
     if recast:
         sel = dr.compress(suspect)
-        t2, n2, part2, face2, d2 = _intersect(mscene, pose, pixel_rays(K, width, sel, RECAST_OFFSET_PX), maxt)
+        t2, p2, n2, part2, face2, d2 = _intersect(mscene, pose, pixel_rays(K, width, sel, RECAST_OFFSET_PX), maxt)
         ok = dr.isfinite(t2) & ~((dr.dot(n2, d2) > 0) & dr.gather(mi.Bool, closed, part2, dr.isfinite(t2)))
         dr.scatter(t, t2, sel, ok)
+        dr.scatter(p, p2, sel, ok)
         dr.scatter(n, n2, sel, ok)
         dr.scatter(part, part2, sel, ok)
         dr.scatter(face, face2, sel, ok)
-        dr.eval(t, n, part, face)
-    return PrimaryHits(rays, t, n, part, face, recast)
+        dr.eval(t, p, n, part, face)
+    return PrimaryHits(rays, t, p, n, part, face, recast)

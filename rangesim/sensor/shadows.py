@@ -20,14 +20,17 @@ def occluded(mscene, points_world, normals_world, sources_world, active):
 
     Notes
     -----
-    Shadow rays start slightly off the surface, on the laser's side, by 1e-6 of the point's
-    distance from the origin plus 1e-4 mm (float32 intersections are accurate to a few ulps),
-    so a surface never shadows itself.
+    Shadow rays start off the surface on the laser's side by Mitsuba's own spawn offset,
+    (1 + max |p_i|) * ``mi.math.RayEpsilon`` (0.05 mm at 600 mm from the origin): float32
+    positions carry errors of a few ulps of the coordinates, and a smaller offset lets a
+    plane shadow itself (seen on CUDA, whose rsqrt is approximate).
     """
     mi = mitsuba()
     to_source = sources_world - points_world
     side = dr.sign(dr.dot(normals_world, to_source))
-    eps = 1e-4 + 1e-6 * dr.norm(points_world)
+    magnitude = dr.select(dr.abs(points_world.x) > dr.abs(points_world.y), dr.abs(points_world.x), dr.abs(points_world.y))
+    magnitude = dr.select(magnitude > dr.abs(points_world.z), magnitude, dr.abs(points_world.z))
+    eps = (1.0 + magnitude) * mi.math.RayEpsilon
     origin = points_world + normals_world * (side * eps)
     to_source = sources_world - origin
     length = dr.norm(to_source)
