@@ -20,14 +20,14 @@ Examples
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
 import time
 import tomllib
 import traceback
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from rangesim import __version__
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
+from rangesim.cli.common import check_suffix, writing
 from rangesim.io import atomic_path, load_scan, save_scan
 from rangesim.sensor import load_sensor, preset_names, scan
 from rangesim.viz import save_preview
@@ -48,6 +49,9 @@ SCAN_SUFFIXES = (".exr", ".npz", ".ply")
 PREVIEW_SUFFIXES = (".png",)
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+#: modules adding subcommands: each has ``register(subparsers)`` that sets ``func`` (args -> exit code)
+COMMAND_MODULES: tuple[str, ...] = ()
 
 
 # -- small helpers ----------------------------------------------------------------------
@@ -67,15 +71,6 @@ def _os_error_message(exc: OSError) -> str:
     """``<file>: <reason>`` for an OSError (``[Errno 13] ...`` reads badly)."""
     reason = exc.strerror or str(exc) or type(exc).__name__
     return f"{exc.filename}: {reason}" if exc.filename else reason
-
-
-def _check_suffix(path: Path, allowed: Sequence[str], what: str) -> None:
-    """Reject an output extension before any work is done."""
-    if path.suffix.lower() not in allowed:
-        found = f"{path.suffix!r} files" if path.suffix else "files without an extension"
-        raise RangesimError(
-            f"cannot write {what} as {found}; supported: {', '.join(allowed)}", source=path
-        )
 
 
 def _parse_setting(text: str) -> tuple[str, Any]:
@@ -134,37 +129,17 @@ def _load_pose(path: Path) -> np.ndarray:
     return pose
 
 
-@contextmanager
-def _writing(path: Path, tmp: Path | None = None) -> Iterator[None]:
-    """Report a failed write against ``path``, not the temporary name the data went to."""
-    try:
-        yield
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        # mkdir under a regular file says "File exists" or "Not a directory": name the culprit
-        blocker = next((p for p in path.parents if p.exists()), None)
-        if blocker is not None and not blocker.is_dir():
-            reason = f"{blocker} is not a directory"
-        raise RangesimError(f"cannot write file ({reason})", source=path) from exc
-    except RangesimError as exc:
-        if tmp is None or str(tmp) not in str(exc):
-            raise
-        relabelled = RangesimError(str(exc).replace(str(tmp), str(path)))
-        relabelled.source = str(path)
-        raise relabelled from exc
-
-
 def _save_outputs(result: RangeScan, out: Path, preview: Path | None) -> None:
     """Write the scan and its preview: both, or neither (an old file stays as it was)."""
     if preview is None:
-        with _writing(out):
+        with writing(out):
             save_scan(result, out)
         return
     # the scan goes to a temporary name that replaces `out` only once the preview is written
-    with _writing(out), atomic_path(out) as tmp:
-        with _writing(out, tmp):
+    with writing(out), atomic_path(out) as tmp:
+        with writing(out, tmp):
             save_scan(result, tmp)
-        with _writing(preview):
+        with writing(preview):
             save_preview(result, preview)
 
 
@@ -188,9 +163,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     out = Path(args.out)
     preview = Path(args.preview) if args.preview else None
     # cheap checks first, so a typo fails before the scene is loaded and rendered
-    _check_suffix(out, SCAN_SUFFIXES, "scans")
+    check_suffix(out, SCAN_SUFFIXES, "scans")
     if preview is not None:
-        _check_suffix(preview, PREVIEW_SUFFIXES, "previews")
+        check_suffix(preview, PREVIEW_SUFFIXES, "previews")
     changes = dict(_parse_setting(text) for text in args.set)
     pose = _load_pose(Path(args.pose)) if args.pose else None
 
@@ -292,6 +267,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "sensor and pose.")
     p.add_argument("scan_file", metavar="SCAN_FILE", help="scan file (.exr, .npz)")
     p.set_defaults(func=cmd_info)
+    for module in COMMAND_MODULES:
+        importlib.import_module(module).register(sub)
     return parser
 
 
