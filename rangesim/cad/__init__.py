@@ -1,0 +1,4 @@
+"""CAD: parametric parts, part trees, B-spline surfaces, analytic features, surface sampling.
+
+Knows parts, not sensors.
+"""
