@@ -43,6 +43,12 @@ class SceneObject:
         Where the geometry came from (file path, primitive or model name).
     material : dict
         Material table for the rendered mode (``albedo`` keeps its meaning for diffuse).
+    face_labels : (n_faces,) int32 or None
+        Built-in models: the sub-part of each triangle, an index into ``labels``.
+    labels : list of str
+        Sub-part names (built-in models).
+    features : AnalyticFeatures or None
+        Built-in models: exact circles and edges, in world coordinates (mm).
     """
 
     name: str
@@ -50,6 +56,9 @@ class SceneObject:
     albedo: float = 0.6
     source: str = ""
     material: dict[str, Any] = field(default_factory=dict)
+    face_labels: np.ndarray | None = None
+    labels: list[str] = field(default_factory=list)
+    features: Any = None
 
     @property
     def watertight(self) -> bool:
@@ -81,6 +90,40 @@ class Scene:
         """(2, 3) axis-aligned bounding box of all objects, mm."""
         corners = np.vstack([o.mesh.bounds for o in self.objects])
         return np.stack([corners.min(axis=0), corners.max(axis=0)])
+
+    @property
+    def subpart_names(self) -> list[str]:
+        """Global sub-part names ``object/sub-part`` (an object without labels is one sub-part)."""
+        names = []
+        for obj in self.objects:
+            names += [f"{obj.name}/{label}" for label in obj.labels] if obj.labels else [obj.name]
+        return names
+
+    def subpart_image(self, part: np.ndarray, face: np.ndarray) -> np.ndarray:
+        """Sub-part label of each pixel from a scan's ``part`` and ``face`` images.
+
+        Parameters
+        ----------
+        part, face : (H, W) int arrays
+            Object and triangle index per pixel (-1 for none), as in a RangeScan.
+
+        Returns
+        -------
+        (H, W) int32 index into :attr:`subpart_names`, -1 where no surface was hit.
+        """
+        part = np.asarray(part)
+        face = np.asarray(face)
+        out = np.full(part.shape, -1, dtype=np.int32)
+        offset = 0
+        for k, obj in enumerate(self.objects):
+            here = part == k
+            if obj.face_labels is not None and obj.labels:
+                out[here] = offset + obj.face_labels[face[here]]
+                offset += len(obj.labels)
+            else:
+                out[here] = offset
+                offset += 1
+        return out
 
     def mitsuba_scene(self):
         """The Mitsuba scene of these objects, built once and cached (see ``mitsuba_scene``)."""
@@ -199,11 +242,8 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
         mesh_path = (path.parent / t["mesh"]).resolve()
         mesh, origin = load_mesh(mesh_path), str(mesh_path)
     elif "model" in t:
-        raise RangesimError(
-            f"{where} ({name}): built-in CAD model {t['model']!r} is not available in this "
-            "version; use a mesh file or primitives",
-            source=path,
-        )
+        built = _build_model(t, where, path)
+        mesh, origin = built.mesh, f"model:{t['model']}"
     else:
         mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
     # the object's own units (for a mesh file), else the scene's
@@ -221,4 +261,28 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
     )
     mesh = mesh.copy()
     mesh.apply_transform(matrix)
-    return SceneObject(name, mesh, albedo=albedo, source=origin, material=dict(t.get("material", {})))
+    obj = SceneObject(name, mesh, albedo=albedo, source=origin, material=dict(t.get("material", {})))
+    if "model" in t:
+        obj.face_labels, obj.labels = built.face_labels, list(built.labels)
+        if scale.shape == () or np.allclose(scale, scale.flat[0]):  # features survive similarity transforms
+            obj.features = built.features.transformed(matrix)
+    return obj
+
+
+def _build_model(t: dict, where: str, path: Path):
+    """A built-in parametric model (``model = "green_piece"``, optional ``params`` table)."""
+    from rangesim.cad.models import MODELS, model_names
+
+    if t["model"] not in MODELS:
+        raise RangesimError(
+            f"{where}: unknown model {t['model']!r}; built-in models: {', '.join(model_names())}", source=path
+        )
+    params = t.get("params", {})
+    if not isinstance(params, dict):
+        raise RangesimError(f"{where}.params must be a table", source=path)
+    try:
+        return MODELS[t["model"]](**params)
+    except RangesimError as exc:
+        raise RangesimError(f"{where}: {exc}", source=path) from exc
+    except (TypeError, ValueError) as exc:
+        raise RangesimError(f"{where}: bad model parameters ({exc})", source=path) from exc
