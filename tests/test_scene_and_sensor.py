@@ -9,7 +9,7 @@ import trimesh
 
 import rangesim as rs
 from rangesim.core.constants import Status
-from tests.conftest import QUIET_SENSOR, make_sensor
+from tests.conftest import make_sensor
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -147,9 +147,3 @@ def test_default_pose_frames_a_scene_without_view():
     seen = scan.status != Status.MISS
     assert not seen[0].any() and not seen[-1].any() and not seen[:, 0].any() and not seen[:, -1].any()
     assert (scan.status != Status.OUT_OF_RANGE).all()
-
-
-def test_standin_green_piece_scene_scans():
-    scan = rs.scan(REPO / "scenes" / "green_piece.toml", dict(QUIET_SENSOR, name="q"))
-    assert set(np.unique(scan.part[scan.valid])) >= {0, 1, 2, 3, 4}
-    assert scan.count(Status.SHADOW) > 0

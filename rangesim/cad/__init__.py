@@ -2,12 +2,16 @@
 
 Knows parts, not sensors.
 """
-from rangesim.cad.features import AnalyticFeatures, Circle3D, Segment3D
+from rangesim.cad.bspline import BSplineSurface, ParametricSurface, surface_curvatures, tessellate_surface
+from rangesim.cad.coons import CoonsPatch, coons_patch
+from rangesim.cad.features import AnalyticFeatures, Circle3D, Curve3D, Segment3D
 from rangesim.cad.green_piece import green_piece
 from rangesim.cad.models import MODELS, load_model, model_names
 from rangesim.cad.part import BuiltPart, PartNode
+from rangesim.cad.renault_piece import renault_piece
 
 __all__ = [
-    "AnalyticFeatures", "BuiltPart", "Circle3D", "MODELS", "PartNode", "Segment3D",
-    "green_piece", "load_model", "model_names",
+    "AnalyticFeatures", "BSplineSurface", "BuiltPart", "Circle3D", "CoonsPatch", "Curve3D", "MODELS",
+    "ParametricSurface", "PartNode", "Segment3D", "coons_patch", "green_piece", "load_model", "model_names",
+    "renault_piece", "surface_curvatures", "tessellate_surface",
 ]

@@ -63,12 +63,32 @@ class Segment3D:
         return float(np.linalg.norm(np.asarray(self.end) - np.asarray(self.start)))
 
 
+@dataclass(frozen=True)
+class Curve3D:
+    """A sharp curved edge (e.g. the rim of a freeform top), as a polyline.
+
+    Attributes
+    ----------
+    points : (N, 3) float, mm
+    dihedral_deg : (N,) float
+        Crease angle at each point, degrees.
+    convex : bool
+    """
+
+    name: str
+    points: np.ndarray
+    dihedral_deg: np.ndarray
+    convex: bool = True
+    part: str = ""
+
+
 @dataclass
 class AnalyticFeatures:
     """All analytic features of a part (or of a placed object)."""
 
     circles: list[Circle3D] = field(default_factory=list)
     segments: list[Segment3D] = field(default_factory=list)
+    curves: list[Curve3D] = field(default_factory=list)
 
     def transformed(self, matrix: np.ndarray) -> "AnalyticFeatures":
         """The features under a 4x4 similarity transform (rotation, uniform scale, translation)."""
@@ -84,14 +104,19 @@ class AnalyticFeatures:
             for c in self.circles
         ]
         segments = [replace(s, start=point(s.start), end=point(s.end)) for s in self.segments]
-        return AnalyticFeatures(circles, segments)
+        curves = [replace(c, points=np.asarray(c.points, float) @ linear.T + matrix[:3, 3]) for c in self.curves]
+        return AnalyticFeatures(circles, segments, curves)
 
     def to_dict(self) -> dict[str, Any]:
         def clean(obj):
             return {k: (np.asarray(v).tolist() if isinstance(v, (np.ndarray, list, tuple)) else v)
                     for k, v in obj.__dict__.items()}
 
-        return {"circles": [clean(c) for c in self.circles], "segments": [clean(s) for s in self.segments]}
+        return {
+            "circles": [clean(c) for c in self.circles],
+            "segments": [clean(s) for s in self.segments],
+            "curves": [clean(c) for c in self.curves],
+        }
 
     def __len__(self) -> int:
-        return len(self.circles) + len(self.segments)
+        return len(self.circles) + len(self.segments) + len(self.curves)
