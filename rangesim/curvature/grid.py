@@ -1,0 +1,101 @@
+"""Per-pixel curvature of an organized range scan by local quadric fits (:mod:`.quadric`)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from rangesim.curvature.quadric import fit_quadric_grid_batch
+
+__all__ = ["curvature_scan"]
+
+#: pixels (centres) per batch: bounds the (window^2, n) temporaries to a few MB each
+_CHUNK_PIXELS = 1 << 15
+
+
+def _xyz_valid(scan: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W, 3) float64 points and (H, W) validity from a RangeScan or a bare array."""
+    if hasattr(scan, "xyz"):
+        xyz = np.asarray(scan.xyz, dtype=np.float64)
+        valid = np.asarray(getattr(scan, "valid", np.ones(xyz.shape[:2], bool)), bool)
+    else:
+        xyz = np.asarray(scan, dtype=np.float64)
+        valid = np.ones(xyz.shape[:2], bool)
+    if xyz.ndim != 3 or xyz.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) point grid, got shape {xyz.shape}")
+    return xyz, valid & np.isfinite(xyz).all(axis=2)
+
+
+def curvature_scan(
+    scan: Any,
+    window: int = 5,
+    min_points: int | None = None,
+    max_dist: float | None = None,
+) -> dict[str, np.ndarray]:
+    """Per-pixel curvature of an organized point grid (a range scan).
+
+    Each valid pixel's neighbourhood is the ``window`` x ``window`` block of the grid
+    around it; invalid or NaN pixels in the block get weight 0 (so holes and the image
+    border are handled), and a quadric is fitted in a frame whose normal is the block's
+    PCA normal turned towards the camera (origin of the scan frame).
+
+    Sign convention (see :mod:`rangesim.curvature.quadric`): normals face the camera and a
+    curvature is negative where the surface bends away from the camera, so a sphere of
+    radius r seen from outside gives k1 = k2 = H = -1/r, K = 1/r^2 (Besl-Jain "peak"), a
+    convex cylinder k1 = 0, k2 = -1/r, and a hollow seen from inside positive values.
+
+    Parameters
+    ----------
+    scan : RangeScan or (H, W, 3) array
+        A RangeScan (``scan.xyz`` and ``scan.valid`` are used; camera frame, mm) or a bare
+        point grid in a frame whose origin is the viewpoint, NaN for missing points.
+    window : int
+        Odd block size in pixels (>= 3).
+    min_points : int, optional
+        Least number of valid pixels in the block; fewer gives NaN. Default: just over
+        half the block (13 of 25 for ``window=5``), at least 6.
+    max_dist : float, optional
+        Also drop block pixels farther than this (mm, 3D) from the centre pixel, so fits
+        do not straddle depth discontinuities. Default: keep all.
+
+    Returns
+    -------
+    dict
+        ``K`` (H, W) 1/mm^2; ``H``, ``k1``, ``k2`` (H, W) 1/mm with k1 >= k2; ``normal``,
+        ``dir1``, ``dir2`` (H, W, 3) fitted unit normal (towards the camera) and principal
+        directions; ``n_points`` (H, W) int valid pixels used. Float arrays are float64,
+        NaN at invalid pixels and where the fit is not possible.
+    """
+    window = int(window)
+    if window < 3 or window % 2 == 0:
+        raise ValueError(f"window must be an odd integer >= 3, got {window}")
+    if min_points is None:
+        min_points = max(6, window * window // 2 + 1)
+    xyz, valid = _xyz_valid(scan)
+    h, w = valid.shape
+    r = window // 2
+    grid = np.where(valid[..., None], xyz, np.nan)
+    padded = np.pad(grid, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
+    blocks = sliding_window_view(padded, (window, window), axis=(0, 1))  # (H, W, 3, win, win)
+
+    out = {key: np.full((h, w), np.nan) for key in ("K", "H", "k1", "k2")}
+    out.update({key: np.full((h, w, 3), np.nan) for key in ("normal", "dir1", "dir2")})
+    out["n_points"] = np.zeros((h, w), np.int64)
+    rows_per_chunk = max(1, _CHUNK_PIXELS // max(w, 1))
+    for i0 in range(0, h, rows_per_chunk):
+        i1 = min(i0 + rows_per_chunk, h)
+        sel = valid[i0:i1]
+        if not sel.any():
+            continue
+        centres = grid[i0:i1][sel]                                   # (n, 3)
+        pts = blocks[i0:i1][sel].reshape(-1, 3, window * window)     # (n, 3, k)
+        pts = np.ascontiguousarray(pts.transpose(1, 2, 0))           # (3, k, n) copy
+        weights = np.isfinite(pts).all(axis=0).astype(np.float64)
+        if max_dist is not None:
+            dist = np.sqrt(((pts - centres.T[:, None, :]) ** 2).sum(axis=0))
+            weights[~(dist <= max_dist)] = 0.0
+        fit = fit_quadric_grid_batch(centres, pts, weights, -centres, min_points)
+        for key in ("K", "H", "k1", "k2", "normal", "dir1", "dir2", "n_points"):
+            out[key][i0:i1][sel] = fit[key]
+    return out
