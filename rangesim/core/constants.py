@@ -26,3 +26,23 @@ STATUS_NAMES = {
     Status.DROPOUT: "dropout",
     Status.OUT_OF_RANGE: "out of range",
 }
+
+
+class EdgeLabel(IntEnum):
+    """Edge types in edge maps and ground truth (``EdgeMap.labels``, uint8)."""
+
+    NONE = 0
+    #: depth discontinuity / occluding boundary
+    JUMP = 1
+    #: crease where the material angle is below 180 degrees (a roof)
+    CONVEX = 2
+    #: crease where the material angle is above 180 degrees (a valley)
+    CONCAVE = 3
+
+
+EDGE_LABEL_NAMES = {
+    EdgeLabel.NONE: "none",
+    EdgeLabel.JUMP: "jump",
+    EdgeLabel.CONVEX: "convex",
+    EdgeLabel.CONCAVE: "concave",
+}
