@@ -11,9 +11,10 @@ from rangesim.core import RangeScan, RangesimError, Status
 from rangesim.io import load_scan, save_scan
 from rangesim.scene import Scene, SceneObject, load_scene
 from rangesim.sensor import Sensor, default_pose, load_sensor, scan
+from rangesim import cad, curvature, edges  # noqa: E402  (subpackages: rs.cad, rs.curvature, rs.edges)
 
 __all__ = [
     "RangeScan", "RangesimError", "Status", "Scene", "SceneObject", "Sensor",
     "load_scene", "load_sensor", "load_scan", "save_scan", "scan", "default_pose",
-    "__version__",
+    "__version__", "cad", "curvature", "edges",
 ]
