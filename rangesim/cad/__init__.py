@@ -9,9 +9,11 @@ from rangesim.cad.green_piece import green_piece
 from rangesim.cad.models import MODELS, load_model, model_names
 from rangesim.cad.part import BuiltPart, PartNode
 from rangesim.cad.renault_piece import renault_piece
+from rangesim.cad.sampling import SurfacePoints, surface_points, visible_points
 
 __all__ = [
     "AnalyticFeatures", "BSplineSurface", "BuiltPart", "Circle3D", "CoonsPatch", "Curve3D", "MODELS",
     "ParametricSurface", "PartNode", "Segment3D", "coons_patch", "green_piece", "load_model", "model_names",
-    "renault_piece", "surface_curvatures", "tessellate_surface",
+    "renault_piece", "SurfacePoints", "surface_curvatures", "surface_points", "tessellate_surface",
+    "visible_points",
 ]

@@ -51,7 +51,9 @@ PREVIEW_SUFFIXES = (".png",)
 EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: modules adding subcommands: each has ``register(subparsers)`` that sets ``func`` (args -> exit code)
-COMMAND_MODULES: tuple[str, ...] = ("rangesim.cli.cad_commands", "rangesim.cli.curvature_commands")
+COMMAND_MODULES: tuple[str, ...] = (
+    "rangesim.cli.cad_commands", "rangesim.cli.curvature_commands", "rangesim.cli.points_commands",
+)
 
 
 # -- small helpers ----------------------------------------------------------------------

@@ -21,14 +21,24 @@ VERTEX_DTYPE = np.dtype(
 )
 
 
-def ply_header(n_vertices: int, pose: np.ndarray) -> bytes:
-    """ASCII header of a rangesim point-cloud PLY with ``n_vertices`` vertices."""
-    pose_text = " ".join(repr(float(v)) for v in np.asarray(pose, dtype=np.float64).ravel())
+CAMERA_FRAME = "camera frame (x right, y down, z forward)"
+
+
+def ply_header(n_vertices: int, pose: np.ndarray | None, frame: str = CAMERA_FRAME) -> bytes:
+    """ASCII header of a rangesim point-cloud PLY with ``n_vertices`` vertices.
+
+    ``frame`` says which frame the points are in; ``pose`` (4x4, camera-to-world) is
+    recorded as a comment when given.
+    """
     lines = [
         "ply",
         "format binary_little_endian 1.0",
-        "comment rangesim point cloud, camera frame (x right, y down, z forward)",
-        f"comment pose {pose_text}",
+        f"comment rangesim point cloud, {frame}",
+    ]
+    if pose is not None:
+        pose_text = " ".join(repr(float(v)) for v in np.asarray(pose, dtype=np.float64).ravel())
+        lines.append(f"comment pose {pose_text}")
+    lines += [
         f"element vertex {n_vertices}",
         *(f"property float {name}" for name in VERTEX_DTYPE.names),
         "end_header",

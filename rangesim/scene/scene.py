@@ -14,11 +14,10 @@ import trimesh
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import look_at, object_transform
 from rangesim.core.tomlfile import check_keys, read_toml
+from rangesim.core.units import UNITS_MM
 from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh, validate_mesh
 from rangesim.scene.primitives import make_primitive
 
-#: length units accepted in scene files, in millimetres
-UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "inch": 25.4}
 
 OBJECT_KEYS = {
     "name", "mesh", "model", "primitive", "params", "translate", "rotate_deg", "scale",
