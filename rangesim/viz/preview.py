@@ -12,20 +12,17 @@ worker threads and the caller's interactive backend is left alone.
 from __future__ import annotations
 
 import math
+
 from pathlib import Path
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.cm import ScalarMappable
-from matplotlib.colors import Colormap, Normalize
-from matplotlib.figure import Figure
-from matplotlib.patches import Patch
+from matplotlib.colors import Colormap
 
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.io.atomic import atomic_path
+from rangesim.viz.figure import ColorbarSpec, save_labelled_image
 
 RGB = tuple[float, float, float]
 
@@ -360,74 +357,17 @@ def save_preview(
     h, w = scan.shape
     lo, hi = depth_limits(scan) if limits is None else (float(limits[0]), float(limits[1]))
     rgb = depth_rgb(scan, cmap=cmap, limits=(lo, hi), shade=shade)
-    counts = _status_counts(scan)
-
-    # -- layout, in pixels so the image lands on whole pixels (crisp nearest-neighbour) --
-    long_side = max(h, w, 1)
-    mag = max(1, 900 // long_side) if long_side <= 2400 else 2400 / long_side
-    img_w, img_h = max(1, round(w * mag)), max(1, round(h * mag))
-    inch = float(dpi)
-    left, gap, cbar_w, cbar_label, right = (round(v * inch) for v in (0.8, 0.15, 0.16, 0.95, 0.2))
-    top, xlabel = round(0.5 * inch), round(0.55 * inch)
-    cbar_h = max(img_h, round(1.6 * inch))  # a colour bar needs some height to read
-    body_h = max(img_h, cbar_h)
-    body_w = left + img_w + gap + cbar_w + cbar_label + right
-    fig_w = max(body_w, round(6.0 * inch))  # room for title and legend on narrow scans
-    x0 = left + (fig_w - body_w) // 2
-
-    handles = [
-        Patch(facecolor=status_color(c), edgecolor="0.4", linewidth=0.5,
-              label=f"{_status_label(c)}: {n:,} px ({_percent(n, h * w)})")
-        for c, n in counts.items()
+    legend = [
+        (status_color(c), f"{_status_label(c)}: {n:,} px ({_percent(n, h * w)})")
+        for c, n in _status_counts(scan).items()
     ]
-    fontsize = 8.5
-    if handles:
-        # legend below the axes, never over the data; as many columns as the width allows
-        char_w = 0.55 * fontsize / 72 * inch
-        entry_w = max(len(p.get_label()) for p in handles) * char_w + 0.45 * inch
-        ncol = max(1, min(len(handles), int((fig_w - 0.2 * inch) // entry_w)))
-        nrow = math.ceil(len(handles) / ncol)
-        legend_h = round((0.1 + 0.24 * nrow) * inch)
-    else:
-        ncol, legend_h = 1, 0
-    bottom = xlabel + legend_h
-    fig_h = top + body_h + bottom
-
-    fig = Figure(figsize=(fig_w / inch, fig_h / inch), dpi=dpi)
-    FigureCanvasAgg(fig)
-    img_y = bottom + (body_h - img_h) // 2
-    ax = fig.add_axes((x0 / fig_w, img_y / fig_h, img_w / fig_w, img_h / fig_h))
-    # extent on pixel edges: pixel (i, j) covers [j, j+1] x [i, i+1], like the K convention
-    ax.imshow(rgb, interpolation="nearest", aspect="equal", origin="upper",
-              extent=(0, w, h, 0), resample=False)
-    ax.set_xlabel("column [px]", fontsize=fontsize)
-    ax.set_ylabel("row [px]", fontsize=fontsize)
-    ax.tick_params(labelsize=fontsize - 1, length=3)
-    ax.set_title(default_title(scan) if title is None else title, fontsize=fontsize + 1.5, pad=8)
-
-    cax = fig.add_axes((
-        (x0 + img_w + gap) / fig_w,
-        (bottom + (body_h - cbar_h) // 2) / fig_h,
-        cbar_w / fig_w,
-        cbar_h / fig_h,
-    ))
     valid_d = scan.depth[_valid_depth_mask(scan)]
     below, above = bool((valid_d < lo).any()), bool((valid_d > hi).any())
     extend = {(False, False): "neither", (True, False): "min", (False, True): "max"}.get(
         (below, above), "both"
     )  # the arrows say "clipped here", so robust limits never hide that data go beyond
-    cbar = fig.colorbar(ScalarMappable(Normalize(lo, hi), _cmap(cmap)), cax=cax, extend=extend)
-    cbar.set_label("depth z [mm]", fontsize=fontsize)
-    cbar.ax.tick_params(labelsize=fontsize - 1, length=3)
-
-    if handles:
-        fig.legend(
-            handles=handles, loc="lower center", ncol=ncol, frameon=False,
-            bbox_to_anchor=(0.5, 0.05 * inch / fig_h),
-            fontsize=fontsize, handlelength=1.0, handleheight=1.0,
-            columnspacing=1.5, borderaxespad=0.0,
-        )
-
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": "rangesim"})
-    return path
+    colorbar = ColorbarSpec(_cmap(cmap), lo, hi, "depth z [mm]", extend)
+    return save_labelled_image(
+        rgb, path, title=default_title(scan) if title is None else title,
+        legend=legend, colorbar=colorbar, dpi=dpi,
+    )
