@@ -12,6 +12,7 @@ from rangesim.io import load_scan, save_scan
 from rangesim.scene import Scene, SceneObject, load_scene
 from rangesim.sensor import Sensor, default_pose, load_sensor, scan
 from rangesim import cad, curvature, edges  # noqa: E402  (subpackages: rs.cad, rs.curvature, rs.edges)
+from rangesim import recorded  # noqa: E402,F401  (registers the readers of recorded formats with load_scan)
 
 __all__ = [
     "RangeScan", "RangesimError", "Status", "Scene", "SceneObject", "Sensor",

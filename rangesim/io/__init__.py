@@ -47,13 +47,24 @@ def _describe_suffix(path: Path) -> str:
     return f"{path.suffix!r} files" if path.suffix else "files without an extension"
 
 
+def _reader_for(path: Path) -> Reader | None:
+    """The reader registered for the longest matching suffix (".msu.gz" before ".gz")."""
+    suffixes = [s.lower() for s in path.suffixes]
+    for k in range(len(suffixes)):
+        reader = _READERS.get("".join(suffixes[k:]))
+        if reader is not None:
+            return reader
+    return None
+
+
 def register_reader(suffixes: str | Iterable[str], func: Reader) -> None:
     """Make :func:`load_scan` read files with these extensions through ``func``.
 
     Parameters
     ----------
     suffixes : str or iterable of str
-        Extensions such as ``".pcd"`` or ``"pcd"``; matched case-insensitively. A
+        Extensions such as ``".pcd"`` or ``"pcd"``, or compound ones such as
+        ``".msu.gz"``; matched case-insensitively, the longest matching one first. A
         later registration for the same suffix replaces the earlier one.
     func : callable
         ``func(path: Path, **kwargs) -> RangeScan``; should raise
@@ -134,7 +145,7 @@ def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
         raise RangesimError("no such file", path)
     if not path.is_file():
         raise RangesimError("not a file", path)
-    reader = _READERS.get(_suffix(path))
+    reader = _reader_for(path)
     if reader is None:
         supported = ", ".join(sorted(_READERS))
         raise RangesimError(

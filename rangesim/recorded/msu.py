@@ -1,0 +1,136 @@
+"""The MSU / White Scanner range-image text format (``.msu``, or gzipped ``.msu.gz``).
+
+Layout: a three-line header giving the number of rows and columns (the wording varied
+between files, so the first two integers in those lines are taken as rows, then
+columns), then four whitespace-separated images of rows x columns numbers, each in row
+order: a flag (1 = valid), X, Y and Z. Coordinates are in the scanner's own frame
+(``meta["frame"] == "scanner"``, z the range axis, ``depth`` = Z); their unit is not in
+the file: millimetres unless the caller says otherwise (``units=``).
+"""
+from __future__ import annotations
+
+import gzip
+import io
+import re
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import RangeScan
+from rangesim.io.atomic import atomic_path
+from rangesim.recorded.pointlist import (
+    apply_conf,
+    check_file,
+    grid_scan,
+    parse_numbers,
+    read_bytes,
+    recorded_meta,
+    unit_scale,
+)
+
+__all__ = ["read_msu", "write_msu"]
+
+HEADER_LINES = 3
+GZIP_MAGIC = b"\x1f\x8b"
+# a whole integer, not part of a decimal number or a word ("480x512" counts as two)
+_INTEGER = re.compile(r"(?<![\w.])\d+(?![\w.])")
+_TIMES = re.compile(r"(?<=\d)[xX*]\s*(?=\d)")
+_NOT_FINITE = re.compile(r"\b(nan|inf|infinity)\b", re.IGNORECASE)
+
+
+def read_msu(path: str | Path, *, units: str = "mm", conf: str | Path | None = None) -> RangeScan:
+    """Read an MSU range image (plain or gzipped, recognised by content).
+
+    Parameters
+    ----------
+    path : str or Path
+    units : str
+        Unit of X, Y, Z in the file (``"mm"``, ``"in"``, ...); the scan is in mm.
+    conf : str or Path, optional
+        A Stanford ``.conf`` whose ``bmesh`` line for this file sets ``pose``.
+
+    Returns
+    -------
+    RangeScan
+        rows x columns; valid where the flag is 1 and X, Y, Z are finite.
+        ``meta["msu_header"]`` keeps the three header lines.
+
+    Raises
+    ------
+    RangesimError
+        A missing or corrupt file, a header without two positive integers or with NaN,
+        or a value count other than 4 x rows x columns.
+    """
+    path = check_file(path)
+    scale = unit_scale(units, path)
+    raw = read_bytes(path)
+    if raw.startswith(GZIP_MAGIC):
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise RangesimError(f"corrupt gzip data ({exc})", path) from None
+    parts = raw.split(b"\n", HEADER_LINES)
+    if len(parts) <= HEADER_LINES:
+        raise RangesimError(f"truncated: fewer than {HEADER_LINES} header lines", path)
+    header = [line.decode("ascii", errors="replace").strip() for line in parts[:HEADER_LINES]]
+    text = " ".join(header)
+    if _NOT_FINITE.search(text):
+        raise RangesimError(f"NaN or infinity in the header {text!r}", path)
+    sizes = [int(v) for v in _INTEGER.findall(_TIMES.sub(" ", text))[:2]]
+    if len(sizes) < 2 or min(sizes) <= 0:
+        raise RangesimError(f"the header does not give two positive integers (rows, columns): {text!r}", path)
+    rows, cols = sizes
+    cells = rows * cols
+    values = parse_numbers(parts[HEADER_LINES], path, "MSU image data")
+    if values.size != 4 * cells:
+        raise RangesimError(
+            f"expected 4 images of {rows} x {cols} = {4 * cells} numbers after the header, found {values.size}"
+            + (" (truncated)" if values.size < 4 * cells else ""),
+            path,
+        )
+    images = values.reshape(4, rows, cols)
+    xyz = (np.moveaxis(images[1:], 0, -1) * scale).astype(np.float32)
+    meta = recorded_meta("msu", path, "scanner", organized=True, msu_header=header, msu_units=units)
+    scan = grid_scan(xyz, meta, valid=images[0] == 1)
+    return apply_conf(scan, conf, path)
+
+
+def write_msu(scan: RangeScan, path: str | Path, *, units: str = "mm") -> Path:
+    """Write ``scan`` as an MSU range image, atomically; gzipped when the name ends ``.gz``.
+
+    The flag image is ``scan.valid``; X, Y, Z are ``scan.xyz`` (0 where invalid) in
+    ``units``, printed with enough digits that millimetre float32 values read back
+    exactly.
+
+    Parameters
+    ----------
+    scan : RangeScan
+    path : str or Path
+        ``.msu`` or ``.msu.gz``.
+    units : str
+        Unit of the file's X, Y, Z.
+
+    Returns
+    -------
+    Path
+        The path written.
+    """
+    path = Path(path)
+    scale = unit_scale(units, path)
+    rows, cols = scan.shape
+    valid = scan.valid
+    out = io.StringIO()
+    out.write(f"{rows} rows\n{cols} columns\nflag X Y Z images, row order, {units} (written by rangesim)\n")
+    np.savetxt(out, valid.astype(np.int64), fmt="%d")
+    exact = scale == 1.0
+    for axis in range(3):
+        image = np.where(valid, scan.xyz[..., axis], np.float32(0)).astype(np.float64) / scale
+        np.savetxt(out, image, fmt="%.9g" if exact else "%.17g")
+    data = out.getvalue().encode("ascii")
+    if path.name.lower().endswith(".gz"):
+        data = gzip.compress(data, mtime=0)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return path
