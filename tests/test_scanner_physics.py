@@ -267,3 +267,13 @@ def test_closed_solid_has_no_leaks_through_shared_edges():
     assert (scan.status[inside] != Status.MISS).all()
     front = np.einsum("ijk,ijk->ij", scan.xyz_true - centre, rays) < 0
     assert front[scan.status != Status.MISS].all()
+
+
+def test_no_leak_through_a_box_standing_on_the_floor():
+    # top-down, square image: the anti-diagonal pixels look exactly along the box top's and
+    # bottom's shared diagonal edges; a leaking ray would land on the floor under the box
+    sensor = make_sensor(**{"camera.width": 128, "camera.height": 128})
+    scan = rs.scan([plane(), box([-50, -50, 0], [50, 50, 30])], sensor, pose=top_down_pose(400.0))
+    x, y = scan.xyz_true[..., 0], scan.xyz_true[..., 1]
+    under_top = (np.abs(x) < 45) & (np.abs(y) < 45)
+    assert under_top.sum() > 1000 and (scan.part[under_top] == 1).all()

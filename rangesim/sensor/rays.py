@@ -74,10 +74,12 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     """One vectorised ``ray_intersect`` over all pixels, plus the shared-edge guard.
 
     Embree can let a ray through an edge shared by two triangles (Mitsuba #1149). On a closed
-    mesh that shows up as a miss inside the silhouette (all four neighbours hit) or as a hit
-    on the inside of the far wall (a back face of a watertight object). Only those rays are
-    cast again, shifted by 1e-3 pixel, and the new hit replaces the old one when it is
-    plausible (a front face, or any hit for a former miss).
+    mesh that shows up as a hit on the inside of its far wall (a back face of a watertight
+    object), or, where the far wall leaks too or lies on another surface, as a pixel whose
+    four neighbours all see one object that it does not (a miss, or a hit on the floor
+    behind). Only those rays are cast again, shifted by 1e-3 pixel, and the new hit
+    replaces the old one when it is plausible (not a back face of a closed object). A
+    genuine one-pixel feature casts the same way again and stays.
 
     Parameters
     ----------
@@ -101,11 +103,13 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     back = hit & (dr.dot(n, d_world) > 0) & dr.gather(mi.Bool, closed, part, hit)
     col, row = index % width, index // width
     inner = (col > 0) & (col < width - 1) & (row > 0) & (row < height - 1)
-    enclosed = inner
-    for step in (1, width):
-        enclosed &= dr.gather(mi.Bool, hit, index + step, inner)
-        enclosed &= dr.gather(mi.Bool, hit, index - step, inner)
-    suspect = back | (~hit & enclosed)
+    # a pixel whose four neighbours all see one object it does not see: a ray that slipped
+    # through that object (a miss inside a silhouette, or a hit on whatever lies behind)
+    around = dr.gather(mi.Int32, part, index + 1, inner)
+    isolated = inner & (around != part)
+    for neighbour in (index - 1, index + width, index - width):
+        isolated &= dr.gather(mi.Int32, part, neighbour, inner) == around
+    suspect = back | isolated
     recast = int(dr.count(suspect)[0]) if dr.width(suspect) else 0
     if recast:
         sel = dr.compress(suspect)
