@@ -1,0 +1,14 @@
+"""Ground truth and scores: exact edge labels of synthetic scans, and how well a detector finds them."""
+from rangesim.evaluate.edge_scores import edge_scores
+from rangesim.evaluate.ground_truth import (
+    ImageEllipse,
+    ImageSegment,
+    ground_truth_edges,
+    ground_truth_features,
+    jump_edges,
+)
+
+__all__ = [
+    "ground_truth_edges", "ground_truth_features", "jump_edges", "edge_scores",
+    "ImageEllipse", "ImageSegment",
+]

@@ -1,0 +1,587 @@
+"""Exact edge ground truth for synthetic scans, from the noise-free geometry behind them.
+
+Nothing here casts rays: everything comes from the scan's own ground-truth images
+(``xyz_true``, ``part``, ``face``, ``normal``), its pose and intrinsics, and the scene's
+meshes (world mm).
+
+Edge types (:class:`~rangesim.core.constants.EdgeLabel`):
+
+* **jump** -- a depth discontinuity between two 4-neighbour pixels (:func:`jump_edges`), or a
+  hit next to a miss; marked on the near (occluding) side.
+* **convex / concave crease** -- mesh edges whose dihedral angle exceeds ``crease_deg`` with
+  both faces turned towards the camera, projected into the image where visible; plus contact
+  creases where two separate surfaces meet (a box standing on a floor), found from pixel
+  pairs. Jump wins where both apply.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rangesim.core.constants import EdgeLabel
+from rangesim.core.rangescan import RangeScan
+
+#: default jump rule: the 3D step between two neighbours within this angle of the viewing ray
+JUMP_ANGLE_DEG = 15.0
+#: image-space spacing of the samples along projected crease edges, pixels
+SAMPLE_SPACING_PX = 0.25
+#: crease samples closer to the camera than this are clipped, mm
+NEAR_CLIP_MM = 1e-3
+
+
+# ---------------------------------------------------------------------------------------
+# jump edges
+# ---------------------------------------------------------------------------------------
+def _pair_jumps(
+    p: np.ndarray, q: np.ndarray, both: np.ndarray, cos_max: float, rays: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Jump test for aligned neighbour arrays ``p``, ``q`` (..., 3); returns (jump, p_is_near)."""
+    rp = np.linalg.norm(p, axis=-1) if rays is None else None
+    rq = np.linalg.norm(q, axis=-1) if rays is None else None
+    if rays is None:
+        p_near = rp <= rq
+        near = np.where(p_near[..., None], p, q)
+        ray = near / np.maximum(np.where(p_near, rp, rq), 1e-300)[..., None]  # 0 off the mask
+    else:
+        # along a given viewing direction, "near" is the smaller coordinate along it
+        p_near = np.einsum("...k,...k->...", p - q, rays) <= 0
+        ray = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    d = q - p
+    along = np.abs(np.einsum("...k,...k->...", d, ray))
+    length = np.linalg.norm(d, axis=-1)
+    jump = both & (along > cos_max * length) & (length > 0)
+    return jump, p_near
+
+
+def jump_edges(
+    xyz: np.ndarray,
+    hit: np.ndarray,
+    *,
+    max_angle_deg: float = JUMP_ANGLE_DEG,
+    boundary: bool = True,
+    rays: np.ndarray | None = None,
+) -> np.ndarray:
+    """Jump (depth-discontinuity) edges of an organized point image, near side marked.
+
+    Rule: two 4-neighbour pixels p, q that both hold a point form a jump when the 3D
+    segment between their points makes an angle below ``max_angle_deg`` with the viewing
+    ray (of the nearer point): ``|(q - p) . r| > cos(max_angle) |q - p|``. A continuous
+    surface seen at incidence i gives segments at >= 90 - i degrees from the ray, so with
+    the default 15 degrees a surface fires only when seen at more than 75 degrees
+    incidence; a step fires when it is deeper than ~1 / tan(15 deg) = 3.7 pixel footprints.
+    Exact for planes (never) and boxes (every top-to-floor step), and creases never fire
+    (the segment across a crease is no closer to the ray than the steeper face). With
+    ``boundary`` a pixel with a point next to one without is a jump too (occluding contour
+    against empty space). The pixel of the pair nearer the camera is marked. Image borders
+    are not edges.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float
+        Points in the camera frame (camera centre at the origin), mm; anything where
+        ``hit`` is False (NaN allowed).
+    hit : (H, W) bool
+        Pixels holding a point (``part >= 0`` for ground truth, ``valid`` for measured data).
+    max_angle_deg : float
+        Largest angle between the step and the viewing ray that still counts as a jump.
+    boundary : bool
+        Also mark points next to pixels without a point.
+    rays : (H, W, 3) float, optional
+        Viewing directions per pixel, for scanners that are not a pinhole at the origin
+        (a translating sweep); default the direction from the origin to the point.
+
+    Returns
+    -------
+    (H, W) bool
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    hit = np.asarray(hit, dtype=bool)
+    if xyz.shape[:2] != hit.shape or xyz.shape[-1] != 3:
+        raise ValueError(f"xyz {xyz.shape} and hit {hit.shape} must be (H, W, 3) and (H, W)")
+    pts = np.where(hit[..., None], xyz, 0.0)  # NaNs off the mask would poison the arithmetic
+    hit = hit & np.all(np.isfinite(pts), axis=-1)
+    pts = np.nan_to_num(pts)
+    if rays is not None:
+        rays = np.asarray(rays, dtype=np.float64)
+    cos_max = float(np.cos(np.radians(max_angle_deg)))
+    out = np.zeros(hit.shape, dtype=bool)
+    for axis in (0, 1):
+        first = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+        second = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+        hp, hq = hit[first], hit[second]
+        ray = None if rays is None else 0.5 * (rays[first] + rays[second])
+        jump, p_near = _pair_jumps(pts[first], pts[second], hp & hq, cos_max, ray)
+        out[first] |= jump & p_near
+        out[second] |= jump & ~p_near
+        if boundary:
+            out[first] |= hp & ~hq
+            out[second] |= hq & ~hp
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# shared helpers
+# ---------------------------------------------------------------------------------------
+def _camera(scan: RangeScan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(world-to-camera rotation R (3, 3), translation t (3,), K (3, 3)) of a synthetic scan."""
+    if scan.xyz_true is None:
+        raise ValueError("ground truth needs a synthetic scan (scan.xyz_true is None)")
+    K = scan.K
+    if K is None:
+        raise ValueError("ground truth needs the scan's pinhole intrinsics (scan.meta['K'])")
+    inv = np.linalg.inv(scan.pose)
+    return inv[:3, :3], inv[:3, 3], K
+
+
+def _project(K: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(N, 2) continuous (u, v) of camera-frame points; pixel (i, j) spans u in [j, j + 1)."""
+    uvw = pts @ K.T
+    return uvw[:, :2] / uvw[:, 2:3]
+
+
+def _visible(
+    scan: RangeScan,
+    K: np.ndarray,
+    k: int,
+    pts: np.ndarray,
+    depth_tol_px: float,
+    faces: np.ndarray | None = None,
+    slack: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which camera-frame points on object ``k`` the scan sees.
+
+    A point is visible when it projects inside the image onto a pixel that hits object
+    ``k`` at a true depth within ``depth_tol_px`` pixel footprints (z / fx) of the point's
+    own depth, or (``faces``, (N, 2)) whose triangle is one of the point's two faces. With
+    ``slack`` any of the 2 x 2 pixels whose centres surround the point will do (a point on
+    an occluding contour is seen although half the pixels it may land on see past it).
+
+    Returns (visible (N,) bool, row (N,) int, col (N,) int): the pixel the point lands on,
+    clipped into the image (meaningless where not visible).
+    """
+    h, w = scan.shape
+    uv = _project(K, pts)
+    front = pts[:, 2] > 0
+    tol = depth_tol_px * pts[:, 2] / K[0, 0]
+
+    def test(row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        inside = front & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        row = np.clip(np.nan_to_num(row), 0, h - 1).astype(np.intp)
+        col = np.clip(np.nan_to_num(col), 0, w - 1).astype(np.intp)
+        same = inside & (scan.part[row, col] == k)
+        close = np.abs(scan.xyz_true[row, col, 2].astype(np.float64) - pts[:, 2]) <= tol
+        if faces is not None:
+            f = scan.face[row, col]
+            close |= (f == faces[:, 0]) | (f == faces[:, 1])
+        return same & close, row, col
+
+    vis, row, col = test(np.floor(uv[:, 1]), np.floor(uv[:, 0]))
+    if slack:
+        r0, c0 = np.floor(uv[:, 1] - 0.5), np.floor(uv[:, 0] - 0.5)
+        for dr in (0, 1):
+            for dc in (0, 1):
+                vis |= test(r0 + dr, c0 + dc)[0]
+    return vis, row, col
+
+
+def _sample_segments(
+    K: np.ndarray, a: np.ndarray, b: np.ndarray, shape: tuple[int, int], spacing: float = SAMPLE_SPACING_PX
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points along camera-frame 3D segments, evenly spaced in the image.
+
+    Each segment is clipped to ``z >= NEAR_CLIP_MM`` and to (a one-pixel margin around)
+    the image, then sampled every ``spacing`` pixels of its projection, mapped back to 3D
+    with perspective-correct interpolation (image fraction s -> t = s zA / ((1 - s) zB + s zA)).
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsics
+    a, b : (M, 3) float
+        Segment ends, camera frame, mm.
+    shape : (H, W)
+
+    Returns
+    -------
+    points : (N, 3) float64
+        Samples, camera frame, mm.
+    segment : (N,) intp
+        Index of the segment each sample belongs to.
+    """
+    h, w = shape
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    # clip to the half-space in front of the camera
+    za, zb = a[:, 2], b[:, 2]
+    keep = (za >= NEAR_CLIP_MM) | (zb >= NEAR_CLIP_MM)
+    crossing = keep & ((za < NEAR_CLIP_MM) | (zb < NEAR_CLIP_MM))
+    tc = np.zeros_like(za)
+    tc[crossing] = (NEAR_CLIP_MM - za[crossing]) / (zb[crossing] - za[crossing])
+    cut = a + tc[:, None] * (b - a)
+    a2 = np.where(((za < NEAR_CLIP_MM) & keep)[:, None], cut, a)
+    b2 = np.where(((zb < NEAR_CLIP_MM) & keep)[:, None], cut, b)
+    idx = np.flatnonzero(keep)
+    a2, b2 = a2[idx], b2[idx]
+    if len(idx) == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.intp)
+    ua, ub = _project(K, a2), _project(K, b2)
+    # Liang-Barsky clip of the image segment to [-1, W + 1] x [-1, H + 1]
+    d = ub - ua
+    lo, hi = np.zeros(len(idx)), np.ones(len(idx))
+    ok = np.ones(len(idx), dtype=bool)
+    for p, q in ((-d[:, 0], ua[:, 0] + 1), (d[:, 0], w + 1 - ua[:, 0]),
+                 (-d[:, 1], ua[:, 1] + 1), (d[:, 1], h + 1 - ua[:, 1])):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = q / p
+        ok &= ~((p == 0) & (q < 0))
+        lo = np.where(p < 0, np.maximum(lo, r), lo)
+        hi = np.where(p > 0, np.minimum(hi, r), hi)
+    ok &= lo <= hi
+    idx, lo, hi, a2, b2, d = idx[ok], lo[ok], hi[ok], a2[ok], b2[ok], d[ok]
+    length = (hi - lo) * np.linalg.norm(d, axis=1)
+    n = np.ceil(length / spacing).astype(np.intp) + 1
+    seg = np.repeat(np.arange(len(idx)), n)
+    start = np.cumsum(n) - n
+    frac = (np.arange(len(seg)) - start[seg]) / np.maximum(n[seg] - 1, 1)
+    s = lo[seg] + frac * (hi[seg] - lo[seg])
+    za, zb = a2[seg, 2], b2[seg, 2]
+    t = s * za / ((1 - s) * zb + s * za)
+    pts = a2[seg] + t[:, None] * (b2[seg] - a2[seg])
+    return pts, idx[seg]
+
+
+# ---------------------------------------------------------------------------------------
+# creases
+# ---------------------------------------------------------------------------------------
+def _mesh_creases(
+    scan: RangeScan, obj: Any, k: int, R: np.ndarray, t: np.ndarray, K: np.ndarray,
+    crease_deg: float, depth_tol_px: float, out: np.ndarray,
+) -> None:
+    """Project object ``k``'s visible crease edges into ``out`` (uint8 labels, in place)."""
+    mesh = obj.mesh
+    if len(mesh.faces) < 2 or not np.any(scan.part == k):
+        return
+    sel = mesh.face_adjacency_angles > np.radians(crease_deg)
+    if not np.any(sel):
+        return
+    pairs = mesh.face_adjacency[sel]
+    edges = mesh.face_adjacency_edges[sel]
+    convex = mesh.face_adjacency_convex[sel]
+    verts = mesh.vertices @ R.T + t  # camera frame
+    normals = mesh.face_normals @ R.T
+    # a planar face faces the camera (origin) everywhere or nowhere: n . (0 - v0) > 0
+    facing = np.einsum("ij,ij->i", normals, -verts[mesh.faces[:, 0]]) > 0
+    f0, f1 = facing[pairs[:, 0]], facing[pairs[:, 1]]
+    if obj.watertight:
+        # both faces seen: a crease; one seen: an occluding contour (the jump rule's job)
+        keep = f0 & f1
+    else:
+        # an open sheet is seen from either side; from its back, convex and concave swap
+        keep = f0 == f1
+        convex = convex ^ ~f0
+    if not np.any(keep):
+        return
+    pairs, edges, convex = pairs[keep], edges[keep], convex[keep]
+    pts, seg = _sample_segments(K, verts[edges[:, 0]], verts[edges[:, 1]], scan.shape)
+    if len(pts) == 0:
+        return
+    vis, row, col = _visible(scan, K, k, pts, depth_tol_px, faces=pairs[seg])
+    label = np.where(convex[seg], EdgeLabel.CONVEX, EdgeLabel.CONCAVE).astype(np.uint8)
+    # several samples per pixel; where convex and concave meet in one pixel, concave wins
+    np.maximum.at(out, (row[vis], col[vis]), label[vis])
+
+
+def _contact_creases(
+    scan: RangeScan, faces_of: list[np.ndarray], K: np.ndarray, crease_deg: float,
+    jump_angle_deg: float, out: np.ndarray,
+) -> None:
+    """Creases where two surfaces that share no mesh edge meet (different objects in contact,
+    or separate shells of one mesh), found from 4-neighbour pixel pairs; into ``out``.
+
+    A pair is a contact crease when both pixels hit, their faces share no vertex, the step
+    between their true points is no jump, their true normals differ by more than
+    ``crease_deg``, and the line where their tangent planes meet passes within the pair's
+    own spacing of the pair's midpoint (else it is a small step, not a crease) and, in the
+    image, between the two pixel centres (a continuous surface from one ray to the other
+    crosses it there). Concave when each point lies in front of the other's tangent plane.
+    The pixel whose centre is nearer that image line is marked.
+    """
+    xyz = scan.xyz_true.astype(np.float64)
+    nrm = scan.normal.astype(np.float64)
+    part, face = scan.part, scan.face
+    hit = (part >= 0) & np.all(np.isfinite(xyz), axis=-1) & np.all(np.isfinite(nrm), axis=-1)
+    cos_crease = np.cos(np.radians(crease_deg))
+    cos_jump = float(np.cos(np.radians(jump_angle_deg)))
+    h, w = scan.shape
+    rows, cols = np.indices((h, w))
+    for axis in (0, 1):
+        first = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+        second = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+        both = hit[first] & hit[second]
+        cand = both & (np.einsum("...k,...k->...", nrm[first], nrm[second]) < cos_crease)
+        ip, jp = rows[first][cand], cols[first][cand]
+        iq, jq = rows[second][cand], cols[second][cand]
+        if len(ip) == 0:
+            continue
+        kp, kq = part[ip, jp], part[iq, jq]
+        fp, fq = face[ip, jp], face[iq, jq]
+        # faces of one object sharing a vertex are mesh neighbours: their crease is a mesh edge
+        same = kp == kq
+        shared = np.zeros(len(ip), dtype=bool)
+        for k in np.unique(kp[same]):  # a loop over objects only
+            m = same & (kp == k)
+            tri_p, tri_q = faces_of[k][fp[m]], faces_of[k][fq[m]]
+            shared[m] = np.any(tri_p[:, :, None] == tri_q[:, None, :], axis=(1, 2))
+        p, q = xyz[ip, jp], xyz[iq, jq]
+        jump, _ = _pair_jumps(p, q, np.ones(len(ip), dtype=bool), cos_jump, None)
+        keep = ~shared & ~jump
+        if not np.any(keep):
+            continue
+        ip, jp, iq, jq, p, q = ip[keep], jp[keep], iq[keep], jq[keep], p[keep], q[keep]
+        n_p, n_q = nrm[ip, jp], nrm[iq, jq]
+        # closest point x to the midpoint m on the planes' intersection line:
+        # x = m + a n_p + b n_q with n_p . x = n_p . p and n_q . x = n_q . q
+        m = 0.5 * (p + q)
+        c = np.einsum("ij,ij->i", n_p, n_q)
+        rp = np.einsum("ij,ij->i", n_p, p - m)
+        rq = np.einsum("ij,ij->i", n_q, q - m)
+        det = np.maximum(1.0 - c * c, 1e-12)  # > 0: the normals differ by > crease_deg
+        a = (rp - c * rq) / det
+        b = (rq - c * rp) / det
+        x = m + a[:, None] * n_p + b[:, None] * n_q
+        spacing = np.linalg.norm(q - p, axis=1)
+        line = np.cross(n_p, n_q)
+        line *= (spacing / np.linalg.norm(line, axis=1))[:, None]
+        # the crease line in the image (pixel-centre coordinates): through x0 along e
+        x0 = _project(K, x) - 0.5
+        e = _project(K, x + line) - 0.5 - x0
+        side_p = e[:, 0] * (ip - x0[:, 1]) - e[:, 1] * (jp - x0[:, 0])
+        side_q = e[:, 0] * (iq - x0[:, 1]) - e[:, 1] * (jq - x0[:, 0])
+        # a continuous surface from p to q crosses the crease between their rays: the line
+        # separates the two pixel centres in the image
+        eps = 1e-6 * np.linalg.norm(e, axis=1)
+        between = side_p * side_q <= eps * eps
+        ok = (np.linalg.norm(x - m, axis=1) <= spacing) & between & (x[:, 2] > 0)
+        concave = (np.einsum("ij,ij->i", n_p, q - p) + np.einsum("ij,ij->i", n_q, p - q)) > 0
+        use_p = np.abs(side_p) <= np.abs(side_q)  # the pixel centre nearer the line
+        r = np.where(use_p, ip, iq)[ok]
+        cc = np.where(use_p, jp, jq)[ok]
+        label = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)[ok]
+        np.maximum.at(out, (r, cc), label)
+
+
+def ground_truth_edges(
+    scan: RangeScan,
+    scene: Any,
+    crease_deg: float = 20.0,
+    *,
+    jump_angle_deg: float = JUMP_ANGLE_DEG,
+    depth_tol_px: float = 3.0,
+) -> np.ndarray:
+    """Exact edge labels of a synthetic scan from the geometry behind it.
+
+    Jump edges follow :func:`jump_edges` on ``scan.xyz_true`` (hits are ``part >= 0``),
+    including hit-next-to-miss, marked on the near side. Creases are the mesh edges of each
+    object whose dihedral angle (between face normals) exceeds ``crease_deg`` and whose two
+    faces both face the camera (one facing away makes it an occluding contour: a jump),
+    sampled every 1/4 pixel of their projection and kept where visible: the sample's pixel
+    hits the same object, on one of the edge's two faces or within ``depth_tol_px`` pixel
+    footprints of the sample's depth. Convex/concave follows the dihedral sign
+    (``face_adjacency_convex``). Surfaces in contact without sharing a mesh edge (a box on
+    a floor) get contact creases from pixel pairs (see ``_contact_creases``). Jump wins over
+    crease; where convex and concave fall in one pixel, concave wins.
+
+    Parameters
+    ----------
+    scan : RangeScan
+        A synthetic scan (``xyz_true``, ``part``, ``face``, ``normal``, ``pose``, ``meta['K']``).
+    scene : Scene or anything :func:`rangesim.load_scene` accepts
+        The scene the scan was made of (object order = ``scan.part``), world mm.
+    crease_deg : float
+        Smallest dihedral angle (degrees between the face normals) that makes a crease.
+    jump_angle_deg : float
+        The jump rule's angle (see :func:`jump_edges`).
+    depth_tol_px : float
+        Visibility tolerance of crease samples, in pixel footprints (z / fx mm).
+
+    Returns
+    -------
+    (H, W) uint8
+        :class:`~rangesim.core.constants.EdgeLabel` per pixel: 0 none, 1 jump, 2 convex,
+        3 concave.
+    """
+    from rangesim.scene.scene import load_scene
+
+    scene = load_scene(scene)
+    R, t, K = _camera(scan)
+    if scan.part.max(initial=-1) >= len(scene.objects):
+        raise ValueError(f"scan hits object {int(scan.part.max())} but the scene has {len(scene.objects)}")
+    hit = (scan.part >= 0) & np.all(np.isfinite(scan.xyz_true), axis=-1)
+    jump = jump_edges(scan.xyz_true, hit, max_angle_deg=jump_angle_deg)
+    labels = np.zeros(scan.shape, dtype=np.uint8)
+    for k, obj in enumerate(scene.objects):
+        _mesh_creases(scan, obj, k, R, t, K, crease_deg, depth_tol_px, labels)
+    _contact_creases(scan, [np.asarray(o.mesh.faces) for o in scene.objects], K, crease_deg,
+                     jump_angle_deg, labels)
+    labels[jump] = EdgeLabel.JUMP
+    return labels
+
+
+# ---------------------------------------------------------------------------------------
+# analytic features
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ImageEllipse:
+    """A 3D circle's exact perspective image.
+
+    Attributes
+    ----------
+    name : str
+    object : int
+        Scene object index.
+    center : (2,) float
+        Ellipse centre (x = column, y = row), pixels, integers at pixel centres (not the
+        projection of the circle's centre).
+    axes : (2,) float
+        Semi-major and semi-minor axes, pixels.
+    angle : float
+        Direction of the major axis, radians from +x (columns) towards +y (rows).
+    visible : float
+        Fraction of the circle (by 3D arc length) the scan sees, 0..1.
+    convex : bool
+    dihedral_deg : float
+    """
+
+    name: str
+    object: int
+    center: np.ndarray
+    axes: np.ndarray
+    angle: float
+    visible: float
+    convex: bool = True
+    dihedral_deg: float = 90.0
+
+
+@dataclass(frozen=True)
+class ImageSegment:
+    """A 3D segment's image: ``xyxy`` = (x0, y0, x1, y1) in pixels (x = column, y = row,
+    integers at pixel centres), clipped to the part in front of the camera; ``visible`` the
+    fraction (by image length) the scan sees."""
+
+    name: str
+    object: int
+    xyxy: np.ndarray
+    visible: float
+    convex: bool = True
+    dihedral_deg: float = 90.0
+
+
+def _conic_to_ellipse(C: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(center, (a, b), angle) of the ellipse x^T C x = 0 (homogeneous 3x3), or None."""
+    A = C[:2, :2]
+    if np.linalg.det(A) <= 0:
+        return None  # parabola or hyperbola: the circle reaches the camera plane
+    center = np.linalg.solve(A, -C[:2, 2])
+    f0 = float(center @ C[:2, 2] + C[2, 2])  # value of the form at the centre
+    lam, vec = np.linalg.eigh(A)
+    axes2 = -f0 / lam
+    if np.any(axes2 <= 0):
+        return None
+    axes = np.sqrt(axes2)
+    order = np.argsort(-axes)  # major first
+    major = vec[:, order[0]]
+    angle = float(np.arctan2(major[1], major[0]))
+    angle = (angle + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector: (-pi/2, pi/2]
+    return center, axes[order], angle
+
+
+def ground_truth_features(
+    scan: RangeScan, scene: Any, *, depth_tol_px: float = 3.0, spacing_px: float = 0.5
+) -> dict[str, list]:
+    """The scene's analytic features (circles, segments) projected into a synthetic scan.
+
+    Circles become exact image ellipses (the conic H^-T diag(1, 1, -1) H^-1 with
+    H = K' [r e1, r e2, c], K' the intrinsics shifted to pixel-centre coordinates);
+    segments become image segments. Visibility: the curve is sampled every ``spacing_px``
+    pixels of its image and a sample counts as seen when one of the 2 x 2 pixels around it
+    hits the same object within ``depth_tol_px`` pixel footprints of the sample's depth
+    (so an edge on an occluding contour counts as seen).
+
+    Parameters
+    ----------
+    scan : RangeScan
+        A synthetic scan of ``scene``.
+    scene : Scene or anything :func:`rangesim.load_scene` accepts
+        Objects' ``features`` (AnalyticFeatures, world mm, may be None) are used.
+
+    Returns
+    -------
+    dict
+        ``{"circles": [ImageEllipse, ...], "segments": [ImageSegment, ...]}``; a circle whose
+        image is not an ellipse (it reaches the camera plane) is left out, and so is a
+        segment wholly behind the camera. Free-form curves (``features.curves``) are not
+        projected.
+    """
+    from rangesim.scene.scene import load_scene
+
+    scene = load_scene(scene)
+    R, t, K = _camera(scan)
+    shift = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]])
+    Kc = shift @ K  # x = column, y = row with integers at pixel centres
+    circles: list[ImageEllipse] = []
+    segments: list[ImageSegment] = []
+    for k, obj in enumerate(scene.objects):
+        feats = obj.features
+        if feats is None:
+            continue
+        for c in getattr(feats, "circles", []):
+            center = R @ np.asarray(c.center, float) + t
+            normal = R @ np.asarray(c.normal, float)
+            normal /= np.linalg.norm(normal)
+            helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
+            e1 = np.cross(normal, helper)
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(normal, e1)
+            H = Kc @ np.column_stack([c.radius * e1, c.radius * e2, center])
+            if abs(np.linalg.det(H)) < 1e-12:
+                continue  # seen edge-on through the camera centre
+            Hi = np.linalg.inv(H)
+            ell = _conic_to_ellipse(Hi.T @ np.diag([1.0, 1.0, -1.0]) @ Hi)
+            if ell is None:
+                continue
+            # sample by 3D angle, dense enough for the image's longest axis
+            n = max(64, int(np.ceil(2 * np.pi * ell[1][0] / spacing_px)))
+            ang = np.linspace(0, 2 * np.pi, n, endpoint=False)[:, None]
+            pts = center + c.radius * (np.cos(ang) * e1 + np.sin(ang) * e2)
+            vis, _, _ = _visible(scan, K, k, pts, depth_tol_px, slack=True)
+            circles.append(ImageEllipse(c.name, k, ell[0], ell[1], ell[2], float(vis.mean()),
+                                        bool(c.convex), float(c.dihedral_deg)))
+        segs = list(getattr(feats, "segments", []))
+        if not segs:
+            continue
+        a = np.array([R @ np.asarray(s.start, float) + t for s in segs])
+        b = np.array([R @ np.asarray(s.end, float) + t for s in segs])
+        for i, s in enumerate(segs):
+            za, zb = a[i, 2], b[i, 2]
+            if max(za, zb) < NEAR_CLIP_MM:
+                continue
+            # clip to the front of the camera, then project the ends
+            aa, bb = a[i].copy(), b[i].copy()
+            if min(za, zb) < NEAR_CLIP_MM:
+                cut = aa + (NEAR_CLIP_MM - za) / (zb - za) * (bb - aa)
+                aa, bb = (cut, bb) if za < zb else (aa, cut)
+            ends = _project(Kc, np.stack([aa, bb]))
+            pts, _ = _sample_segments(K, aa[None], bb[None], scan.shape, spacing_px)
+            if len(pts):
+                vis, _, _ = _visible(scan, K, k, pts, depth_tol_px, slack=True)
+                # the part outside the image margin was clipped away before sampling
+                kept_uv = _project(K, pts[[0, -1]])
+                kept = float(np.linalg.norm(kept_uv[1] - kept_uv[0]))
+                full = float(np.linalg.norm(ends[1] - ends[0]))
+                frac = float(vis.mean()) * (kept / full if full > 0 else 1.0)
+            else:
+                frac = 0.0
+            segments.append(ImageSegment(s.name, k, ends.reshape(-1), min(frac, 1.0),
+                                         bool(s.convex), float(s.dihedral_deg)))
+    return {"circles": circles, "segments": segments}
