@@ -7,8 +7,9 @@ from rangesim.evaluate.ground_truth import (
     ground_truth_features,
     jump_edges,
 )
+from rangesim.evaluate.regions import region_boundaries
 
 __all__ = [
     "ground_truth_edges", "ground_truth_features", "jump_edges", "edge_scores",
-    "ImageEllipse", "ImageSegment",
+    "ImageEllipse", "ImageSegment", "region_boundaries",
 ]

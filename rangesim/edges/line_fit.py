@@ -1,0 +1,162 @@
+"""Technique 2 of the founding paper: edges of unorganized point lists by straight lines
+through each point's nearest neighbours."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rangesim.core.constants import EdgeLabel
+from rangesim.edges.common import (
+    JUMP_THRESHOLD, NEIGHBOURS, discontinuities, scan_depth, scan_points,
+)
+from rangesim.edges.edgemap import EdgeMap
+
+__all__ = ["line_fit", "line_fit_points"]
+
+#: centres per batch: bounds the (chunk, k, k) temporaries (~4 MB each at k = 8)
+_CHUNK = 1 << 16
+
+
+def line_fit_points(
+    points: np.ndarray,
+    k: int = 8,
+    angle_tol_deg: float = 15.0,
+    line_sep_deg: float = 30.0,
+    workers: int = -1,
+) -> np.ndarray:
+    """Edge points of an (N, 3) point list; see :func:`line_fit`.
+
+    Returns
+    -------
+    (N,) bool
+        True at edge points; False at non-finite rows (which are ignored as neighbours).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"expected an (N, 3) point array, got shape {pts.shape}")
+    k = int(k)
+    if k < 2:
+        raise ValueError(f"k must be at least 2, got {k}")
+    out = np.zeros(len(pts), bool)
+    finite = np.isfinite(pts).all(axis=1)
+    p = pts[finite]
+    n = len(p)
+    if n == 0:
+        return out
+    if n <= k:
+        out[finite] = True                         # too few points for any line pair
+        return out
+    cos_opp = np.cos(np.radians(angle_tol_deg))
+    cos_sep = np.cos(np.radians(line_sep_deg))
+    tree = cKDTree(p)
+    edge = np.empty(n, bool)
+    for i0 in range(0, n, _CHUNK):
+        i1 = min(i0 + _CHUNK, n)
+        centre = np.arange(i0, i1)
+        _, idx = tree.query(p[i0:i1], k=k + 1, workers=workers)
+        # drop the centre itself (the last neighbour if duplicates pushed it out)
+        is_self = idx == centre[:, None]
+        no_self = ~is_self.any(axis=1)
+        is_self[no_self, -1] = True
+        is_self &= np.cumsum(is_self, axis=1) == 1
+        idx = idx[~is_self].reshape(i1 - i0, k)
+        d = (p[idx] - p[i0:i1, None, :]).astype(np.float32)      # (m, k, 3)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = d / np.linalg.norm(d, axis=2, keepdims=True)     # coincident points: NaN
+        g = u @ u.transpose(0, 2, 1)                               # (m, k, k) cosines
+        # neighbour j lies on a line through the centre if some neighbour is opposite it
+        on_line = (g < -cos_opp).any(axis=2)                       # (m, k)
+        # two lines are distinct if their directions are not (anti)parallel
+        distinct = np.abs(g) < cos_sep
+        planar = (distinct & on_line[:, :, None] & on_line[:, None, :]).any(axis=(1, 2))
+        edge[i0:i1] = ~planar
+    out[finite] = edge
+    return out
+
+
+def line_fit(
+    points_or_scan: Any,
+    k: int = 8,
+    angle_tol_deg: float = 15.0,
+    line_sep_deg: float = 30.0,
+    jump_threshold: float = JUMP_THRESHOLD,
+    max_search: int = 50,
+    workers: int = -1,
+) -> np.ndarray | EdgeMap:
+    """Edge points by line fitting through nearest neighbours (the paper's technique 2).
+
+    For unorganized, non-uniformly spaced (x, y, z) lists: each point's ``k`` nearest
+    neighbours in 3D (``scipy.spatial.cKDTree``), unit vectors from the point to them, and
+    pairs of neighbours in opposite directions (within ``angle_tol_deg`` of 180 degrees)
+    form straight lines through the point. Two or more distinct lines (directions more
+    than ``line_sep_deg`` apart) span a plane: not an edge; one line or none: an edge
+    point. Vectorised over all points (``(N, k, k)`` cosines, in chunks).
+
+    What it finds: creases whose faces bend by more than ``angle_tol_deg`` (no neighbour
+    pair straddling the crease is straight any more, only the line along it is), and the
+    boundaries of the point set (silhouettes, holes): there the neighbourhood is one-sided.
+    On a plane sampled so anisotropically that all k neighbours lie along one direction
+    (grazing views, spacing ratio above ~k / 2) every point is an edge: raise ``k``.
+
+    For a scan, the valid pixels' points are the list and the answer is mapped back to
+    pixels. Pixels whose neighbourhood is one-sided only because of the image, not the
+    surface (next to invalid pixels, at the image border, or either side of a depth
+    jump) are decided by the jump rule instead
+    (:func:`~rangesim.edges.common.find_discontinuities`, steps deeper than
+    ``jump_threshold`` pixel footprints, searched across NaN gaps): an edge, labelled JUMP,
+    on the near side of a jump, else none, so a hole in a flat face or the image border is
+    not an edge. Line-fit edges get label 0
+    (the technique cannot tell convex from concave).
+
+    Parameters
+    ----------
+    points_or_scan : (N, 3) array or RangeScan
+        Points (mm; non-finite rows ignored), or a scan (``xyz``, ``depth``, ``valid``).
+    k : int
+        Neighbours per point (8-12; the paper's 8-neighbourhood).
+    angle_tol_deg : float
+        Two neighbours are opposite if the angle between their directions is within this
+        many degrees of 180; hence the least crease bend detected (default 15).
+    line_sep_deg : float
+        Least angle between two lines for them to count as distinct (default 30; lines of
+        a square grid are 45 degrees apart).
+    jump_threshold : float
+        The jump rule for scans, in pixel footprints (default
+        :data:`~rangesim.edges.common.JUMP_THRESHOLD` = 3.73, as the ground truth).
+    max_search : int
+        Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+    workers : int
+        Threads for the k-d tree queries (-1: all cores).
+
+    Returns
+    -------
+    (N,) bool array for a point list; EdgeMap for a scan
+        ``method="line_fit"``; ``strength`` 1.0 at edge pixels, 0 at other valid pixels,
+        NaN at invalid ones; ``direction`` None.
+    """
+    if not hasattr(points_or_scan, "xyz"):
+        return line_fit_points(points_or_scan, k, angle_tol_deg, line_sep_deg, workers)
+    scan = points_or_scan
+    z, valid = scan_depth(scan)
+    xyz = scan_points(scan, valid)
+    edge = np.zeros(z.shape, bool)
+    edge[valid] = line_fit_points(xyz[valid], k, angle_tol_deg, line_sep_deg, workers)
+    disc, geo = discontinuities(scan, z, jump_threshold, max_search)
+    # one-sided neighbourhoods that are the image's doing: an invalid or missing neighbour
+    vpad = np.pad(valid, 1, constant_values=False)
+    h, w = z.shape
+    cut = disc.touching.copy()
+    for dr, dc in NEIGHBOURS:
+        cut |= ~vpad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
+    cut &= valid
+    edge[cut] = disc.occluding[cut]
+    labels = np.where(disc.occluding, EdgeLabel.JUMP, EdgeLabel.NONE).astype(np.uint8)
+    strength = np.where(valid, edge.astype(np.float32), np.float32(np.nan))
+    params = {
+        "k": int(k), "angle_tol_deg": float(angle_tol_deg), "line_sep_deg": float(line_sep_deg),
+        "jump_threshold": float(jump_threshold), "max_search": int(max_search),
+    }
+    return EdgeMap(mask=edge & valid, labels=labels, strength=strength, method="line_fit",
+                   params=params)

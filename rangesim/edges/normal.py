@@ -1,0 +1,139 @@
+"""Technique 3 of the founding paper: edges where the surface normal turns."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rangesim.core.constants import EdgeLabel
+from rangesim.edges.common import (
+    AXES, JUMP_THRESHOLD, discontinuities, dot3, measured_normals, nonmax_suppress,
+    pad_last2, padded_view, scan_depth, scan_points,
+)
+from rangesim.edges.edgemap import EdgeMap
+
+__all__ = ["normal"]
+
+
+def _pair_cut(gaps: np.ndarray, dr: int, dc: int) -> np.ndarray:
+    """True where the step p - d -> p or p -> p + d is cut (``gaps``: the step p -> p + d)."""
+    back = np.zeros_like(gaps)
+    h, w = gaps.shape
+    # the step p - d -> p is gaps[p - d]
+    r0, r1 = max(0, dr), h + min(0, dr)
+    c0, c1 = max(0, dc), w + min(0, dc)
+    back[r0:r1, c0:c1] = gaps[r0 - dr:r1 - dr, c0 - dc:c1 - dc]
+    return gaps | back
+
+
+def normal(
+    scan: Any,
+    threshold_deg: float = 20.0,
+    window: int = 3,
+    jump_threshold: float = JUMP_THRESHOLD,
+    nms: bool = True,
+    max_search: int = 50,
+) -> EdgeMap:
+    """Crease and jump edges from the change of the measured surface normal.
+
+    Technique 3 of the founding paper: points of a plane share one normal, so a large
+    change of the unit normal among the 8 neighbours of a point marks an edge. Normals
+    are estimated from the MEASURED points (``scan.xyz``; ``scan.normal`` is the
+    simulator's truth and is not used) by :func:`~rangesim.edges.common.measured_normals`:
+    cross products of edge-preserving (WENO-weighted one-sided / central) differences over
+    ``window // 2`` pixels, NaN-aware and never across a depth jump, so each pixel next to a
+    crease keeps the normal of its own face. The 8 neighbours form 4 opposite pairs
+    ``p - d``, ``p + d`` (axes at 0, 45, 90 and 135 degrees); the strength of a pixel is the
+    largest angle between the normals of such a pair. At a crease it is the crease's bend
+    angle (180 degrees minus the dihedral angle), on the one or two pixels nearest to it; on
+    a plane 0; on a smooth surface of curvature k about ``2 k footprint`` radians, so
+    ``threshold_deg`` means what the ground truth's ``crease_deg`` does.
+
+    Convex vs concave: for the compared pair A = p - d, B = p + d, the sign of
+    ``(P_B - P_A) . (n_A - n_B)`` (normals facing the camera): negative where the faces turn
+    away from the camera on both sides (a roof, convex), positive in a valley (concave).
+    Jumps: :func:`~rangesim.edges.common.find_discontinuities` (steps deeper than
+    ``jump_threshold`` pixel footprints, searched across NaN gaps), JUMP on the near side;
+    pairs that straddle a jump are skipped (as are those across NaN gaps, which may hide
+    one), so jumps do not also show up as creases.
+
+    Parameters
+    ----------
+    scan : RangeScan
+        Uses ``xyz``, ``depth`` and ``valid`` (mm, camera frame).
+    threshold_deg : float
+        Least bend of the normal, degrees, for a crease pixel (default 20, the ground
+        truth's crease angle). Noise: the angle noise of a normal is about
+        ``sigma_z / (window // 2 * footprint)`` radians, so noisy scans need a larger window.
+    window : int
+        Odd stencil size of the normal estimate, pixels (>= 3): differences over
+        ``window // 2`` pixels.
+    jump_threshold : float
+        Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
+        more than this many footprints (``z / f`` mm) are a jump. Default
+        :data:`~rangesim.edges.common.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
+        truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
+        camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
+    nms : bool
+        Thin creases to 1 px by non-maximum suppression across the crease (its direction is
+        the dominant harmonic of the four axis strengths).
+    max_search : int
+        Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+
+    Returns
+    -------
+    EdgeMap
+        ``method="normal"``; ``strength`` is the bend angle in degrees (NaN where no pair of
+        opposite neighbours has normals); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None.
+    """
+    window = int(window)
+    if window < 3 or window % 2 == 0:
+        raise ValueError(f"window must be an odd integer >= 3, got {window}")
+    z, valid = scan_depth(scan)
+    xyz = scan_points(scan, valid, component_major=True)
+    disc, _ = discontinuities(scan, z, jump_threshold, max_search)
+    n = measured_normals(xyz, disc.pairs, window // 2)
+
+    shape = z.shape
+    # compared normals must be joined by valid pixels with no jump between: a NaN gap may
+    # hide one (e.g. a laser shadow between an object and the floor)
+    vpad = pad_last2(valid, 1, True)
+    npad, xpad = pad_last2(n, 1, np.nan), pad_last2(xyz, 1, np.nan)
+    strength = np.full(shape, -1.0, np.float32)
+    concave = np.zeros(shape, bool)
+    angles = []
+    for a, (dr, dc) in enumerate(AXES):
+        gaps = disc.pairs[a] | ~valid | ~padded_view(vpad, 1, dr, dc, shape)
+        na = padded_view(npad, 1, -dr, -dc, shape)           # the pair p - d, p + d
+        nb = padded_view(npad, 1, dr, dc, shape)
+        c = dot3(na, nb)
+        np.clip(c, -1, 1, out=c)
+        angle = np.degrees(np.arccos(c))
+        np.copyto(angle, np.nan, where=_pair_cut(gaps, dr, dc) | ~valid)
+        chord = padded_view(xpad, 1, dr, dc, shape) - padded_view(xpad, 1, -dr, -dc, shape)
+        side = dot3(chord, na - nb)
+        better = angle > strength                            # NaN compares False
+        strength[better] = angle[better]
+        concave[better] = side[better] > 0
+        angles.append(np.where(np.isnan(angle), np.float32(0), angle))
+    np.copyto(strength, np.nan, where=strength < 0)
+    # direction across the crease: dominant second harmonic of the four axis strengths
+    theta = 0.5 * np.arctan2(angles[1] - angles[3], angles[0] - angles[2])
+
+    with np.errstate(invalid="ignore"):
+        crease = strength > threshold_deg
+    if nms:
+        # a crease between pixel centres gives its bend to both pixels beside it; rank them
+        # by the bend summed over the four axes (largest nearest the crease) to keep one
+        rank = angles[0] + angles[1] + angles[2] + angles[3]
+        np.copyto(rank, np.nan, where=np.isnan(strength))
+        crease = nonmax_suppress(rank, theta, crease)
+    labels = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
+    jump = disc.occluding
+    labels[jump] = EdgeLabel.JUMP
+    params = {
+        "threshold_deg": float(threshold_deg), "window": window,
+        "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
+    }
+    return EdgeMap(mask=(crease | jump) & valid, labels=labels, strength=strength,
+                   method="normal", params=params)

@@ -1,0 +1,36 @@
+"""Region-boundary ground truth from segment labels (e.g. the mOSD Kinect scenes)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, background: int = 0) -> np.ndarray:
+    """(H, W) bool: pixels next to a pixel of another segment.
+
+    Parameters
+    ----------
+    labels : (H, W) int array
+        Segment id per pixel; ``background`` marks pixels with no segment (no data).
+    valid : (H, W) bool, optional
+        Pixels with a measurement; others never count as a boundary.
+    background : int
+        The id of "no segment".
+
+    Notes
+    -----
+    Both pixels of a 4-neighbour pair with different, non-background ids are marked, so a
+    boundary is two pixels wide; score it with a tolerance of at least 1 pixel.
+    """
+    labels = np.asarray(labels)
+    ok = labels != background
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool)
+    out = np.zeros(labels.shape, dtype=bool)
+    for axis in (0, 1):
+        a = [slice(None)] * 2
+        b = [slice(None)] * 2
+        a[axis], b[axis] = slice(None, -1), slice(1, None)
+        differ = ok[tuple(a)] & ok[tuple(b)] & (labels[tuple(a)] != labels[tuple(b)])
+        out[tuple(a)] |= differ
+        out[tuple(b)] |= differ
+    return out

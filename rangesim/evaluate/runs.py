@@ -1,0 +1,101 @@
+"""Running edge detectors on a scan and scoring them against whatever truth the scan has."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rangesim.core.constants import EdgeLabel
+from rangesim.evaluate.edge_scores import edge_scores
+from rangesim.evaluate.ground_truth import ground_truth_edges
+from rangesim.evaluate.regions import region_boundaries
+
+
+@dataclass
+class EdgeTruth:
+    """Ground-truth edges of a scan.
+
+    Attributes
+    ----------
+    labels : (H, W) uint8
+        EdgeLabel per pixel (region boundaries carry JUMP: their type is unknown).
+    kind : str
+        ``"geometry"`` (exact, from the scene behind a synthetic scan) or ``"regions"``
+        (boundaries between labelled segments of a recorded scan).
+    """
+
+    labels: np.ndarray
+    kind: str
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.labels != EdgeLabel.NONE
+
+
+def scan_truth(scan, scene: Any = None, segment_labels: np.ndarray | None = None,
+               crease_deg: float = 20.0) -> EdgeTruth | None:
+    """The best ground truth available for ``scan``, or None.
+
+    A synthetic scan (``xyz_true`` present) with its scene (given, or the scene file named
+    in ``scan.meta["scene"]`` if it still exists) gets the exact geometric truth, kept on
+    the pixels the scanner measured (an edge inside a laser shadow is nobody's to find); a
+    recorded scan with per-pixel segment labels gets their region boundaries.
+    """
+    if scan.xyz_true is not None:
+        if scene is None:
+            source = scan.meta.get("scene")
+            if source and Path(str(source)).is_file():
+                scene = str(source)
+        if scene is not None:
+            from rangesim.scene import load_scene
+
+            labels = ground_truth_edges(scan, load_scene(scene), crease_deg=crease_deg)
+            # no detector can find an edge where the scanner measured nothing (laser shadow)
+            labels[~scan.valid] = EdgeLabel.NONE
+            return EdgeTruth(labels, "geometry")
+    if segment_labels is not None:
+        boundary = region_boundaries(segment_labels, scan.valid)
+        return EdgeTruth(np.where(boundary, np.uint8(EdgeLabel.JUMP), np.uint8(0)), "regions")
+    return None
+
+
+def run_detectors(scan, methods, truth: EdgeTruth | None = None, tolerance_px: float = 2.0,
+                  params: dict[str, dict] | None = None) -> dict[str, dict[str, Any]]:
+    """Run edge detectors on one scan and score them.
+
+    Parameters
+    ----------
+    scan : RangeScan
+    methods : iterable of str
+        Names in :data:`rangesim.edges.DETECTORS`.
+    truth : EdgeTruth, optional
+    tolerance_px : float
+        Matching tolerance of the scores, pixels.
+    params : dict, optional
+        Keyword arguments per method.
+
+    Returns
+    -------
+    dict
+        Per method: ``edge_map``, ``seconds`` and, with a truth, ``scores`` (precision,
+        recall, F1, FOM; per label for geometric truth).
+    """
+    from rangesim.edges import DETECTORS
+
+    results = {}
+    for method in methods:
+        start = time.perf_counter()
+        edge_map = DETECTORS[method](scan, **(params or {}).get(method, {}))
+        entry: dict[str, Any] = {"edge_map": edge_map, "seconds": time.perf_counter() - start}
+        if truth is not None:
+            labelled = truth.kind == "geometry"
+            entry["scores"] = edge_scores(
+                edge_map.mask, truth.mask, tolerance_px,
+                pred_labels=edge_map.labels if labelled else None,
+                gt_labels=truth.labels if labelled else None,
+            )
+        results[method] = entry
+    return results

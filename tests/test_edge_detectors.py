@@ -1,0 +1,365 @@
+"""Edge detectors on noise-free scans: where they fire, what they call it, and what they ignore.
+
+The main scene is a box on a floor seen obliquely, so one view holds convex creases (the
+box's top edges), concave creases (where its walls meet the floor), jump edges (its
+silhouette over the floor) and a laser shadow (a NaN gap beside the box). The box's 12
+edges are projected analytically with ``meta["K"]`` and the inverse pose.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.core.constants import EdgeLabel
+from rangesim.core.geometry import look_at
+from rangesim.core.rangescan import RangeScan
+from rangesim.edges.common import pixel_geometry
+from rangesim.edges.curvature import curvature
+from rangesim.edges.edgemap import EdgeMap
+from rangesim.edges.gradient import gradient
+from rangesim.edges.line_fit import line_fit
+from rangesim.edges.normal import normal
+from rangesim.edges.pcl_organized import OrganizedEdgeMap, pcl_organized
+from tests.conftest import box, make_sensor, plane, top_down_pose
+
+LO, HI = np.array([-40.0, -30.0, 0.0]), np.array([40.0, 30.0, 30.0])
+DETECTORS = {
+    "gradient": gradient, "normal": normal, "curvature": curvature, "line_fit": line_fit,
+    "pcl_organized": pcl_organized,
+}
+
+
+# -- scenes and analytic edges -------------------------------------------------------------
+@pytest.fixture(scope="module")
+def box_scene():
+    return [plane(), box(LO, HI)]
+
+
+@pytest.fixture(scope="module")
+def box_scan(box_scene):
+    """200 x 150, f = 275 px, camera up front and to the right: the box's front and right
+    walls, its top, and the floor are visible; the laser (on the camera's right) shadows the
+    floor left of the box."""
+    sensor = make_sensor(**{"camera.width": 200, "camera.height": 150})
+    pose = look_at((170.0, -230.0, 300.0), (0.0, 0.0, 10.0), up=(0, 0, 1))
+    return rs.scan(box_scene, sensor, pose=pose, seed=0)
+
+
+@pytest.fixture(scope="module")
+def top_scan():
+    """A larger box seen from straight above: big flat faces (top and floor) for holes."""
+    sensor = make_sensor(**{"camera.width": 200, "camera.height": 150})
+    return rs.scan([plane(), box([-50, -40, 0], [50, 40, 30])], sensor,
+                   pose=top_down_pose(400.0), seed=0)
+
+
+#: (row, col) of hole centres in top_scan: the box top's centre and the floor in front of it
+TOP_HOLES = ((75, 100), (136, 100))
+
+
+def box_edges() -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    """The box's 12 edges (world mm) grouped as top (z = HI), bottom (z = LO), vertical."""
+    corners = {(i, j, k): np.array([(LO, HI)[i][0], (LO, HI)[j][1], (LO, HI)[k][2]])
+               for i in (0, 1) for j in (0, 1) for k in (0, 1)}
+    groups: dict[str, list] = {"top": [], "bottom": [], "vertical": []}
+    for a in corners:
+        for axis in range(3):
+            if a[axis] == 0:
+                b = list(a)
+                b[axis] = 1
+                seg = (corners[a], corners[tuple(b)])
+                key = "vertical" if axis == 2 else ("top" if a[2] == 1 else "bottom")
+                groups[key].append(seg)
+    return groups
+
+
+def project(scan: RangeScan, pts: np.ndarray) -> np.ndarray:
+    """World points -> continuous pixel coordinates (u, v) with pixel (i, j) at (j + .5, i + .5)."""
+    to_cam = np.linalg.inv(scan.pose)
+    pc = pts @ to_cam[:3, :3].T + to_cam[:3, 3]
+    uv = pc @ np.asarray(scan.meta["K"]).T
+    return uv[:, :2] / uv[:, 2:]
+
+
+def segment_distance(scan: RangeScan, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(H, W) distance, pixels, from every pixel centre to the projected segment p-q."""
+    h, w = scan.shape
+    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    pix = np.stack([jj, ii], axis=-1)
+    a, b = project(scan, np.array([p, q]))
+    d = b - a
+    t = np.clip(((pix - a) @ d) / (d @ d), 0.0, 1.0)
+    return np.linalg.norm(pix - (a + t[..., None] * d), axis=-1)
+
+
+@pytest.fixture(scope="module")
+def edge_distance(box_scan) -> dict[str, np.ndarray]:
+    """Distance (px) to the nearest projected box edge of each group, and of all ("any")."""
+    out = {k: np.min([segment_distance(box_scan, p, q) for p, q in segs], axis=0)
+           for k, segs in box_edges().items()}
+    out["any"] = np.minimum(np.minimum(out["top"], out["bottom"]), out["vertical"])
+    return out
+
+
+def with_hole(scan: RangeScan, centre: tuple[int, int], half: int) -> RangeScan:
+    """The scan with a (2 half + 1)^2 block of invalid pixels (NaN points and depth)."""
+    i, j = centre
+    sl = (slice(i - half, i + half + 1), slice(j - half, j + half + 1))
+    depth, xyz, valid = scan.depth.copy(), scan.xyz.copy(), scan.valid.copy()
+    depth[sl], xyz[sl], valid[sl] = np.nan, np.nan, False
+    return dataclasses.replace(scan, depth=depth, xyz=xyz, valid=valid)
+
+
+def synthetic_roof(bend_deg: float, edge_deg: float, convex: bool, offset_px: float = 0.3,
+                   size: int = 61, f: float = 400.0, z0: float = 500.0) -> RangeScan:
+    """A pinhole view of two planes meeting in a straight crease through the image centre.
+
+    The faces are tilted by -+ bend / 2 about the crease (towards the camera for a valley,
+    away for a roof); ``edge_deg`` is the angle of the (x, y) vector across the crease.
+    """
+    K = np.array([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
+    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    a = np.radians(edge_deg)
+    across = np.array([np.cos(a), np.sin(a), 0.0])
+    p0 = np.array([0.0, 0.0, z0]) + across * offset_px * z0 / f
+    sign = 1.0 if convex else -1.0
+
+    def face(tilt_deg: float) -> np.ndarray:
+        t = np.radians(tilt_deg)
+        n = -np.cos(t) * np.array([0.0, 0.0, 1.0]) + np.sin(t) * across
+        return rays * ((p0 @ n) / (rays @ n))[..., None]
+
+    pa, pb = face(-sign * bend_deg / 2), face(sign * bend_deg / 2)
+    xyz = np.where((((pa - p0) @ across) < 0)[..., None], pa, pb).astype(np.float32)
+    shape = (size, size)
+    return RangeScan(
+        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
+        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
+        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
+        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()},
+    )
+
+
+def roof_distance(scan: RangeScan, edge_deg: float, offset_px: float = 0.3) -> np.ndarray:
+    """Distance (px) of each pixel centre to the crease line of :func:`synthetic_roof`."""
+    h, w = scan.shape
+    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    a = np.radians(edge_deg)
+    return np.abs((jj - w / 2) * np.cos(a) + (ii - h / 2) * np.sin(a) - offset_px)
+
+
+# -- every detector ------------------------------------------------------------------------
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_detections_lie_on_the_box_edges(name, box_scan, edge_distance):
+    em = DETECTORS[name](box_scan)
+    assert isinstance(em, EdgeMap) and em.method == name
+    assert em.mask.shape == em.labels.shape == em.strength.shape == box_scan.shape
+    mask = em.mask
+    if name == "pcl_organized":
+        # PCL's occluded class is the far side of every jump, here also the floor beyond the
+        # laser shadow, away from the box; its occluding side must be on the box edges
+        mask = mask & ~em.occluded
+    assert mask.sum() >= (60 if name == "curvature" else 200)
+    if name == "curvature":     # corners only (a straight crease has one curvature ~0)
+        assert (em.mask & (em.labels != EdgeLabel.JUMP)).sum() >= 2
+    d = edge_distance["any"]
+    assert d[mask].max() <= 2.0, f"{name}: detections {d[mask].max():.1f} px from any box edge"
+    flat = (d > 4.0) & box_scan.valid
+    assert not (mask & flat).any()
+    assert not (em.mask & ~box_scan.valid).any()
+    assert set(np.unique(em.labels[~em.mask])) <= {0}
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal"])
+def test_convex_top_edges_concave_floor_edges(name, box_scan, edge_distance):
+    em = DETECTORS[name](box_scan)
+    top, bottom, vert = edge_distance["top"], edge_distance["bottom"], edge_distance["vertical"]
+    crease = em.mask & np.isin(em.labels, [EdgeLabel.CONVEX, EdgeLabel.CONCAVE])
+    near_top = crease & (top <= 2) & (bottom > 3) & (vert > 3)
+    near_floor = crease & (bottom <= 2) & (top > 3) & (vert > 3)
+    assert near_top.sum() >= 30 and near_floor.sum() >= 30
+    assert np.mean(em.labels[near_top] == EdgeLabel.CONVEX) >= 0.9
+    assert np.mean(em.labels[near_floor] == EdgeLabel.CONCAVE) >= 0.9
+    # the silhouette (top and vertical edges, never the floor's) is labelled jump
+    jump = em.label_mask(EdgeLabel.JUMP)
+    assert jump.sum() >= 50
+    assert np.minimum(top, vert)[jump].max() <= 2.0
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_nan_hole_in_a_flat_face_makes_no_edges(name, top_scan):
+    plain = DETECTORS[name](top_scan)
+    holed = top_scan
+    around = np.zeros(top_scan.shape, bool)
+    for i, j in TOP_HOLES:
+        holed = with_hole(holed, (i, j), 3)
+        around[i - 8:i + 9, j - 8:j + 9] = True
+    assert top_scan.valid[around].all() and not plain.mask[around].any()
+    em = DETECTORS[name](holed)
+    assert not (em.mask & around).any(), f"{name} marks the rim of a hole in a flat face"
+    if name == "pcl_organized":
+        assert not (em.nan_boundary & around).any()    # found the far side within max_search
+
+
+def test_pcl_marks_nan_boundaries_only_where_the_search_gives_up(top_scan):
+    i, j = TOP_HOLES[0]
+    holed = with_hole(top_scan, (i, j), 4)
+    em = pcl_organized(holed, max_search=3)          # the 9 px hole is wider than the search
+    rim = np.zeros(top_scan.shape, bool)
+    rim[i - 5:i + 6, j - 5:j + 6] = True
+    rim &= holed.valid
+    assert em.nan_boundary[rim].sum() >= 20
+    assert (em.mask & rim).sum() == (em.nan_boundary & rim).sum()
+    assert not em.labels[em.nan_boundary & rim].any()   # the type cannot be told
+    assert not pcl_organized(holed).mask[rim].any()     # max_search = 50 crosses it
+
+
+def test_pcl_occluding_and_occluded(box_scan, edge_distance):
+    em = pcl_organized(box_scan)
+    assert isinstance(em, OrganizedEdgeMap)
+    assert em.occluding.sum() >= 50 and em.occluded.sum() >= 50
+    assert not (em.occluding & em.occluded).any()
+    assert (em.labels[em.occluding | em.occluded] == EdgeLabel.JUMP).all()
+    assert edge_distance["any"][em.occluding].max() <= 2.0
+    # the far side of the box's back silhouette lies on the floor behind it: farther away
+    assert np.nanmedian(box_scan.depth[em.occluded]) > np.nanmedian(box_scan.depth[em.occluding])
+    only = pcl_organized(box_scan, edge_types=("occluding",))
+    np.testing.assert_array_equal(only.mask, em.occluding & box_scan.valid)
+    with pytest.raises(ValueError, match="unknown edge types"):
+        pcl_organized(box_scan, edge_types=("corners",))
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal", "line_fit"])
+def test_scores_against_ground_truth(name, box_scan, box_scene):
+    from rangesim.evaluate import edge_scores, ground_truth_edges
+
+    gt = ground_truth_edges(box_scan, box_scene)
+    gt = np.where(box_scan.valid, gt, 0)       # no detector sees edges in the laser shadow
+    s = edge_scores(DETECTORS[name](box_scan), gt, 2.0)
+    assert s["f1"] >= (0.85 if name == "line_fit" else 0.9), s
+
+
+def test_without_intrinsics_the_footprint_is_estimated(box_scan):
+    bare = dataclasses.replace(box_scan, meta={})
+    geo, true = pixel_geometry(bare), pixel_geometry(box_scan)
+    assert geo.perspective and geo.focal_length == pytest.approx(true.focal_length, rel=0.05)
+    for fn in (gradient, normal):
+        a, b = fn(box_scan).mask, fn(bare).mask
+        assert (a & b).sum() >= 0.95 * max(a.sum(), b.sum())
+
+
+# -- gradient ------------------------------------------------------------------------------
+@pytest.mark.parametrize("edge_deg", [0.0, 20.0, 45.0, 70.0, 110.0, 160.0])
+@pytest.mark.parametrize("convex", [True, False])
+def test_gradient_roof_type_bend_and_direction(edge_deg, convex):
+    scan = synthetic_roof(30.0, edge_deg, convex)
+    em = gradient(scan)
+    dist = roof_distance(scan, edge_deg)
+    inner = np.zeros(scan.shape, bool)
+    inner[8:-8, 8:-8] = True
+    found = em.mask & inner
+    assert found.sum() >= 40
+    assert dist[found].max() <= 1.0
+    assert (em.labels[found] == (EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE)).all()
+    # strength: the bend in degrees, 0.75-1 of the true one
+    assert np.all((em.strength[found] > 22.0) & (em.strength[found] < 31.0))
+    # direction: across the crease, within ~15 degrees (mod 180)
+    err = np.abs((em.direction[found] - np.radians(edge_deg) + np.pi / 2) % np.pi - np.pi / 2)
+    assert np.degrees(err).max() <= 15.0
+
+
+def test_gradient_direction_is_perpendicular_to_the_box_edges(box_scan):
+    em = gradient(box_scan)
+    checked = 0
+    # the front-top (convex) and front-bottom (concave) edges, away from their ends
+    for z in (HI[2], LO[2]):
+        p, q = np.array([LO[0], LO[1], z]), np.array([HI[0], LO[1], z])
+        (a, b) = project(box_scan, np.array([p, q]))
+        d = segment_distance(box_scan, p, q)
+        h, w = box_scan.shape
+        jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+        ends = np.minimum(np.hypot(jj - a[0], ii - a[1]), np.hypot(jj - b[0], ii - b[1]))
+        sel = em.mask & (d <= 1.5) & (ends > 6) & (em.labels != EdgeLabel.JUMP)
+        normal_angle = np.arctan2(b[0] - a[0], -(b[1] - a[1]))     # (x, y) across the edge
+        err = np.abs((em.direction[sel] - normal_angle + np.pi / 2) % np.pi - np.pi / 2)
+        assert sel.sum() >= 20 and np.degrees(err).max() <= 15.0
+        checked += sel.sum()
+    assert checked >= 40
+
+
+def test_gradient_threshold_is_a_bend_angle():
+    scan = synthetic_roof(12.0, 30.0, True)
+    assert not gradient(scan).mask.any()                 # below the default 15 degrees
+    assert gradient(scan, threshold=8.0).mask.sum() >= 40
+
+
+# -- normal --------------------------------------------------------------------------------
+@pytest.mark.parametrize("edge_deg", [0.0, 35.0, 90.0, 125.0])
+def test_normal_strength_is_the_bend(edge_deg):
+    for convex in (True, False):
+        scan = synthetic_roof(40.0, edge_deg, convex)
+        em = normal(scan)
+        found = em.mask.copy()
+        found[:6], found[-6:], found[:, :6], found[:, -6:] = False, False, False, False
+        assert found.sum() >= 40
+        assert roof_distance(scan, edge_deg)[found].max() <= 1.0
+        np.testing.assert_allclose(em.strength[found], 40.0, atol=1.0)
+        assert (em.labels[found] == (EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE)).all()
+
+
+def test_normal_ignores_the_true_normals(box_scan):
+    wrong = dataclasses.replace(box_scan, normal=np.zeros_like(box_scan.normal))
+    np.testing.assert_array_equal(normal(wrong).mask, normal(box_scan).mask)
+
+
+# -- line fitting --------------------------------------------------------------------------
+def _rotation(seed: int) -> np.ndarray:
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q
+
+
+def test_line_fit_plane_with_nonuniform_spacing_has_no_inner_edges():
+    rng = np.random.default_rng(1)
+    xs = np.cumsum(np.linspace(1.0, 2.0, 30))            # spacing grows from 1 to 2
+    ys = np.cumsum(np.linspace(1.5, 0.8, 30))
+    gx, gy = np.meshgrid(xs, ys)
+    pts = np.stack([gx, gy, np.zeros_like(gx)], axis=-1).reshape(-1, 3)
+    pts[:, :2] += rng.uniform(-0.03, 0.03, (len(pts), 2))
+    pts = pts @ _rotation(2).T + [10.0, -5.0, 300.0]
+    edge = line_fit(pts).reshape(gx.shape)
+    assert edge.dtype == bool
+    assert not edge[3:-3, 3:-3].any()
+    assert edge[0, 5:-5].all() and edge[5:-5, -1].all()   # the list's own boundary is an edge
+
+
+def test_line_fit_ridge_of_two_planes_at_90_degrees():
+    g = np.arange(-10, 11, dtype=float)
+    gx, gy = np.meshgrid(np.arange(30, dtype=float), g)
+    pts = np.stack([gx, gy * np.sqrt(0.5), -np.abs(gy) * np.sqrt(0.5)], axis=-1)  # unit steps
+    pts = pts.reshape(-1, 3) @ _rotation(3).T
+    edge = line_fit(pts).reshape(gx.shape)
+    ridge = gy == 0
+    inner = (gx >= 3) & (gx <= 26)
+    assert edge[ridge & inner].all()
+    assert not edge[~ridge & inner & (np.abs(gy) >= 2) & (np.abs(gy) <= 8)].any()
+
+
+def test_line_fit_many_random_points_and_nan_rows():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 100, (20000, 3))
+    pts[::1000] = np.nan
+    edge = line_fit(pts, k=8)
+    assert edge.shape == (20000,) and edge.dtype == bool
+    assert not edge[::1000].any()
+    with pytest.raises(ValueError):
+        line_fit(np.zeros((10, 2)))
+
+
+def test_line_fit_on_a_scan_labels_only_jumps(box_scan):
+    em = line_fit(box_scan)
+    assert set(np.unique(em.labels[em.mask])) <= {EdgeLabel.NONE, EdgeLabel.JUMP}
+    assert (em.labels[em.mask] == EdgeLabel.NONE).sum() >= 100
