@@ -147,3 +147,14 @@ def test_default_pose_frames_a_scene_without_view():
     seen = scan.status != Status.MISS
     assert not seen[0].any() and not seen[-1].any() and not seen[:, 0].any() and not seen[:, -1].any()
     assert (scan.status != Status.OUT_OF_RANGE).all()
+
+
+def test_scene_mesh_paths_can_name_the_shared_data(data_dir, monkeypatch, tmp_path):
+    monkeypatch.setenv("RANGESIM_DATA", str(data_dir))
+    scene = rs.load_scene(REPO / "scenes" / "flat_target.toml")
+    target = scene.objects[0]
+    # 150 x 150 x 10 mm, turned over and centred by the scene file
+    np.testing.assert_allclose(target.mesh.bounds, [[-75, -75, 0], [75, 75, 10]], atol=1e-6)
+    monkeypatch.setenv("RANGESIM_DATA", str(tmp_path / "nowhere"))
+    with pytest.raises(rs.RangesimError, match="no such mesh file"):
+        rs.load_scene(REPO / "scenes" / "flat_target.toml")

@@ -4,6 +4,7 @@ All geometry is converted to millimetres on load; sensors work in millimetres.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
@@ -190,6 +191,20 @@ def _scene_from_meshes(meshes: Iterable[trimesh.Trimesh]) -> Scene:
     return Scene(objects, source="memory")
 
 
+def data_dir() -> Path:
+    """The shared recorded-data folder: ``$RANGESIM_DATA``, else ``../shared/data`` beside the repository."""
+    env = os.environ.get("RANGESIM_DATA")
+    return Path(env) if env else Path(__file__).resolve().parents[3] / "shared" / "data"
+
+
+def expand_data_path(text: str) -> str:
+    """Replace a leading ``$RANGESIM_DATA`` (or ``${RANGESIM_DATA}``) by :func:`data_dir`."""
+    for token in ("${RANGESIM_DATA}", "$RANGESIM_DATA"):
+        if text.startswith(token):
+            return str(data_dir()) + text[len(token):]
+    return text
+
+
 def _unit_scale(value: str, where: str, source) -> float:
     if value not in UNITS_MM:
         raise RangesimError(
@@ -238,7 +253,7 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
     if len(kinds) != 1:
         raise RangesimError(f"{where} ({name}) needs exactly one of mesh, model, primitive", source=path)
     if "mesh" in t:
-        mesh_path = (path.parent / t["mesh"]).resolve()
+        mesh_path = (path.parent / expand_data_path(str(t["mesh"]))).resolve()
         mesh, origin = load_mesh(mesh_path), str(mesh_path)
     elif "model" in t:
         built = _build_model(t, where, path)
