@@ -171,7 +171,7 @@ def load_scene(source) -> Scene:
         return _scene_from_toml(path)
     if path.suffix.lower() in MESH_SUFFIXES:
         mesh = load_mesh(path)
-        return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path))
+        return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path.resolve()))
     if not path.exists():
         raise RangesimError("no such scene or mesh file", source=path)
     raise RangesimError(
@@ -242,7 +242,7 @@ def _scene_from_toml(path: Path) -> Scene:
             )
         except ValueError as exc:
             raise RangesimError(str(exc), source=path) from exc
-    return Scene(objects, view=view, source=str(path))
+    return Scene(objects, view=view, source=str(path.resolve()))
 
 
 def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObject:

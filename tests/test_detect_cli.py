@@ -1,0 +1,152 @@
+"""``rangesim detect``: edge maps, overlays and scores from the command line.
+
+Called in-process through :func:`rangesim.cli.main.main`. The synthetic scan is a box on a
+plane seen obliquely by the quiet 160 x 120 test sensor, saved as .exr beside the scene TOML
+it came from; the recorded scans come from the shared data and skip when it is absent.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.cli.main import main
+from rangesim.core.geometry import look_at
+from rangesim.edges import DETECTORS
+from tests.conftest import make_sensor
+
+SCENE_TOML = """\
+units = "mm"
+
+[[object]]
+name = "box"
+primitive = "box"
+size = [120, 90, 50]
+translate = [0, 0, 25]
+albedo = 0.6
+
+[[object]]
+name = "ground"
+primitive = "plane"
+size = [1200, 1200]
+albedo = 0.3
+"""
+
+ARRAYS = {"mask", "labels", "strength"}
+SCORES = ("precision", "recall", "f1", "fom")
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory) -> tuple[Path, Path]:
+    """(scan .exr, scene .toml): the box on a plane, camera tilted about 35 degrees."""
+    d = tmp_path_factory.mktemp("detect_inputs")
+    scene = d / "scene.toml"
+    scene.write_text(SCENE_TOML)
+    pose = look_at((0.0, -250.0, 380.0), (0.0, 0.0, 20.0), up=(0, 0, 1))
+    scan = rs.scan(scene, make_sensor(), pose=pose, seed=0)
+    assert 0 < scan.valid.sum() < scan.valid.size  # the box casts a laser shadow
+    path = rs.save_scan(scan, d / "scan.exr")
+    return Path(path), scene
+
+
+def _detect(capsys, *args) -> tuple[int, str, str]:
+    """``main(["detect", *args])``: exit code, stdout, stderr."""
+    code = main(["detect", *map(str, args)])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def _check_edge_files(out: Path, shape: tuple[int, int]) -> None:
+    """One NPZ (mask, labels, strength of the scan's shape) and one PNG per detector."""
+    for method in DETECTORS:
+        with np.load(out / f"{method}_edges.npz") as npz:
+            assert ARRAYS <= set(npz.files), (method, npz.files)
+            assert npz["mask"].shape == shape and npz["mask"].dtype == bool
+            assert npz["labels"].shape == shape and int(npz["labels"].max(initial=0)) <= 3
+            assert npz["strength"].shape == shape
+            assert not npz["labels"][~npz["mask"]].any()  # labels only on edge pixels
+        assert (out / f"{method}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _check_scores(out: Path, truth: str) -> dict:
+    """scores.json with every detector's scores in [0, 1]; returns the report."""
+    report = json.loads((out / "scores.json").read_text())
+    assert report["truth"] == truth
+    assert set(report["methods"]) == set(DETECTORS)
+    for method, s in report["methods"].items():
+        for key in SCORES:
+            assert 0.0 <= s[key] <= 1.0, (method, key, s[key])
+    return report
+
+
+def test_all_methods_on_synthetic_scan_with_scene(synthetic, tmp_path, capsys):
+    scan_path, scene = synthetic
+    out = tmp_path / "edges"
+    code, stdout, err = _detect(capsys, scan_path, "--method", "all", "--scene", scene, "--out", out)
+    assert code == 0, err
+    shape = rs.load_scan(scan_path).shape
+    _check_edge_files(out, shape)
+    assert (out / "ground_truth.png").is_file()
+    report = _check_scores(out, "geometry")
+    # a noise-free box: the best detector finds most of its edges
+    assert max(s["f1"] for s in report["methods"].values()) > 0.5
+    assert "truth: geometry" in stdout and all(m in stdout for m in DETECTORS)
+
+
+def test_single_method(synthetic, tmp_path, capsys):
+    scan_path, scene = synthetic
+    out = tmp_path / "edges"
+    code, _, err = _detect(capsys, scan_path, "--method", "gradient", "--scene", scene, "--out", out)
+    assert code == 0, err
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["gradient.png", "gradient_edges.npz", "ground_truth.png", "scores.json"]
+    with np.load(out / "gradient_edges.npz") as npz:
+        assert "direction" in npz.files  # the gradient detector also gives edge directions
+
+
+def test_recorded_range_grid_without_truth(data_dir, tmp_path, capsys):
+    ply = data_dir / "stanford-bunny" / "bun000.ply"
+    if not ply.is_file():
+        pytest.skip(f"{ply} not found")
+    out = tmp_path / "bunny"
+    code, stdout, err = _detect(capsys, ply, "--method", "all", "--out", out)
+    assert code == 0, err
+    _check_edge_files(out, (400, 512))
+    assert not (out / "scores.json").exists()
+    assert not (out / "ground_truth.png").exists()
+    assert "truth: none" in stdout
+
+
+def test_mosd_pcd_scores_against_regions(data_dir, tmp_path, capsys):
+    pcd = data_dir / "mosd-kinect" / "test0.pcd"
+    if not pcd.is_file():
+        pytest.skip(f"{pcd} not found")
+    out = tmp_path / "mosd"
+    code, stdout, err = _detect(capsys, pcd, "--method", "all", "--out", out)
+    assert code == 0, err
+    _check_edge_files(out, (480, 640))
+    _check_scores(out, "regions")
+    assert (out / "ground_truth.png").is_file()
+    assert "truth: regions" in stdout
+
+
+def test_missing_scan_is_a_one_line_error(tmp_path, capsys):
+    missing = tmp_path / "no_such_scan.exr"
+    code, stdout, err = _detect(capsys, missing, "--out", tmp_path / "edges")
+    assert code == 2
+    assert err.strip() and err.strip().count("\n") == 0, err
+    assert "no_such_scan.exr" in err and "Traceback" not in err
+    assert not (tmp_path / "edges").exists()
+
+
+def test_out_pointing_at_a_file_is_an_error(synthetic, tmp_path, capsys):
+    scan_path, scene = synthetic
+    target = tmp_path / "a_file"
+    target.write_text("not a directory")
+    code, _, err = _detect(capsys, scan_path, "--scene", scene, "--out", target)
+    assert code == 2
+    assert err.strip().count("\n") == 0 and "Traceback" not in err
+    assert target.read_text() == "not a directory"
