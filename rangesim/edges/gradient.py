@@ -7,7 +7,8 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges.common import (
-    JUMP_THRESHOLD, central_difference, discontinuities, nonmax_suppress, scan_depth, shift,
+    JUMP_THRESHOLD, NOISE_FLOOR, NOISE_K_GRADIENT, central_difference, discontinuities,
+    estimate_depth_noise, nonmax_suppress, noise_threshold, scan_depth, shift,
 )
 from rangesim.edges.edgemap import EdgeMap
 
@@ -156,10 +157,10 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None) -> list[n
 
 def gradient(
     scan: Any,
-    threshold: float = 15.0,
+    threshold: float | None = None,
     jump_threshold: float = JUMP_THRESHOLD,
     nms: bool = True,
-    sigma: float = 0.0,
+    sigma: float | None = None,
     max_search: int = 50,
 ) -> EdgeMap:
     """Roof (crease) and jump edges from the paper's four 3x3 second-derivative operators.
@@ -207,10 +208,15 @@ def gradient(
         Uses ``depth``, ``valid`` and ``meta["K"]`` for the footprint (without it the
         footprint is estimated from the points, see
         :func:`~rangesim.edges.common.pixel_geometry`).
-    threshold : float
-        Least bend of a crease pixel, degrees (estimated as above). The default 15 finds
-        creases of 20 degrees and more (the ground truth's ``crease_deg``) at any
-        orientation and sub-pixel position.
+    threshold : float, optional
+        Least bend of a crease pixel, degrees (estimated as above). Noise-free default 15:
+        finds creases of 20 degrees and more (the ground truth's ``crease_deg``) at any
+        orientation and sub-pixel position. Default (None) on noisy scans (depth noise
+        from :func:`~rangesim.edges.common.estimate_depth_noise` above
+        :data:`~rangesim.edges.common.NOISE_FLOOR` footprints): ``max(15, k * median)`` of
+        ``2 atan(response)`` over valid pixels (the noise's bend, as if the neighbour
+        across responded as much), ``k`` = :data:`~rangesim.edges.common.NOISE_K_GRADIENT`
+        = 3 (~4 sigma of the bend estimate; 20 degrees at the preset noise).
     jump_threshold : float
         Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
@@ -219,9 +225,11 @@ def gradient(
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     nms : bool
         Thin creases by non-maximum suppression across the edge direction (1 px wide).
-    sigma : float
+    sigma : float, optional
         Gaussian pre-smoothing of the depth, pixels (0: none). Noisy scans need it: the
-        response's noise is ~1.4 sigma_z / footprint unsmoothed.
+        response's noise is ~1.4 sigma_z / footprint unsmoothed. Default (None): 0 on
+        noise-free scans, else ``clip(4 * noise, 1, 3)`` px for a depth noise of ``noise``
+        footprints (1 px at the White Scanner preset's 0.25).
     max_search : int
         Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
 
@@ -236,6 +244,15 @@ def gradient(
     """
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
+    noise = None
+    if sigma is None or threshold is None:
+        noise = estimate_depth_noise(z=z, fp=geo.footprint)
+    noisy = noise is not None and noise >= NOISE_FLOOR
+    if sigma is None:
+        sigma = float(np.clip(4 * noise, 1.0, 3.0)) if noisy else 0.0
+    auto_threshold = threshold is None
+    if auto_threshold:
+        threshold = 15.0
     zs = _nan_gaussian(z, sigma) if sigma > 0 else z
     # a depth step is not a roof: no stencil part may cross a discontinuity
     resp = second_differences(zs, disc.pairs)
@@ -267,6 +284,10 @@ def gradient(
     np.copyto(theta, np.nan, where=np.isnan(mag))
     direction = theta
 
+    if auto_threshold and noisy:
+        noise_bend = np.degrees(2 * np.arctan(mag))
+        threshold = noise_threshold(noise_bend, valid, threshold, NOISE_K_GRADIENT)
+
     # bend angle: the slopes on either side are t -+ d / 2 around the mean slope t across
     # the edge (central first difference, which straddles a crease at the centre); d is
     # the response summed over the edge's ridge: a crease between two pixel centres splits
@@ -291,6 +312,7 @@ def gradient(
     params = {
         "threshold": float(threshold), "jump_threshold": float(jump_threshold), "nms": bool(nms),
         "sigma": float(sigma), "max_search": int(max_search),
+        "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=(crease | jump) & valid, labels=labels, strength=bend, direction=direction,
                    method="gradient", params=params)

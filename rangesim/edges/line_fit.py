@@ -9,7 +9,8 @@ from scipy.spatial import cKDTree
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges.common import (
-    JUMP_THRESHOLD, NEIGHBOURS, discontinuities, scan_depth, scan_points,
+    JUMP_THRESHOLD, NEIGHBOURS, NOISE_FLOOR, discontinuities, estimate_depth_noise,
+    scan_depth, scan_points,
 )
 from rangesim.edges.edgemap import EdgeMap
 
@@ -76,10 +77,16 @@ def line_fit_points(
     return out
 
 
+#: noisy scans: the opposite-pair tolerance is ``atan(NOISE_K_LINE * sqrt(2) * noise)``
+#: (the angle noise of a unit vector to a neighbour one footprint away is ~sqrt(2) noise
+#: radians), at least 15 and at most 60 degrees
+NOISE_K_LINE = 3.0
+
+
 def line_fit(
     points_or_scan: Any,
     k: int = 8,
-    angle_tol_deg: float = 15.0,
+    angle_tol_deg: float | None = None,
     line_sep_deg: float = 30.0,
     jump_threshold: float = JUMP_THRESHOLD,
     max_search: int = 50,
@@ -116,9 +123,13 @@ def line_fit(
         Points (mm; non-finite rows ignored), or a scan (``xyz``, ``depth``, ``valid``).
     k : int
         Neighbours per point (8-12; the paper's 8-neighbourhood).
-    angle_tol_deg : float
+    angle_tol_deg : float, optional
         Two neighbours are opposite if the angle between their directions is within this
-        many degrees of 180; hence the least crease bend detected (default 15).
+        many degrees of 180; hence the least crease bend detected. Default (None): 15;
+        for a scan whose depth noise (:func:`~rangesim.edges.common.estimate_depth_noise`,
+        ``noise`` footprints) is above :data:`~rangesim.edges.common.NOISE_FLOOR`,
+        ``atan(3 sqrt(2) noise)`` clipped to 15..60 degrees (46 at the White Scanner
+        preset's 0.25: creases below that are not found, but noise is not an edge).
     line_sep_deg : float
         Least angle between two lines for them to count as distinct (default 30; lines of
         a square grid are 45 degrees apart).
@@ -137,10 +148,18 @@ def line_fit(
         NaN at invalid ones; ``direction`` None.
     """
     if not hasattr(points_or_scan, "xyz"):
-        return line_fit_points(points_or_scan, k, angle_tol_deg, line_sep_deg, workers)
+        tol = 15.0 if angle_tol_deg is None else angle_tol_deg
+        return line_fit_points(points_or_scan, k, tol, line_sep_deg, workers)
     scan = points_or_scan
     z, valid = scan_depth(scan)
     xyz = scan_points(scan, valid)
+    noise = None
+    if angle_tol_deg is None:
+        noise = estimate_depth_noise(scan, z)
+        angle_tol_deg = 15.0
+        if noise >= NOISE_FLOOR:
+            angle_tol_deg = float(np.clip(
+                np.degrees(np.arctan(NOISE_K_LINE * np.sqrt(2) * noise)), 15.0, 60.0))
     edge = np.zeros(z.shape, bool)
     edge[valid] = line_fit_points(xyz[valid], k, angle_tol_deg, line_sep_deg, workers)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
@@ -157,6 +176,7 @@ def line_fit(
     params = {
         "k": int(k), "angle_tol_deg": float(angle_tol_deg), "line_sep_deg": float(line_sep_deg),
         "jump_threshold": float(jump_threshold), "max_search": int(max_search),
+        "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=edge & valid, labels=labels, strength=strength, method="line_fit",
                    params=params)

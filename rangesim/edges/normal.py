@@ -7,8 +7,9 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges.common import (
-    AXES, JUMP_THRESHOLD, discontinuities, dot3, measured_normals, nonmax_suppress,
-    pad_last2, padded_view, scan_depth, scan_points,
+    AXES, JUMP_THRESHOLD, NOISE_FLOOR, NOISE_K_NORMAL, discontinuities, dot3,
+    estimate_depth_noise, measured_normals, noise_threshold, nonmax_suppress, pad_last2,
+    padded_view, scan_depth, scan_points,
 )
 from rangesim.edges.edgemap import EdgeMap
 
@@ -28,8 +29,8 @@ def _pair_cut(gaps: np.ndarray, dr: int, dc: int) -> np.ndarray:
 
 def normal(
     scan: Any,
-    threshold_deg: float = 20.0,
-    window: int = 3,
+    threshold_deg: float | None = None,
+    window: int | None = None,
     jump_threshold: float = JUMP_THRESHOLD,
     nms: bool = True,
     max_search: int = 50,
@@ -61,13 +62,20 @@ def normal(
     ----------
     scan : RangeScan
         Uses ``xyz``, ``depth`` and ``valid`` (mm, camera frame).
-    threshold_deg : float
-        Least bend of the normal, degrees, for a crease pixel (default 20, the ground
-        truth's crease angle). Noise: the angle noise of a normal is about
+    threshold_deg : float, optional
+        Least bend of the normal, degrees, for a crease pixel (noise-free default 20, the
+        ground truth's crease angle). Noise: the angle noise of a normal is about
         ``sigma_z / (window // 2 * footprint)`` radians, so noisy scans need a larger window.
-    window : int
+        Default (None) on noisy scans (depth noise from
+        :func:`~rangesim.edges.common.estimate_depth_noise` above
+        :data:`~rangesim.edges.common.NOISE_FLOOR` footprints): ``max(20, k * median)`` of
+        the strength over valid pixels, ``k`` = :data:`~rangesim.edges.common.NOISE_K_NORMAL`
+        = 4.5 (~37 degrees at the White Scanner preset's noise with window 7).
+    window : int, optional
         Odd stencil size of the normal estimate, pixels (>= 3): differences over
-        ``window // 2`` pixels.
+        ``window // 2`` pixels. Default (None): 3 on noise-free scans, else
+        ``2 ceil(12 noise) + 1`` clipped to 3..9 for a depth noise of ``noise`` footprints
+        (7 at the preset's 0.25).
     jump_threshold : float
         Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
@@ -86,12 +94,22 @@ def normal(
         ``method="normal"``; ``strength`` is the bend angle in degrees (NaN where no pair of
         opposite neighbours has normals); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None.
     """
-    window = int(window)
-    if window < 3 or window % 2 == 0:
-        raise ValueError(f"window must be an odd integer >= 3, got {window}")
+    if window is not None:
+        window = int(window)
+        if window < 3 or window % 2 == 0:
+            raise ValueError(f"window must be an odd integer >= 3, got {window}")
     z, valid = scan_depth(scan)
     xyz = scan_points(scan, valid, component_major=True)
-    disc, _ = discontinuities(scan, z, jump_threshold, max_search)
+    disc, geo = discontinuities(scan, z, jump_threshold, max_search)
+    noise = None
+    if window is None or threshold_deg is None:
+        noise = estimate_depth_noise(z=z, fp=geo.footprint)
+    noisy = noise is not None and noise >= NOISE_FLOOR
+    if window is None:
+        window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3
+    auto_threshold = threshold_deg is None
+    if auto_threshold:
+        threshold_deg = 20.0
     n = measured_normals(xyz, disc.pairs, window // 2)
 
     shape = z.shape
@@ -117,6 +135,8 @@ def normal(
         concave[better] = side[better] > 0
         angles.append(np.where(np.isnan(angle), np.float32(0), angle))
     np.copyto(strength, np.nan, where=strength < 0)
+    if auto_threshold and noisy:
+        threshold_deg = noise_threshold(strength, valid, threshold_deg, NOISE_K_NORMAL)
     # direction across the crease: dominant second harmonic of the four axis strengths
     theta = 0.5 * np.arctan2(angles[1] - angles[3], angles[0] - angles[2])
 
@@ -134,6 +154,7 @@ def normal(
     params = {
         "threshold_deg": float(threshold_deg), "window": window,
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
+        "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=(crease | jump) & valid, labels=labels, strength=strength,
                    method="normal", params=params)

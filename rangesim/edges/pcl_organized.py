@@ -9,8 +9,9 @@ from scipy import ndimage
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges.common import (
-    AXES, central_difference, dot3, find_discontinuities, measured_normals, nearest_axis,
-    nonmax_suppress, pad_last2, padded_view, scan_depth, scan_points,
+    AXES, NOISE_FLOOR, NOISE_K_PCL, central_difference, dot3, estimate_depth_noise,
+    find_discontinuities, measured_normals, nearest_axis, noise_threshold, nonmax_suppress,
+    pad_last2, padded_view, pixel_geometry, scan_depth, scan_points,
 )
 from rangesim.edges.edgemap import EdgeMap
 
@@ -87,9 +88,9 @@ def pcl_organized(
     scan: Any,
     depth_discontinuity: float = 0.02,
     max_search: int = 50,
-    curvature_threshold: tuple[float, float] = (0.4, 1.1),
+    curvature_threshold: tuple[float, float] | None = None,
     edge_types: tuple[str, ...] = EDGE_TYPES,
-    normal_window: int = 3,
+    normal_window: int | None = None,
 ) -> OrganizedEdgeMap:
     """Organized-cloud edges as in PCL's ``OrganizedEdgeFromNormals``, written in NumPy.
 
@@ -130,13 +131,20 @@ def pcl_organized(
         Relative depth-discontinuity threshold (PCL's ``th_depth_discon``, 0.02).
     max_search : int
         PCL's ``max_search_neighbors``: pixels searched across NaN gaps (50).
-    curvature_threshold : (float, float)
+    curvature_threshold : (float, float), optional
         Canny hysteresis (low, high) on the Sobel magnitude of the normal field, raw Sobel
-        units as in PCL (``th_hc_canny_low``/``high``, 0.4 and 1.1).
+        units as in PCL (``th_hc_canny_low``/``high``, 0.4 and 1.1, the noise-free
+        default). Default (None) on noisy scans (depth noise from
+        :func:`~rangesim.edges.common.estimate_depth_noise` above
+        :data:`~rangesim.edges.common.NOISE_FLOOR` footprints): low =
+        ``max(0.4, k * median)`` of the magnitude over valid pixels, ``k`` =
+        :data:`~rangesim.edges.common.NOISE_K_PCL` = 4, and high = low * 1.1 / 0.4.
     edge_types : tuple of str
         Classes that enter ``mask`` (PCL's ``setEdgeType``): any of :data:`EDGE_TYPES`.
-    normal_window : int
-        Odd stencil size of the normal estimate, pixels (>= 3).
+    normal_window : int, optional
+        Odd stencil size of the normal estimate, pixels (>= 3). Default (None): 3 on
+        noise-free scans, else as :func:`~rangesim.edges.normal.normal`'s window
+        (``2 ceil(12 noise) + 1`` clipped to 3..9).
 
     Returns
     -------
@@ -147,11 +155,19 @@ def pcl_organized(
     unknown = set(edge_types) - set(EDGE_TYPES)
     if unknown:
         raise ValueError(f"unknown edge types {sorted(unknown)}; choose from {EDGE_TYPES}")
-    normal_window = int(normal_window)
-    if normal_window < 3 or normal_window % 2 == 0:
-        raise ValueError(f"normal_window must be an odd integer >= 3, got {normal_window}")
-    low, high = (float(t) for t in curvature_threshold)
+    if normal_window is not None:
+        normal_window = int(normal_window)
+        if normal_window < 3 or normal_window % 2 == 0:
+            raise ValueError(f"normal_window must be an odd integer >= 3, got {normal_window}")
     z, valid = scan_depth(scan)
+    noise = None
+    if normal_window is None or curvature_threshold is None:
+        noise = estimate_depth_noise(z=z, fp=pixel_geometry(scan, z).footprint)
+    noisy = noise is not None and noise >= NOISE_FLOOR
+    if normal_window is None:
+        normal_window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3
+    auto_threshold = curvature_threshold is None
+    low, high = (0.4, 1.1) if auto_threshold else (float(t) for t in curvature_threshold)
     xyz = scan_points(scan, valid, component_major=True)
     disc = find_discontinuities(z, depth_discontinuity, max_search, rule="dominant")
     n = measured_normals(xyz, disc.pairs, normal_window // 2)
@@ -163,6 +179,9 @@ def pcl_organized(
     gy = _smooth3(central_difference(n, 2, disc.pairs), 1) * np.float32(8)
     jxx, jyy, jxy = dot3(gx, gx), dot3(gy, gy), dot3(gx, gy)
     magnitude = np.sqrt(jxx + jyy)
+    if auto_threshold and noisy:
+        low = noise_threshold(magnitude, valid, low, NOISE_K_PCL)
+        high = low * 1.1 / 0.4
     theta = 0.5 * np.arctan2(2 * jxy, jxx - jyy)
     axis = nearest_axis(theta)
     thin = nonmax_suppress(magnitude, theta, magnitude > low)
@@ -202,7 +221,7 @@ def pcl_organized(
     params = {
         "depth_discontinuity": float(depth_discontinuity), "max_search": int(max_search),
         "curvature_threshold": [low, high], "edge_types": list(edge_types),
-        "normal_window": normal_window,
+        "normal_window": normal_window, "noise": None if noise is None else float(noise),
     }
     return OrganizedEdgeMap(
         mask=mask & valid, labels=labels, strength=magnitude, method="pcl_organized",

@@ -1,0 +1,96 @@
+"""Edge-detector quality on the Green Piece against exact ground truth (issue 4's "Done means").
+
+Scans: ``scenes/green_piece.toml`` with the ``white_scanner`` preset (512 x 480 px), seed 0.
+Noise-free: ``noise.sigma_px = noise.speckle_contrast = noise.quantization_px = 0`` (the
+stripe width stays: mixed pixels at jumps are physics, not noise). Preset noise: the
+preset as is (depth noise 0.24 pixel footprints, measured by
+``rangesim.edges.common.estimate_depth_noise``). Scores: ``edge_scores`` on jump + crease
+edges together, tolerance 2 px, default detector settings (noise-adaptive: see
+``rangesim.edges.common``). Truth is kept on measured pixels only (``scan_truth``).
+
+Documented F1 (measured; the floors asserted below are these minus a small margin):
+
+=============  ==========  ======================  ============  ======================
+detector       noise-free  noise-free, stripe 0    preset noise  flagged at preset noise
+=============  ==========  ======================  ============  ======================
+gradient       0.760       0.880                   0.752         1.4 % of valid pixels
+normal         0.731       0.873                   0.715         1.4 %
+line_fit       0.762       0.816                   0.549         1.0 %
+curvature      0.526       0.544                   0.523         0.7 %
+pcl_organized  0.739       0.716                   0.622         1.9 %
+=============  ==========  ======================  ============  ======================
+
+Before the noise-adaptive defaults, gradient / normal / line_fit / pcl_organized flagged
+30-39 % of the valid pixels at preset noise (F1 ~0.1). The 0.9 aim for gradient and
+normal is not reached yet on the noise-free scan: most of the loss is on the threaded
+holes (concave truth bands behind occluding thread crests, convex responses on the crests
+next to the jump) and, with stripe width, on mixed pixels along the jumps.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.edges import DETECTORS
+from rangesim.edges.common import NOISE_FLOOR, estimate_depth_noise
+from rangesim.evaluate.edge_scores import edge_scores
+from rangesim.evaluate.runs import scan_truth
+
+SCENE = Path(__file__).resolve().parents[1] / "scenes" / "green_piece.toml"
+QUIET = {"noise.sigma_px": 0.0, "noise.speckle_contrast": 0.0, "noise.quantization_px": 0.0}
+
+#: F1 floors (documented values above minus ~0.03)
+CLEAN_FLOOR = {"gradient": 0.73, "normal": 0.70, "line_fit": 0.73, "curvature": 0.49,
+               "pcl_organized": 0.70}
+NOISY_FLOOR = {"gradient": 0.72, "normal": 0.68}
+#: most of the valid pixels a detector may flag at preset noise (no flooding)
+MAX_FRACTION = 0.05
+
+
+def _scan(changes):
+    sensor = rs.load_sensor("white_scanner")
+    if changes:
+        sensor = sensor.with_params(changes)
+    scene = rs.load_scene(str(SCENE))
+    scan = rs.scan(scene, sensor)
+    return scan, scan_truth(scan, str(SCENE))
+
+
+@pytest.fixture(scope="module")
+def clean():
+    return _scan(QUIET)
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    return _scan({})
+
+
+def _f1(scan, truth, method):
+    em = DETECTORS[method](scan)
+    s = edge_scores(em.mask, truth.mask, 2.0)
+    return s["f1"], em.mask.sum() / scan.valid.sum()
+
+
+def test_noise_estimate(clean, noisy):
+    assert estimate_depth_noise(clean[0]) < 0.01 < NOISE_FLOOR
+    assert 0.2 < estimate_depth_noise(noisy[0]) < 0.3     # the preset's 0.27 (rms incl. tails)
+
+
+def test_noise_free_f1_floors(clean):
+    scan, truth = clean
+    for method, floor in CLEAN_FLOOR.items():
+        f1, _ = _f1(scan, truth, method)
+        assert f1 >= floor, (method, f1)
+
+
+def test_preset_noise_no_flooding(noisy):
+    scan, truth = noisy
+    for method in DETECTORS:
+        f1, fraction = _f1(scan, truth, method)
+        assert fraction < MAX_FRACTION, (method, fraction)
+        if method in NOISY_FLOOR:
+            assert f1 >= NOISY_FLOOR[method], (method, f1)
