@@ -259,8 +259,13 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
 
 
 def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: float) -> float:
-    """``max(default, k * median(strength))`` over valid pixels with a finite strength."""
-    st = strength[valid & np.isfinite(strength)]
+    """``max(default, k * median(strength))`` over valid pixels with a finite strength.
+
+    The median is taken on every 4th row and column (1/16 of the pixels): plenty for a
+    robust noise level, and 16 times cheaper than over a megapixel.
+    """
+    sub = (slice(None, None, 4), slice(None, None, 4))
+    st = strength[sub][valid[sub] & np.isfinite(strength[sub])]
     if st.size == 0:
         return float(default)
     return float(max(default, k * float(np.median(st))))

@@ -33,8 +33,9 @@ def _nan_gaussian(z: np.ndarray, sigma: float) -> np.ndarray:
     from scipy.ndimage import gaussian_filter
 
     ok = np.isfinite(z)
-    num = gaussian_filter(np.where(ok, z, 0).astype(np.float32), sigma, mode="constant")
-    den = gaussian_filter(ok.astype(np.float32), sigma, mode="constant")
+    # 3 sigma of kernel keeps 99.7 % of the weight, and is a quarter cheaper than scipy's 4
+    num = gaussian_filter(np.where(ok, z, 0).astype(np.float32), sigma, mode="constant", truncate=3.0)
+    den = gaussian_filter(ok.astype(np.float32), sigma, mode="constant", truncate=3.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(ok, num / den, np.nan).astype(np.float32)
 
