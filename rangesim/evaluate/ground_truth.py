@@ -1,6 +1,6 @@
 """Exact edge ground truth for synthetic scans, from the noise-free geometry behind them.
 
-Nothing here casts rays: everything comes from the scan's own ground-truth images
+Only crease visibility casts rays (Mitsuba shadow rays); everything else comes from the scan's own ground-truth images
 (``xyz_true``, ``part``, ``face``, ``normal``), its pose and intrinsics, and the scene's
 meshes (world mm).
 
@@ -254,11 +254,121 @@ def _sample_segments(
 # ---------------------------------------------------------------------------------------
 # creases
 # ---------------------------------------------------------------------------------------
+def _raster_segments(
+    K: np.ndarray, a: np.ndarray, b: np.ndarray, shape: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """8-connected rasterisation of projected camera-frame 3D segments.
+
+    Each segment is clipped to ``z >= NEAR_CLIP_MM``, projected, and crossed with the
+    centre line of every pixel column (when its image runs more along x than along y) or
+    pixel row (otherwise) within its extent: one sample per crossing, at the segment's own
+    sub-pixel position there, in the pixel that position falls in. So a line at any angle
+    marks exactly one pixel per column (or row), 1 pixel wide on diagonals -- what an edge
+    detector gives after non-maximum suppression -- and every marked pixel is one the
+    projected edge passes through. The 3D point of each sample comes from
+    perspective-correct interpolation (image fraction s -> t = s zA / ((1 - s) zB + s zA)).
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsics
+    a, b : (M, 3) float
+        Segment ends, camera frame, mm.
+    shape : (H, W)
+
+    Returns
+    -------
+    points : (N, 3) float64
+        Samples on the segments, camera frame, mm.
+    segment : (N,) intp
+        Index of the segment each sample belongs to.
+    row, col : (N,) intp
+        The pixel each sample marks (inside the image).
+    """
+    h, w = shape
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    empty = (np.zeros((0, 3)), np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp))
+    za, zb = a[:, 2], b[:, 2]
+    keep = (za >= NEAR_CLIP_MM) | (zb >= NEAR_CLIP_MM)
+    crossing = keep & ((za < NEAR_CLIP_MM) | (zb < NEAR_CLIP_MM))
+    tc = np.zeros_like(za)
+    tc[crossing] = (NEAR_CLIP_MM - za[crossing]) / (zb[crossing] - za[crossing])
+    cut = a + tc[:, None] * (b - a)
+    a = np.where(((za < NEAR_CLIP_MM) & keep)[:, None], cut, a)
+    b = np.where(((zb < NEAR_CLIP_MM) & keep)[:, None], cut, b)
+    idx = np.flatnonzero(keep)
+    if len(idx) == 0:
+        return empty
+    a, b = a[idx], b[idx]
+    ua, ub = _project(K, a), _project(K, b)
+    d = ub - ua
+    major = (np.abs(d[:, 1]) > np.abs(d[:, 0])).astype(np.intp)  # 0: x (columns), 1: y (rows)
+    minor = 1 - major
+    ar = np.arange(len(idx))
+    lo = np.minimum(ua[ar, major], ub[ar, major])
+    hi = np.maximum(ua[ar, major], ub[ar, major])
+    limit = np.where(major == 0, w, h)
+    # pixel centres k + 0.5 inside [lo, hi] and inside the image
+    first = np.maximum(np.ceil(lo - 0.5), 0)
+    last = np.minimum(np.floor(hi - 0.5), limit - 1)
+    n = np.maximum(last - first + 1, 0).astype(np.intp)
+    if n.sum() == 0:
+        return empty
+    seg = np.repeat(ar, n)
+    start = np.cumsum(n) - n
+    k = first[seg] + (np.arange(len(seg)) - start[seg])
+    dm = d[seg, major[seg]]
+    s = np.clip((k + 0.5 - ua[seg, major[seg]]) / np.where(dm == 0, 1.0, dm), 0.0, 1.0)
+    other = ua[seg, minor[seg]] + s * d[seg, minor[seg]]
+    pos = np.empty((len(seg), 2))
+    pos[np.arange(len(seg)), major[seg]] = k
+    pos[np.arange(len(seg)), minor[seg]] = np.floor(other)
+    col, row = pos[:, 0], pos[:, 1]
+    inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+    zA, zB = a[seg, 2], b[seg, 2]
+    t = s * zA / ((1 - s) * zB + s * zA)
+    pts = a[seg] + t[:, None] * (b[seg] - a[seg])
+    return (pts[inside], idx[seg[inside]], row[inside].astype(np.intp), col[inside].astype(np.intp))
+
+
+def _unoccluded(scene: Any, scan: RangeScan, pts: np.ndarray, tol: np.ndarray) -> np.ndarray:
+    """(N,) bool: nothing in ``scene`` lies between the camera and the camera-frame points
+    ``pts``, short of ``tol`` (N,) mm in front of each (one Mitsuba shadow ray per point,
+    plus one from an eye nudged by a hair, as in :func:`~rangesim.scene.visibility.visible_from`)."""
+    from rangesim.core.backend import mitsuba
+    from rangesim.scene.visibility import _NUDGE, _blocked
+
+    if len(pts) == 0:
+        return np.zeros(0, dtype=bool)
+    mi = mitsuba()
+    world = pts @ scan.pose[:3, :3].T + scan.pose[:3, 3]
+    eye = np.asarray(scan.pose[:3, 3], dtype=np.float64)
+    # float32 slack of a hit on the edge's own faces (as visible_from's default)
+    magnitude = max(float(np.abs(world).max()), float(np.abs(eye).max()))
+    tol = np.maximum(tol, (1.0 + magnitude) * 4.0 * float(mi.math.RayEpsilon))
+    mscene = scene.mitsuba_scene().scene
+    nudge = _NUDGE * (1.0 + float(np.abs(eye).max())) * 1e-4
+    blocked = np.zeros(len(pts), dtype=bool)
+    for origin in (eye, eye + nudge):
+        blocked |= _blocked(mi, mscene, origin, world, tol)
+    return ~blocked
+
+
 def _mesh_creases(
-    scan: RangeScan, obj: Any, k: int, R: np.ndarray, t: np.ndarray, K: np.ndarray,
+    scan: RangeScan, scene: Any, k: int, R: np.ndarray, t: np.ndarray, K: np.ndarray,
     crease_deg: float, depth_tol_px: float, out: np.ndarray,
 ) -> None:
-    """Project object ``k``'s visible crease edges into ``out`` (uint8 labels, in place)."""
+    """Rasterise object ``k``'s visible crease edges into ``out`` (uint8 labels, in place).
+
+    Every crease edge (dihedral above ``crease_deg``, both faces towards the camera) is
+    rasterised 8-connected (:func:`_raster_segments`, one sample per pixel column or row it
+    crosses, at the edge's own sub-pixel position there). A sample marks its pixel when the
+    edge itself is seen there: no surface lies on the ray from the camera to the sample
+    more than ``depth_tol_px`` pixel footprints (z / fx) in front of it (a Mitsuba shadow
+    ray cast to the sample's own position, not the pixel centre), and the pixel hits
+    object ``k``.
+    """
+    obj = scene.objects[k]
     mesh = obj.mesh
     if len(mesh.faces) < 2 or not np.any(scan.part == k):
         return
@@ -283,12 +393,35 @@ def _mesh_creases(
     if not np.any(keep):
         return
     pairs, edges, convex = pairs[keep], edges[keep], convex[keep]
-    pts, seg = _sample_segments(K, verts[edges[:, 0]], verts[edges[:, 1]], scan.shape)
+    pts, seg, row, col = _raster_segments(K, verts[edges[:, 0]], verts[edges[:, 1]], scan.shape)
+    on = scan.part[row, col] == k
+    pts, seg, row, col = pts[on], seg[on], row[on], col[on]
     if len(pts) == 0:
         return
-    vis, row, col = _visible(scan, K, k, pts, depth_tol_px, faces=pairs[seg])
+    # both faces must be sampled by the scan next to the crease: some pixel of the 3 x 3
+    # around the mark hits object k with a true normal within crease_deg / 2 of each face's
+    # (a crease bounding a sliver no pixel sees -- a sub-footprint step -- is not in the data)
+    h, w = scan.shape
+    cos_half = np.cos(np.radians(crease_deg) / 2)
+    seen0 = np.zeros(len(pts), dtype=bool)
+    seen1 = np.zeros(len(pts), dtype=bool)
+    n0, n1 = normals[pairs[seg, 0]], normals[pairs[seg, 1]]
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            r, c = row + dr, col + dc
+            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+            r, c = np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)
+            ok &= scan.part[r, c] == k
+            n = np.nan_to_num(scan.normal[r, c].astype(np.float64))
+            seen0 |= ok & (np.einsum("ij,ij->i", n, n0) >= cos_half)
+            seen1 |= ok & (np.einsum("ij,ij->i", n, n1) >= cos_half)
+    both = seen0 & seen1
+    pts, seg, row, col = pts[both], seg[both], row[both], col[both]
+    if len(pts) == 0:
+        return
+    vis = _unoccluded(scene, scan, pts, depth_tol_px * pts[:, 2] / K[0, 0])
     label = np.where(convex[seg], EdgeLabel.CONVEX, EdgeLabel.CONCAVE).astype(np.uint8)
-    # several samples per pixel; where convex and concave meet in one pixel, concave wins
+    # where convex and concave meet in one pixel, concave wins
     np.maximum.at(out, (row[vis], col[vis]), label[vis])
 
 
@@ -377,7 +510,7 @@ def ground_truth_edges(
     crease_deg: float = 20.0,
     *,
     jump_angle_deg: float = JUMP_ANGLE_DEG,
-    depth_tol_px: float = 3.0,
+    depth_tol_px: float = 1.0,
 ) -> np.ndarray:
     """Exact edge labels of a synthetic scan from the geometry behind it.
 
@@ -385,9 +518,11 @@ def ground_truth_edges(
     including hit-next-to-miss, marked on the near side. Creases are the mesh edges of each
     object whose dihedral angle (between face normals) exceeds ``crease_deg`` and whose two
     faces both face the camera (one facing away makes it an occluding contour: a jump),
-    sampled every 1/4 pixel of their projection and kept where visible: the sample's pixel
-    hits the same object, on one of the edge's two faces or within ``depth_tol_px`` pixel
-    footprints of the sample's depth. Convex/concave follows the dihedral sign
+    rasterised 8-connected (one pixel per column or row crossed, 1 px on diagonals) and kept
+    where the edge itself is seen: a ray from the camera to the sample's own position meets
+    nothing more than ``depth_tol_px`` pixel footprints in front of it, the pixel hits the
+    same object, and the scan samples both faces in the 3 x 3 around it (true normals within
+    ``crease_deg / 2`` of each face's; a sub-footprint step is not in the data). Convex/concave follows the dihedral sign
     (``face_adjacency_convex``). Surfaces in contact without sharing a mesh edge (a box on
     a floor) get contact creases from pixel pairs (see ``_contact_creases``). Jump wins over
     crease; where convex and concave fall in one pixel, concave wins.
@@ -403,7 +538,8 @@ def ground_truth_edges(
     jump_angle_deg : float
         The jump rule's angle (see :func:`jump_edges`).
     depth_tol_px : float
-        Visibility tolerance of crease samples, in pixel footprints (z / fx mm).
+        Occluders closer than this to a crease sample (pixel footprints, z / fx mm) do not
+        hide it.
 
     Returns
     -------
@@ -420,8 +556,8 @@ def ground_truth_edges(
     hit = (scan.part >= 0) & np.all(np.isfinite(scan.xyz_true), axis=-1)
     jump = jump_edges(scan.xyz_true, hit, max_angle_deg=jump_angle_deg)
     labels = np.zeros(scan.shape, dtype=np.uint8)
-    for k, obj in enumerate(scene.objects):
-        _mesh_creases(scan, obj, k, R, t, K, crease_deg, depth_tol_px, labels)
+    for k in range(len(scene.objects)):
+        _mesh_creases(scan, scene, k, R, t, K, crease_deg, depth_tol_px, labels)
     _contact_creases(scan, [np.asarray(o.mesh.faces) for o in scene.objects], K, crease_deg,
                      jump_angle_deg, labels)
     labels[jump] = EdgeLabel.JUMP
