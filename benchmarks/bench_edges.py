@@ -28,15 +28,16 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_info, timed  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SCENE = REPO / "scenes" / "green_piece.toml"
@@ -46,46 +47,6 @@ TARGETS = {"gradient": 0.1, "normal": 0.3, "line_fit_points": 5.0}
 BASELINE = "scipy.ndimage.sobel (3x3)"
 
 
-def timed(fn: Callable[[], Any], repeat: int) -> tuple[float, float, list[float], Any]:
-    """Run ``fn`` once (warm-up), then ``repeat`` times.
-
-    Returns
-    -------
-    cold : float
-        Seconds of the warm-up run.
-    median : float
-        Median seconds of the timed runs.
-    times : list of float
-        Every timed run, seconds.
-    result : Any
-        What the last run returned.
-    """
-    t0 = time.perf_counter()
-    result = fn()
-    cold = time.perf_counter() - t0
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t0)
-    return cold, statistics.median(times), times, result
-
-
-def cpu_info() -> dict[str, Any]:
-    """CPU model and core counts of this machine."""
-    info: dict[str, Any] = {"os.cpu_count": os.cpu_count()}
-    try:
-        info["affinity"] = len(os.sched_getaffinity(0))
-    except AttributeError:
-        pass
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                info["model"] = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return info
 
 
 def make_scan(size: int, quiet: bool):

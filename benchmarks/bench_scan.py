@@ -36,7 +36,6 @@ import datetime
 import io
 import json
 import math
-import os
 import platform
 import pstats
 import statistics
@@ -45,6 +44,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_info, timed  # noqa: E402
 
 #: the target: a full scan within this factor of Open3D's bare depth
 TARGET_RATIO = 1.5
@@ -121,33 +123,7 @@ def world_rays(sensor, pose) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- timing ----------------------------------------------------------------------------------
-def timed(fn, repeat: int):
-    """(cold seconds, median seconds, all warm times, last result)."""
-    t0 = time.perf_counter()
-    result = fn()
-    cold = time.perf_counter() - t0
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t0)
-    return cold, statistics.median(times), times, result
 
-
-def cpu_info() -> dict:
-    info = {"os.cpu_count": os.cpu_count()}
-    try:
-        info["affinity"] = len(os.sched_getaffinity(0))
-    except AttributeError:
-        pass
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                info["model"] = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return info
 
 
 # -- per-stage profile -----------------------------------------------------------------------
@@ -455,7 +431,7 @@ def main(argv=None) -> int:
               f"{total:.3f} s each with the tracer; sections are its # comments)")
         for title, v in sections:
             print(f"  {v:>8.3f} s {100 * v / total:>6.1f} %  {title[:80]}")
-        print(f"\nslowest lines of scan_geometric (a line's time includes the calls it makes and "
+        print("\nslowest lines of scan_geometric (a line's time includes the calls it makes and "
               "the Dr.Jit kernels it waits for)")
         for lineno, v, text in lines[:15]:
             print(f"  geometric.py:{lineno:<4}{v:>8.3f} s  {text[:90]}")
