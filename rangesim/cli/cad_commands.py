@@ -33,8 +33,9 @@ def cmd_model(args: argparse.Namespace) -> int:
         except tomllib.TOMLDecodeError as exc:
             raise RangesimError(f"--param {key}: not a TOML value: {raw!r}") from exc
     part = MODELS[args.name](**params)
+    data = part.mesh.export(file_type=out.suffix.lower().lstrip("."))  # bytes (or str for OBJ)
     with writing(out), atomic_path(out) as tmp:
-        part.mesh.export(tmp)
+        Path(tmp).write_bytes(data if isinstance(data, bytes) else data.encode())
     if tree_path is not None:
         with writing(tree_path), atomic_path(tree_path) as tmp:
             Path(tmp).write_text(json.dumps(part.to_dict(), indent=1))
