@@ -1,5 +1,6 @@
 """Ground truth and scores: exact edge labels of synthetic scans, and how well a detector finds them."""
 from rangesim.evaluate.edge_scores import edge_scores
+from rangesim.evaluate.feature_scores import feature_scores
 from rangesim.evaluate.ground_truth import (
     ImageEllipse,
     ImageSegment,
@@ -10,6 +11,6 @@ from rangesim.evaluate.ground_truth import (
 from rangesim.evaluate.regions import region_boundaries
 
 __all__ = [
-    "ground_truth_edges", "ground_truth_features", "jump_edges", "edge_scores",
+    "ground_truth_edges", "ground_truth_features", "jump_edges", "edge_scores", "feature_scores",
     "ImageEllipse", "ImageSegment", "region_boundaries",
 ]

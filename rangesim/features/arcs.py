@@ -1,0 +1,74 @@
+"""Circular arcs: circle hypotheses of the directional Hough transform with partial support."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rangesim.features.circles import _dedupe, _support, circle_hypotheses
+from rangesim.features.common import edge_points
+
+
+@dataclass(frozen=True)
+class Arc:
+    """A circular arc.
+
+    Attributes
+    ----------
+    center : (x, y) float, pixels
+    radius : float, pixels
+    start, end : float
+        Angles of the longest supported run, radians from +x towards +y (image), end > start.
+    coverage : float
+        Fraction of the whole circumference supported (within 1 px), 0..1.
+    votes : int
+    residual : float
+        RMS distance of the supporting edge pixels, pixels.
+    """
+
+    center: tuple[float, float]
+    radius: float
+    start: float
+    end: float
+    coverage: float
+    votes: int
+    residual: float
+
+    @property
+    def span(self) -> float:
+        """Angle of the longest supported run, radians."""
+        return self.end - self.start
+
+
+def arcs(
+    edge_map: Any,
+    radii: tuple[float, float] = (5, 80),
+    *,
+    min_span_deg: float = 60.0,
+    max_coverage: float = 0.5,
+    threshold: float = 0.12,
+    angle_tol_deg: float = 4.0,
+    max_residual: float = 0.8,
+    keep: np.ndarray | None = None,
+) -> list[Arc]:
+    """Arcs: circle hypotheses whose support is partial.
+
+    Same accumulator as :func:`~rangesim.features.circles` with a lower threshold (a
+    fraction of 2 pi r, so proportional to r); kept when the longest contiguous supported run
+    spans at least ``min_span_deg`` while the total coverage stays below ``max_coverage``
+    (above it the hypothesis is a circle).
+
+    Returns
+    -------
+    list of Arc, longest span first, near-duplicates removed.
+    """
+    xy, _ = edge_points(edge_map, keep)
+    found = []
+    for c, r, votes, _ in circle_hypotheses(edge_map, radii, angle_tol_deg=angle_tol_deg,
+                                            threshold=threshold, keep=keep):
+        _, cov, s, e, rms = _support(xy, c, r)
+        if cov < max_coverage and (e - s) >= np.deg2rad(min_span_deg) and rms <= max_residual:
+            found.append(Arc((float(c[0]), float(c[1])), float(r), s, e, cov, votes, rms))
+    found.sort(key=lambda a: -a.span)
+    return _dedupe(found, lambda k: np.array(k.center), lambda k: k.radius, 2.0)

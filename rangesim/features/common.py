@@ -1,0 +1,209 @@
+"""Shared helpers of the feature finders: edge points with directions, and least-squares fits
+of circles and conics (image coordinates: x = column, y = row, integers at pixel centres)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+
+def edge_points(edge_map: Any, keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Edge pixels and their edge-normal directions.
+
+    Parameters
+    ----------
+    edge_map : EdgeMap or (H, W) bool array
+    keep : (H, W) bool, optional
+        Extra mask of the pixels to use.
+
+    Returns
+    -------
+    xy : (N, 2) float64
+        (x = column, y = row) of the edge pixels, pixels.
+    theta : (N,) float64
+        Direction across the edge, radians: ``edge_map.direction`` where given, else the
+        direction of the gradient of the Gaussian-smoothed mask (sigma 1.5 px).
+    """
+    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
+    if keep is not None:
+        mask = mask & keep
+    rows, cols = np.nonzero(mask)
+    direction = getattr(edge_map, "direction", None)
+    if direction is not None:
+        theta = np.asarray(direction, np.float64)[rows, cols]
+    else:
+        theta = np.full(len(rows), np.nan)
+    bad = ~np.isfinite(theta)
+    if bad.any():
+        # structure-tensor orientation of the mask: the normal to the local line of edge pixels
+        m = np.asarray(getattr(edge_map, "mask", edge_map), np.float64)
+        gx = ndimage.sobel(m, axis=1)
+        gy = ndimage.sobel(m, axis=0)
+        jxx, jyy, jxy = (ndimage.gaussian_filter(a, 1.5) for a in (gx * gx, gy * gy, gx * gy))
+        orient = 0.5 * np.arctan2(2 * jxy, jxx - jyy)  # dominant gradient orientation
+        theta[bad] = orient[rows[bad], cols[bad]]
+    return np.column_stack([cols, rows]).astype(np.float64), theta
+
+
+def fit_circle(xy: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Algebraic (Kasa) least-squares circle, then Gauss-Newton on the geometric distance.
+
+    Parameters
+    ----------
+    xy : (N, 2) float, N >= 3, pixels
+
+    Returns
+    -------
+    center : (2,) float, radius : float, rms : float
+        Centre, radius and RMS geometric residual, pixels.
+    """
+    m = xy.mean(axis=0)
+    p = xy - m
+    A = np.column_stack([2 * p, np.ones(len(p))])
+    sol, *_ = np.linalg.lstsq(A, (p ** 2).sum(1), rcond=None)
+    c = sol[:2]
+    r = float(np.sqrt(max(sol[2] + c @ c, 1e-12)))
+    for _ in range(5):  # geometric refinement
+        d = p - c
+        rho = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+        J = np.column_stack([-d / rho[:, None], -np.ones(len(p))])
+        res = rho - r
+        step, *_ = np.linalg.lstsq(J, -res, rcond=None)
+        c, r = c + step[:2], r + float(step[2])
+        if np.abs(step).max() < 1e-6:
+            break
+    res = np.linalg.norm(p - c, axis=1) - r
+    return c + m, abs(r), float(np.sqrt(np.mean(res ** 2)))
+
+
+def fit_conic(xy: np.ndarray) -> np.ndarray | None:
+    """Fitzgibbon-Pilu-Fisher direct least-squares ellipse (Halir-Flusser stable form).
+
+    Parameters
+    ----------
+    xy : (N, 2) float, N >= 5, pixels
+
+    Returns
+    -------
+    (6,) float or None
+        Conic ``a x^2 + b x y + c y^2 + d x + e y + f = 0`` in pixel coordinates, normalised
+        to unit norm, or None when no ellipse fits.
+    """
+    if len(xy) < 5:
+        return None
+    m = xy.mean(axis=0)
+    s = max(float(np.abs(xy - m).max()), 1e-9)
+    x, y = ((xy - m) / s).T
+    D1 = np.column_stack([x * x, x * y, y * y])
+    D2 = np.column_stack([x, y, np.ones_like(x)])
+    S1, S2, S3 = D1.T @ D1, D1.T @ D2, D2.T @ D2
+    try:
+        T = -np.linalg.solve(S3, S2.T)
+    except np.linalg.LinAlgError:
+        return None
+    M = S1 + S2 @ T
+    M = np.array([M[2] / 2, -M[1], M[0] / 2])
+    w, v = np.linalg.eig(M)
+    v = np.real(v)
+    cond = 4 * v[0] * v[2] - v[1] ** 2
+    ok = np.nonzero(cond > 0)[0]
+    if len(ok) == 0:
+        return None
+    a1 = v[:, ok[0]]
+    a2 = T @ a1
+    A, B, C, D, E, F = (*a1, *a2)
+    # undo the normalisation x' = (x - mx) / s
+    mx, my = m
+    A2, B2, C2 = A / s ** 2, B / s ** 2, C / s ** 2
+    D2_, E2 = D / s, E / s
+    conic = np.array([
+        A2, B2, C2,
+        D2_ - 2 * A2 * mx - B2 * my,
+        E2 - 2 * C2 * my - B2 * mx,
+        F + A2 * mx ** 2 + B2 * mx * my + C2 * my ** 2 - D2_ * mx - E2 * my,
+    ])
+    return conic / np.linalg.norm(conic)
+
+
+def conic_matrix(conic: np.ndarray) -> np.ndarray:
+    """3x3 symmetric matrix of a conic given as (a, b, c, d, e, f)."""
+    a, b, c, d, e, f = conic
+    return np.array([[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]])
+
+
+def conic_from_ellipse(center, axes, angle) -> np.ndarray:
+    """(6,) conic coefficients of the ellipse with centre (x, y), semi-axes (a, b), angle (rad)."""
+    a, b = axes
+    ca, sa = np.cos(angle), np.sin(angle)
+    R = np.array([[ca, -sa], [sa, ca]])
+    A = R @ np.diag([1 / a ** 2, 1 / b ** 2]) @ R.T
+    c = np.asarray(center, float)
+    q = np.array([A[0, 0], 2 * A[0, 1], A[1, 1], *(-2 * A @ c), c @ A @ c - 1])
+    return q / np.linalg.norm(q)
+
+
+def ellipse_from_conic(conic: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(center (2,), semi-axes (a >= b), major-axis angle in (-pi/2, pi/2]) or None."""
+    from rangesim.evaluate.ground_truth import _conic_to_ellipse
+
+    C = conic_matrix(conic)
+    if C[0, 0] < 0:
+        C = -C
+    return _conic_to_ellipse(C)
+
+
+def sampson_distance(conic: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(N,) first-order geometric distance (pixels) of points to a conic."""
+    a, b, c, d, e, f = conic
+    x, y = xy[:, 0], xy[:, 1]
+    q = a * x * x + b * x * y + c * y * y + d * x + e * y + f
+    gx = 2 * a * x + b * y + d
+    gy = b * x + 2 * c * y + e
+    return np.abs(q) / np.maximum(np.hypot(gx, gy), 1e-12)
+
+
+def conic_normal_angle(conic: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(N,) direction (radians) of the conic's gradient at the points: the normal to the curve."""
+    a, b, c, d, e, f = conic
+    x, y = xy[:, 0], xy[:, 1]
+    return np.arctan2(b * x + 2 * c * y + e, 2 * a * x + b * y + d)
+
+
+def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, float]:
+    """Coverage of a circle by point angles, and the longest covered run.
+
+    Parameters
+    ----------
+    angles : (N,) float, radians
+    n_bins : int
+        Bins around the circle (about one per pixel of circumference).
+
+    Returns
+    -------
+    coverage : float
+        Fraction of bins holding a point, 0..1.
+    start, end : float
+        Start and end angles (radians, counter-clockwise in image x-y, i.e. from +x towards
+        +y) of the longest run of occupied bins.
+    """
+    n_bins = max(int(n_bins), 8)
+    idx = np.floor((np.mod(angles, 2 * np.pi)) / (2 * np.pi) * n_bins).astype(int) % n_bins
+    occ = np.zeros(n_bins, bool)
+    occ[idx] = True
+    cov = float(occ.mean())
+    if occ.all():
+        return 1.0, 0.0, 2 * np.pi
+    if not occ.any():
+        return 0.0, 0.0, 0.0
+    # longest circular run of True: rotate so that the array starts at an empty bin
+    shift = int(np.argmin(occ))
+    r = np.roll(occ, -shift)
+    padded = np.concatenate([[False], r, [False]]).astype(np.int8)
+    dif = np.diff(padded)
+    starts, ends = np.nonzero(dif == 1)[0], np.nonzero(dif == -1)[0]
+    k = int(np.argmax(ends - starts))
+    step = 2 * np.pi / n_bins
+    s = ((starts[k] + shift) % n_bins) * step
+    e = s + (ends[k] - starts[k]) * step
+    return cov, float(s), float(e)

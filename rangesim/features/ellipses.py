@@ -1,0 +1,294 @@
+"""Ellipses: model-guided (predicted from the model's 3D circles and the scan's pose, refined on
+the edge points left over by lines, circles and arcs), or fitted to linked chains (RANSAC)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rangesim.features.common import (
+    conic_from_ellipse,
+    conic_normal_angle,
+    edge_points,
+    ellipse_from_conic,
+    fit_conic,
+    sampson_distance,
+)
+
+
+@dataclass(frozen=True)
+class Ellipse:
+    """An ellipse in the image.
+
+    Attributes
+    ----------
+    center : (x, y) float, pixels
+    axes : (a, b) float
+        Semi-major and semi-minor axes, pixels.
+    orientation : float
+        Major-axis direction, radians from +x towards +y, in (-pi/2, pi/2].
+    residual : float
+        RMS Sampson distance of the supporting edge pixels, pixels.
+    n_points : int
+    name : str
+        The model circle it was predicted from ("" without a model).
+    """
+
+    center: tuple[float, float]
+    axes: tuple[float, float]
+    orientation: float
+    residual: float
+    n_points: int
+    name: str = ""
+
+
+def mesh_circles(mesh: Any, crease_deg: float = 30.0, max_rel_residual: float = 0.02,
+                 min_points: int = 8) -> list:
+    """3D circles fitted to the closed crease loops of a mesh.
+
+    Mesh edges whose dihedral angle exceeds ``crease_deg`` are grouped into connected
+    components (graph traversal); components where every vertex has degree 2 are closed
+    loops; each loop is fitted with a plane (SVD) and a circle in that plane, and kept when
+    the RMS residuals are below ``max_rel_residual`` times the radius.
+
+    Returns
+    -------
+    list of :class:`~rangesim.cad.features.Circle3D` (world mm, the mesh's frame).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from rangesim.cad.features import Circle3D
+    from rangesim.features.common import fit_circle
+
+    angles = np.asarray(mesh.face_adjacency_angles)
+    edges = np.asarray(mesh.face_adjacency_edges)[angles > np.deg2rad(crease_deg)]
+    if len(edges) == 0:
+        return []
+    nv = len(mesh.vertices)
+    g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(nv, nv))
+    n_comp, lab = connected_components(g, directed=False)
+    deg = np.bincount(edges.ravel(), minlength=nv)
+    verts = np.unique(edges)
+    out = []
+    V = np.asarray(mesh.vertices, float)
+    for comp in np.unique(lab[verts]):
+        vs = verts[lab[verts] == comp]
+        if len(vs) < min_points or np.any(deg[vs] != 2):
+            continue
+        P = V[vs]
+        m = P.mean(0)
+        _, sv, vt = np.linalg.svd(P - m, full_matrices=False)
+        normal = vt[2]
+        uv = (P - m) @ vt[:2].T
+        c2, r, rms = fit_circle(uv)
+        planar = sv[2] / np.sqrt(len(P))
+        if r <= 0 or rms > max_rel_residual * r or planar > max_rel_residual * r:
+            continue
+        out.append(Circle3D(f"loop_{comp}", m + c2 @ vt[:2], normal, float(r)))
+    return out
+
+
+def predict_ellipses(scan: Any, circles3d: list, world: bool = True) -> list[tuple[str, np.ndarray]]:
+    """Predicted image ellipses of 3D circles seen from the scan's pose.
+
+    Parameters
+    ----------
+    scan : RangeScan
+        Needs ``pose`` and ``meta["K"]``.
+    circles3d : list of Circle3D
+        World mm (camera frame when ``world`` is False).
+
+    Returns
+    -------
+    list of (name, conic (6,)) in pixel-centre coordinates; circles whose image is not an
+    ellipse are left out.
+    """
+    from rangesim.evaluate.ground_truth import _conic_to_ellipse
+
+    K = scan.K
+    inv = np.linalg.inv(np.asarray(scan.pose, float)) if world else np.eye(4)
+    R, t = inv[:3, :3], inv[:3, 3]
+    Kc = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]]) @ K
+    out = []
+    for c in circles3d:
+        center = R @ np.asarray(c.center, float) + t
+        normal = R @ np.asarray(c.normal, float)
+        normal /= np.linalg.norm(normal)
+        helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
+        e1 = np.cross(normal, helper)
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(normal, e1)
+        Hm = Kc @ np.column_stack([c.radius * e1, c.radius * e2, center])
+        if abs(np.linalg.det(Hm)) < 1e-12:
+            continue
+        Hi = np.linalg.inv(Hm)
+        ell = _conic_to_ellipse(Hi.T @ np.diag([1.0, 1.0, -1.0]) @ Hi)
+        if ell is None:
+            continue
+        out.append((c.name, conic_from_ellipse(*ell)))
+    return out
+
+
+def _scene_circles(scene: Any) -> list:
+    from rangesim.scene.scene import load_scene
+
+    scene = load_scene(scene)
+    circles3d = []
+    for obj in scene.objects:
+        feats = obj.features
+        if feats is not None and getattr(feats, "circles", None):
+            circles3d += list(feats.circles)
+        elif obj.source not in ("plane", "box") and len(obj.mesh.faces) > 12:
+            circles3d += mesh_circles(obj.mesh)
+    return circles3d
+
+
+def _refine(conic: np.ndarray, xy: np.ndarray, theta: np.ndarray, band: float,
+            angle_tol_deg: float = 25.0, iterations: int = 3) -> tuple[np.ndarray, np.ndarray] | None:
+    """Refit a conic on the edge points within ``band`` px of it whose direction agrees."""
+    cos_tol = np.cos(np.deg2rad(angle_tol_deg))
+    sel = None
+    for k in range(iterations):
+        b = band if k == 0 else max(1.0, band / 2 ** k)
+        d = sampson_distance(conic, xy)
+        agree = np.abs(np.cos(conic_normal_angle(conic, xy) - theta)) >= cos_tol
+        sel = np.nonzero((d <= b) & agree)[0]
+        if len(sel) < 8:
+            return None
+        new = fit_conic(xy[sel])
+        if new is None or ellipse_from_conic(new) is None:
+            return None
+        conic = new
+    return conic, sel
+
+
+def _ransac(xy: np.ndarray, rng: np.random.Generator, iters: int = 200, tol: float = 1.0):
+    """Best ellipse (conic, inliers) of points by 6-point RANSAC + refit, or None."""
+    best, best_n = None, 0
+    n = len(xy)
+    for _ in range(iters):
+        c = fit_conic(xy[rng.choice(n, 6, replace=False)])
+        if c is None or ellipse_from_conic(c) is None:
+            continue
+        inl = sampson_distance(c, xy) <= tol
+        if inl.sum() > best_n:
+            best, best_n = c, int(inl.sum())
+            if best_n > 0.9 * n:
+                break
+    if best is None:
+        return None
+    inl = np.nonzero(sampson_distance(best, xy) <= tol)[0]
+    c = fit_conic(xy[inl])
+    return (c, inl) if c is not None and ellipse_from_conic(c) is not None else None
+
+
+def ellipses(
+    edge_map: Any,
+    scan: Any = None,
+    scene: Any = None,
+    *,
+    explained: tuple = (),
+    remove_explained: bool = True,
+    band_px: float | None = None,
+    min_points: int = 20,
+    min_support: float = 0.3,
+    axes_range: tuple[float, float] = (4.0, 200.0),
+    seed: int = 0,
+) -> list[Ellipse]:
+    """Ellipses of an edge map.
+
+    First the edge points explained by lines, circles and arcs (``explained``: the features
+    to remove; by default found here with :func:`~rangesim.features.lines`,
+    :func:`~rangesim.features.circles` and :func:`~rangesim.features.arcs`) are removed,
+    except where they lie in a model-predicted ellipse's band (the model has priority).
+
+    With ``scene`` and ``scan`` (pose and intrinsics): the model's 3D circles (analytic
+    features of built-in parts; for other meshes circles fitted to closed crease loops,
+    :func:`mesh_circles`) are projected to predicted image ellipses; each is refined by a
+    direct least-squares conic fit (Fitzgibbon) on the remaining edge points within a band
+    of ``band_px`` (default ``max(3, 0.15 b)``) px whose edge direction agrees, narrowing the
+    band over three passes. Kept when its supporting points cover at least ``min_support``
+    of its perimeter (about one point per pixel).
+
+    Without a model: ellipses fitted to linked chains (:func:`rangesim.edges.link`) by direct
+    least squares inside RANSAC.
+
+    Returns
+    -------
+    list of Ellipse
+    """
+    from rangesim.edges.link import link
+
+    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
+    H, W = mask.shape
+    xy, theta = edge_points(edge_map)
+    predictions = []
+    if scene is not None and scan is not None:
+        predictions = predict_ellipses(scan, _scene_circles(scene))
+    # -- remove points explained by lines, circles and arcs (not those a model claims) --
+    remove = np.zeros(len(xy), bool)
+    if remove_explained:
+        if not explained:
+            from rangesim.features.arcs import arcs as find_arcs
+            from rangesim.features.circles import circles as find_circles
+            from rangesim.features.lines import lines as find_lines
+
+            explained = (*find_lines(edge_map), *find_circles(edge_map), *find_arcs(edge_map))
+        for f in explained:
+            if hasattr(f, "radius"):
+                remove |= np.abs(np.hypot(*(xy - np.array(f.center)).T) - f.radius) <= 1.0
+            elif hasattr(f, "start") and hasattr(f, "end") and not hasattr(f, "radius"):
+                a, b = np.array(f.start), np.array(f.end)
+                ab = b - a
+                t = np.clip((xy - a) @ ab / max(ab @ ab, 1e-12), 0, 1)
+                remove |= np.hypot(*(xy - a - t[:, None] * ab).T) <= 1.0
+    claimed = np.zeros(len(xy), bool)
+    for _, conic in predictions:
+        ell = ellipse_from_conic(conic)
+        claimed |= sampson_distance(conic, xy) <= (band_px or max(3.0, 0.15 * ell[1][1]))
+    keep = ~remove | claimed
+    out: list[Ellipse] = []
+    if predictions:
+        for name, conic in predictions:
+            ell = ellipse_from_conic(conic)
+            if ell is None:
+                continue
+            (cx, cy), (a, b) = ell[0], ell[1]
+            if not (-a <= cx <= W + a and -a <= cy <= H + a):
+                continue
+            band = band_px or max(3.0, 0.15 * b)
+            res = _refine(conic, xy[keep], theta[keep], band)
+            if res is None:
+                continue
+            c2, sel = res
+            e2 = ellipse_from_conic(c2)
+            if e2 is None or np.hypot(*(e2[0] - ell[0])) > band or abs(e2[1][0] - a) > band:
+                continue
+            perim = np.pi * (3 * (e2[1][0] + e2[1][1]) - np.sqrt((3 * e2[1][0] + e2[1][1]) * (e2[1][0] + 3 * e2[1][1])))
+            if len(sel) < min_support * perim or len(sel) < min_points:
+                continue
+            rms = float(np.sqrt(np.mean(sampson_distance(c2, xy[keep][sel]) ** 2)))
+            out.append(Ellipse((float(e2[0][0]), float(e2[0][1])), (float(e2[1][0]), float(e2[1][1])),
+                               float(e2[2]), rms, len(sel), name))
+        return out
+    # -- no model: RANSAC on linked chains of the remaining points --
+    rest = np.zeros_like(mask)
+    rest[xy[keep, 1].astype(int), xy[keep, 0].astype(int)] = True
+    rng = np.random.default_rng(seed)
+    for chain in link(rest, max_gap=2, min_length=min_points):
+        p = chain.points[:, ::-1].astype(float)  # (row, col) -> (x, y)
+        res = _ransac(p, rng)
+        if res is None:
+            continue
+        c2, inl = res
+        e2 = ellipse_from_conic(c2)
+        if e2 is None or len(inl) < min_points or not (axes_range[0] <= e2[1][1] and e2[1][0] <= axes_range[1]):
+            continue
+        if e2[1][1] / e2[1][0] < 0.2:
+            continue
+        rms = float(np.sqrt(np.mean(sampson_distance(c2, p[inl]) ** 2)))
+        out.append(Ellipse((float(e2[0][0]), float(e2[0][1])), (float(e2[1][0]), float(e2[1][1])),
+                           float(e2[2]), rms, len(inl)))
+    return out

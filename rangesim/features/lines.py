@@ -1,0 +1,180 @@
+"""Straight line segments: Hough transform for lines, then segments along each line."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+from skimage.transform import hough_line, hough_line_peaks
+
+from rangesim.features.common import edge_points
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A straight segment in the image.
+
+    Attributes
+    ----------
+    start, end : (x, y) float, pixels (x = column, y = row)
+    length : float, pixels
+    length_mm : float or None
+        3D distance between the back-projected end points (nearest valid pixel of
+        ``scan.xyz``), mm; None without a scan.
+    n_points : int
+        Edge pixels supporting it.
+    residual : float
+        RMS distance of those pixels to the line, pixels.
+    """
+
+    start: tuple[float, float]
+    end: tuple[float, float]
+    length: float
+    length_mm: float | None
+    n_points: int
+    residual: float
+
+
+def back_project(scan: Any, xy: np.ndarray) -> np.ndarray:
+    """(N, 3) camera-frame points (mm) of image positions, from the nearest valid pixel of
+    ``scan.xyz``; NaN when the scan has no valid pixel."""
+    valid = np.asarray(scan.valid, bool) & np.isfinite(np.asarray(scan.xyz)).all(-1)
+    if not valid.any():
+        return np.full((len(xy), 3), np.nan)
+    _, (ri, ci) = ndimage.distance_transform_edt(~valid, return_indices=True)
+    H, W = valid.shape
+    r = np.clip(np.rint(xy[:, 1]).astype(int), 0, H - 1)
+    c = np.clip(np.rint(xy[:, 0]).astype(int), 0, W - 1)
+    return np.asarray(scan.xyz, float)[ri[r, c], ci[r, c]]
+
+
+def lines(
+    edge_map: Any,
+    scan: Any = None,
+    *,
+    min_length: float = 30.0,
+    max_gap: float = 3.0,
+    band_px: float = 1.5,
+    angle_tol_deg: float = 15.0,
+    threshold: int | None = None,
+    max_lines: int = 200,
+    keep: np.ndarray | None = None,
+) -> list[Segment]:
+    """Line segments of an edge map.
+
+    Steps: Hough transform of the edge pixels (``skimage.transform.hough_line``, 0.5 degree
+    steps), peaks (``hough_line_peaks``); for each line, strongest first, the unused edge
+    pixels within ``band_px`` of it whose edge direction is within ``angle_tol_deg`` of the
+    line's normal are split at gaps longer than ``max_gap`` pixels; runs at least
+    ``min_length`` long are refitted (total least squares) and become segments; their pixels
+    are used up.
+
+    Parameters
+    ----------
+    edge_map : EdgeMap or (H, W) bool
+    scan : RangeScan, optional
+        For the lengths in mm.
+    min_length : float, pixels
+    max_gap : float, pixels
+    band_px : float, pixels
+    angle_tol_deg : float, degrees
+    threshold : int, optional
+        Least Hough votes of a line (default ``min_length / 2``).
+    max_lines : int
+    keep : (H, W) bool, optional
+        Only these edge pixels are used.
+
+    Returns
+    -------
+    list of Segment, longest first.
+    """
+    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
+    if keep is not None:
+        mask = mask & keep
+    xy, theta = edge_points(edge_map, keep)
+    if len(xy) < 2:
+        return []
+    angles = np.deg2rad(np.arange(-90, 90, 0.5))
+    acc, ang, dist = hough_line(mask, angles)
+    _, pa, pd = hough_line_peaks(acc, ang, dist, min_distance=3, min_angle=3,
+                                 threshold=threshold or min_length / 2, num_peaks=max_lines)
+    used = np.zeros(len(xy), bool)
+    cos_tol = np.cos(np.deg2rad(angle_tol_deg))
+    out: list[tuple[np.ndarray, np.ndarray, int, float]] = []
+    for a, d in zip(pa, pd):
+        n = np.array([np.cos(a), np.sin(a)])  # skimage: d = x cos a + y sin a
+        off = xy @ n - d
+        aligned = np.abs(np.cos(theta - a)) >= cos_tol
+        idx = np.nonzero((np.abs(off) <= band_px) & aligned & ~used)[0]
+        if len(idx) < min_length / 2:
+            continue
+        t = xy[idx] @ np.array([-n[1], n[0]])
+        o = np.argsort(t)
+        idx, t = idx[o], t[o]
+        cuts = np.nonzero(np.diff(t) > max_gap)[0] + 1
+        for run in np.split(np.arange(len(idx)), cuts):
+            if len(run) < 2 or t[run[-1]] - t[run[0]] < min_length:
+                continue
+            p = xy[idx[run]]
+            m = p.mean(0)
+            _, _, vt = np.linalg.svd(p - m, full_matrices=False)
+            u = vt[0]
+            s = (p - m) @ u
+            res = (p - m) @ vt[1]
+            rms = float(np.sqrt(np.mean(res ** 2)))
+            if rms > band_px:
+                continue
+            out.append((m + s.min() * u, m + s.max() * u, len(run), rms))
+            used[idx[run]] = True
+    ends = np.array([[*a, *b] for a, b, _, _ in out]).reshape(-1, 4)
+    mm = None
+    if scan is not None and len(out):
+        P = back_project(scan, ends.reshape(-1, 2)).reshape(-1, 2, 3)
+        mm = np.linalg.norm(P[:, 1] - P[:, 0], axis=1)
+    segs = [
+        Segment((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), float(np.hypot(*(b - a))),
+                None if mm is None or not np.isfinite(mm[k]) else float(mm[k]), n, rms)
+        for k, (a, b, n, rms) in enumerate(out)
+    ]
+    segs.sort(key=lambda s: -s.length)
+    return segs
+
+
+def segment_pairs(segments: list[Segment]) -> tuple[np.ndarray, np.ndarray]:
+    """Minimum distance and angle between every pair of segments, vectorised.
+
+    Returns
+    -------
+    distance : (N, N) float, pixels
+        0 where two segments cross.
+    angle : (N, N) float, degrees in [0, 90]
+        Angle between the lines.
+    """
+    if not segments:
+        return np.zeros((0, 0)), np.zeros((0, 0))
+    A = np.array([s.start for s in segments], float)
+    B = np.array([s.end for s in segments], float)
+
+    def point_seg(P, a, b):  # P (N,2) against segments a,b (M,2) -> (N, M)
+        ab = b - a
+        L2 = np.maximum((ab ** 2).sum(1), 1e-12)
+        t = np.clip(((P[:, None] - a[None]) * ab[None]).sum(-1) / L2[None], 0, 1)
+        return np.linalg.norm(P[:, None] - (a[None] + t[..., None] * ab[None]), axis=-1)
+
+    d = np.minimum.reduce([point_seg(A, A, B), point_seg(B, A, B), point_seg(A, A, B).T, point_seg(B, A, B).T])
+
+    def cross(u, v):
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    r, s_ = B - A, B - A
+    den = cross(r[:, None], s_[None])
+    qp = A[None] - A[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = cross(qp, s_[None]) / den
+        u = cross(qp, r[:, None]) / den
+    crossing = (np.abs(den) > 1e-12) & (t >= 0) & (t <= 1) & (u >= 0) & (u <= 1)
+    d[crossing] = 0.0
+    ang = np.arctan2(r[:, 1], r[:, 0])
+    diff = np.abs(ang[:, None] - ang[None]) % np.pi
+    return d, np.rad2deg(np.minimum(diff, np.pi - diff))

@@ -1,0 +1,93 @@
+"""Relations between features (the paper's section 5): distances and angles, as a table."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from rangesim.features.lines import segment_pairs
+
+FIELDS = ("relation", "a", "b", "value", "unit")
+
+
+def _point_segment(p: np.ndarray, segs: list) -> np.ndarray:
+    """(N,) distance from a point to each segment, pixels."""
+    A = np.array([s.start for s in segs], float)
+    B = np.array([s.end for s in segs], float)
+    ab = B - A
+    t = np.clip(((p - A) * ab).sum(1) / np.maximum((ab ** 2).sum(1), 1e-12), 0, 1)
+    return np.linalg.norm(p - (A + t[:, None] * ab), axis=1)
+
+
+def relations(segments: list = (), circles: list = (), ellipses: list = (), arcs: list = (),
+              pairs: bool = True) -> list[dict]:
+    """Relations between features, one row per pair.
+
+    Rows (``relation``, ``a``, ``b`` as ``kind:index``, ``value``, ``unit``):
+    ``circle_segment_distance`` and ``ellipse_segment_distance`` (minimum distance from the
+    centre to the segment, px), ``circle_ellipse_distance``, ``circle_circle_distance``
+    (centre distances, px), ``segment_ellipse_angle`` (angle between the segment and the
+    ellipse's major axis, degrees in [0, 90]) and, with ``pairs``,
+    ``segment_segment_distance`` (px) and ``segment_segment_angle`` (degrees).
+    Arcs count as circles (``arc:i``).
+    """
+    rows: list[dict] = []
+    round_ = [("circle", i, c) for i, c in enumerate(circles)] + [("arc", i, a) for i, a in enumerate(arcs)]
+    segs = list(segments)
+    if segs:
+        for kind, i, c in round_:
+            for j, d in enumerate(_point_segment(np.array(c.center), segs)):
+                rows.append(dict(relation="circle_segment_distance", a=f"{kind}:{i}", b=f"segment:{j}", value=float(d), unit="px"))
+        for i, e in enumerate(ellipses):
+            for j, d in enumerate(_point_segment(np.array(e.center), segs)):
+                rows.append(dict(relation="ellipse_segment_distance", a=f"ellipse:{i}", b=f"segment:{j}", value=float(d), unit="px"))
+            for j, s in enumerate(segs):
+                sa = np.arctan2(s.end[1] - s.start[1], s.end[0] - s.start[0])
+                diff = abs(sa - e.orientation) % np.pi
+                rows.append(dict(relation="segment_ellipse_angle", a=f"segment:{j}", b=f"ellipse:{i}",
+                                 value=float(np.rad2deg(min(diff, np.pi - diff))), unit="deg"))
+        if pairs:
+            dist, ang = segment_pairs(segs)
+            iu, ju = np.triu_indices(len(segs), 1)
+            for i, j in zip(iu, ju):
+                rows.append(dict(relation="segment_segment_distance", a=f"segment:{i}", b=f"segment:{j}", value=float(dist[i, j]), unit="px"))
+                rows.append(dict(relation="segment_segment_angle", a=f"segment:{i}", b=f"segment:{j}", value=float(ang[i, j]), unit="deg"))
+    for kind, i, c in round_:
+        for k, e in enumerate(ellipses):
+            rows.append(dict(relation="circle_ellipse_distance", a=f"{kind}:{i}", b=f"ellipse:{k}",
+                             value=float(np.hypot(*(np.array(c.center) - e.center))), unit="px"))
+    for x in range(len(round_)):
+        for y in range(x + 1, len(round_)):
+            (k1, i1, c1), (k2, i2, c2) = round_[x], round_[y]
+            rows.append(dict(relation="circle_circle_distance", a=f"{k1}:{i1}", b=f"{k2}:{i2}",
+                             value=float(np.hypot(*(np.array(c1.center) - c2.center))), unit="px"))
+    return rows
+
+
+def relations_to_csv(rows: list[dict], path: str | Path | None = None) -> str:
+    """The table as CSV text (written to ``path`` when given, atomically)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=FIELDS, lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    text = buf.getvalue()
+    if path is not None:
+        from rangesim.io.atomic import atomic_path
+
+        with atomic_path(Path(path)) as tmp:
+            Path(tmp).write_text(text)
+    return text
+
+
+def relations_to_json(rows: list[dict], path: str | Path | None = None) -> str:
+    """The table as JSON text (a list of objects), written to ``path`` when given."""
+    text = json.dumps(rows, indent=1)
+    if path is not None:
+        from rangesim.io.atomic import atomic_path
+
+        with atomic_path(Path(path)) as tmp:
+            Path(tmp).write_text(text)
+    return text

@@ -1,0 +1,125 @@
+"""Hough features on the noise-free Green Piece: circles head-on, ellipses on the tilted view,
+plate edges as segments; relations, scores and the CLI."""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+import rangesim.edges  # noqa: F401
+import rangesim.evaluate  # noqa: F401
+import rangesim.features as F
+from rangesim.core.geometry import look_at
+from rangesim.evaluate.feature_scores import feature_scores
+
+QUIET = {"noise.sigma_px": 0, "noise.speckle_contrast": 0, "noise.quantization_px": 0}
+HOLES = ("hole_1_rim_top", "hole_2_rim_top", "hole_3_rim_top", "hole_4_rim_top")
+
+
+@pytest.fixture(scope="module")
+def green():
+    scene = rs.load_scene("scenes/green_piece.toml")
+    sensor = rs.load_sensor("white_scanner").with_params(QUIET)
+    out = {}
+    for view, pose in (("tilt", None), ("top", look_at((0, 0, 300), (0, 0, 0), up=(0, 1, 0)))):
+        scan = rs.scan(scene, sensor, seed=0, pose=pose)
+        out[view] = (scan, rs.edges.gradient(scan), rs.evaluate.ground_truth_features(scan, scene))
+    return scene, out
+
+
+def _nearest(found, center):
+    d = [np.hypot(*(np.asarray(f.center) - center)) for f in found]
+    return (min(d), found[int(np.argmin(d))]) if d else (np.inf, None)
+
+
+def test_holes_as_circles_head_on(green):
+    _, views = green
+    scan, edges, truth = views["top"]
+    found = F.circles(edges, radii=(5, 70))
+    for g in truth["circles"]:
+        if g.name in HOLES:
+            d, c = _nearest(found, g.center)
+            assert d <= 1.0, (g.name, d)
+            assert abs(c.radius - g.axes[0]) <= 1.5 and c.support >= 0.5
+
+
+def test_rims_as_ellipses_on_tilted_view(green):
+    scene, views = green
+    scan, edges, truth = views["tilt"]
+    found = F.ellipses(edges, scan, scene)
+    visible = [g for g in truth["circles"] if g.visible >= 0.5]
+    assert len(visible) >= 12
+    for g in visible:  # holes, threads and the dent rim
+        d, e = _nearest(found, g.center)
+        assert d <= 1.0, (g.name, d)
+        assert np.all(np.abs(np.asarray(e.axes) - g.axes) <= 1.5), (g.name, e.axes, g.axes)
+    scores = feature_scores({"ellipses": found}, truth, scan)
+    assert scores["round"]["recall"] == 1.0
+    assert scores["round"]["center_error_px"]["max"] <= 1.0
+
+
+def test_ellipses_without_model_on_a_crop(green):
+    _, views = green
+    scan, edges, truth = views["tilt"]
+    g = next(c for c in truth["circles"] if c.name == "dent_rim")
+    x0, y0 = (np.asarray(g.center) - 60).astype(int)
+    crop = edges.mask[y0:y0 + 121, x0:x0 + 121]
+    found = F.ellipses(crop, remove_explained=False)
+    d, _ = _nearest(found, np.asarray(g.center) - (x0, y0))
+    assert d <= 1.0
+
+
+def test_plate_edges_as_segments(green):
+    _, views = green
+    for view in ("tilt", "top"):
+        scan, edges, truth = views[view]
+        segs = F.lines(edges, scan)
+        long_edges = [t for t in truth["segments"] if t.name.startswith("plate_edge") and t.visible >= 0.9
+                      and np.hypot(*(t.xyxy[2:] - t.xyxy[:2])) > 100]
+        assert long_edges
+        for t in long_edges:
+            a, b = t.xyxy[:2], t.xyxy[2:]
+            u = (b - a) / np.linalg.norm(b - a)
+            n = np.array([-u[1], u[0]])
+            best = 0.0
+            for s in segs:
+                p = np.array([s.start, s.end])
+                if np.all(np.abs((p - a) @ n) <= 2.0):
+                    best = max(best, abs(np.diff((p - a) @ u)[0]) / np.linalg.norm(b - a))
+            assert best >= 0.8, (view, t.name, best)
+        assert all(s.length_mm is not None and s.length_mm > 0 for s in segs)
+
+
+def test_relations_table_and_pairs(green, tmp_path):
+    _, views = green
+    scan, edges, _ = views["top"]
+    segs = F.lines(edges, scan)[:4]
+    circ = F.circles(edges, radii=(5, 70))[:3]
+    dist, ang = F.segment_pairs(segs)
+    assert dist.shape == (4, 4) and np.allclose(dist, dist.T) and np.all(ang <= 90)
+    rows = F.relations(segs, circ, [])
+    kinds = {r["relation"] for r in rows}
+    assert {"circle_segment_distance", "circle_circle_distance", "segment_segment_angle"} <= kinds
+    F.relations_to_csv(rows, tmp_path / "r.csv")
+    assert len(list(csv.DictReader(open(tmp_path / "r.csv")))) == len(rows)
+    assert json.loads(F.relations_to_json(rows)) == rows
+
+
+def test_cli_writes_outputs(green, tmp_path):
+    from rangesim.cli.feature_commands import register
+
+    _, views = green
+    views["tilt"][0].save(tmp_path / "s.npz")
+    p = argparse.ArgumentParser()
+    register(p.add_subparsers())
+    args = p.parse_args(["features", str(tmp_path / "s.npz"), "--out", str(tmp_path / "o"),
+                         "--scene", "scenes/green_piece.toml"])
+    assert args.func(args) == 0
+    for name in ("features.json", "relations.csv", "features.png"):
+        assert (tmp_path / "o" / name).is_file()
+    report = json.loads((tmp_path / "o" / "features.json").read_text())
+    assert report["scores"]["round"]["recall"] == 1.0
