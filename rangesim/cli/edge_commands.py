@@ -14,8 +14,7 @@ from rangesim.io.atomic import atomic_path
 
 def cmd_detect(args: argparse.Namespace) -> int:
     from rangesim.edges import DETECTORS, EdgeMap
-    from rangesim.evaluate.runs import run_detectors, scan_truth
-    from rangesim.io import load_scan
+    from rangesim.evaluate.runs import load_scan_with_labels, run_detectors, scan_truth
     from rangesim.viz.edge_overlay import save_edge_overlay
 
     methods = list(DETECTORS) if args.method == "all" else [args.method]
@@ -23,15 +22,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
     path = Path(args.scan)
-    options = {"conf": args.conf} if args.conf else {}
-    segment_labels = None
-    if path.suffix.lower() == ".pcd":
-        from rangesim.recorded import read_pcd
-
-        scan, extras = read_pcd(path, **options)
-        segment_labels = extras.get("label")
-    else:
-        scan = load_scan(path, **options)
+    scan, segment_labels = load_scan_with_labels(path, args.conf)
     truth = scan_truth(scan, args.scene, segment_labels, crease_deg=args.crease_deg)
     results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
 

@@ -35,6 +35,26 @@ class EdgeTruth:
         return self.labels != EdgeLabel.NONE
 
 
+def load_scan_with_labels(path, conf=None):
+    """A scan file and its per-pixel segment labels if the format has them (PCD ``label``).
+
+    Returns
+    -------
+    scan : RangeScan
+    labels : (H, W) int array or None
+    """
+    from rangesim.io import load_scan
+
+    path = Path(path)
+    options = {"conf": conf} if conf else {}
+    if path.suffix.lower() == ".pcd":
+        from rangesim.recorded import read_pcd
+
+        scan, extras = read_pcd(path, **options)
+        return scan, extras.get("label")
+    return load_scan(path, **options), None
+
+
 def scan_truth(scan, scene: Any = None, segment_labels: np.ndarray | None = None,
                crease_deg: float = 20.0) -> EdgeTruth | None:
     """The best ground truth available for ``scan``, or None.

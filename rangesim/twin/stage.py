@@ -1,0 +1,366 @@
+"""The simulated twin of a recorded moving-head scan (Cyberware 3030 style).
+
+The recorded grid is in the scanner frame: columns are head positions along x (the sweep),
+rows are samples along the stripe (y), z is the range axis. Twin cell (i, j) looks along
+the cell's *sample line*: the line on which the recording puts that cell's sample,
+fitted from the recorded points as
+
+    x = a0 + a1 j + a2 (i mod 2) + a3 z        (interlaced rows shift by a2)
+    y = b0 + b1 i + (b2 + b3 i) z               (rows fan out slightly with range)
+
+i.e. an (almost) orthographic ray along the range axis. One ``ray_intersect`` finds the
+first mesh hit of every cell from the scanner's side (+z or -z, whichever side puts the
+recorded points nearest to the hits). A hit is measured when
+
+* the laser reaches it: one ``ray_test`` towards the laser direction, in the sheet (y-z
+  plane), tilted by ``alpha_deg`` from the range axis (else status SHADOW);
+* the camera sees it: one ``ray_test`` towards the camera direction, in the x-z plane,
+  ``theta_deg`` from the range axis, either sign (else status SHADOW);
+* the return is strong enough: the cosines of incidence of laser and camera both exceed
+  ``min_cos`` (else status DROPOUT, a grazing dropout).
+
+Measured depths get Gaussian noise of std ``sigma_mm`` along the range axis.
+
+:class:`TwinStage` holds the geometry that does not depend on those parameters (the mesh
+in the scanner frame, the Mitsuba scene, the primary hits) so a calibration can try many
+parameter sets at the cost of one ``ray_test`` per angle.
+"""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rangesim.core.constants import Status
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import RangeScan
+
+__all__ = ["TwinStage", "twin", "DEFAULT_PARAMS", "load_mesh_mm"]
+
+#: parameters of the twin when neither the caller nor the sensor sets them
+DEFAULT_PARAMS: dict[str, float] = {"theta_deg": 20.0, "alpha_deg": 0.0, "sigma_mm": 0.1, "min_cos": 0.1}
+
+
+def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray | None = None):
+    """A trimesh (copy) in millimetres from a trimesh or a mesh file.
+
+    ``scale="auto"``: a mesh whose bounding box is under 5 units across while the
+    ``reference`` points span more than 5 mm is taken to be in metres (x 1000).
+    """
+    import trimesh
+
+    if isinstance(mesh, (str, Path)):
+        path = Path(mesh)
+        if not path.is_file():
+            raise RangesimError("mesh file not found", source=path)
+        try:
+            loaded = trimesh.load(path, force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many kinds
+            raise RangesimError(f"cannot read mesh ({exc})", source=path) from exc
+        mesh = loaded
+    if not hasattr(mesh, "vertices") or not hasattr(mesh, "faces") or len(mesh.faces) == 0:
+        raise RangesimError("the mesh has no triangles")
+    mesh = mesh.copy()
+    if scale == "auto":
+        extent = float(np.ptp(mesh.vertices, axis=0).max())
+        ref = 0.0 if reference is None or len(reference) == 0 else float(np.ptp(reference, axis=0).max())
+        scale = 1000.0 if extent < 5.0 and ref > 5.0 else 1.0
+    mesh.apply_scale(float(scale))
+    return mesh
+
+
+def _sensor_defaults(sensor: Any) -> dict[str, float]:
+    """Twin parameters a sensor preset suggests (camera tilt -> theta)."""
+    params = dict(DEFAULT_PARAMS)
+    if sensor is None:
+        return params
+    if isinstance(sensor, str):
+        from rangesim.sensor import load_sensor
+
+        sensor = load_sensor(sensor)
+    p = getattr(sensor, "params", {}) or {}
+    tilt = p.get("laser", {}).get("tilt_deg")
+    if tilt is not None:
+        params["theta_deg"] = float(tilt)
+    min_signal = p.get("noise", {}).get("min_signal")
+    if min_signal is not None:
+        params["min_cos"] = float(min_signal)
+    return params
+
+
+def _sensor_name(sensor: Any) -> str | None:
+    if sensor is None:
+        return None
+    return sensor if isinstance(sensor, str) else getattr(sensor, "name", str(sensor))
+
+
+@dataclass
+class GridModel:
+    """The sample line of every cell (see the module docstring); coefficients a, b."""
+
+    a: np.ndarray  # (4,)
+    b: np.ndarray  # (4,)
+    z_ref: float
+
+    def line(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point at z = z_ref, direction with z component 1), each (N, 3) float64."""
+        i, j = rows.astype(np.float64), cols.astype(np.float64)
+        a, b, z = self.a, self.b, self.z_ref
+        x = a[0] + a[1] * j + a[2] * (i % 2) + a[3] * z
+        slope_y = b[2] + b[3] * i
+        y = b[0] + b[1] * i + slope_y * z
+        origin = np.stack([x, y, np.full_like(x, z)], axis=1)
+        direction = np.stack([np.full_like(x, a[3]), slope_y, np.ones_like(x)], axis=1)
+        return origin, direction
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"a": self.a.tolist(), "b": self.b.tolist(), "z_ref": self.z_ref}
+
+
+def fit_grid(scan: RangeScan) -> GridModel:
+    """Fit the sample lines of a recorded organized scan from its valid points."""
+    valid = scan.valid & np.isfinite(scan.xyz).all(axis=2)
+    if np.count_nonzero(valid) < 10:
+        raise RangesimError("the recorded scan has fewer than 10 valid points: cannot fit its grid")
+    i, j = np.nonzero(valid)
+    p = scan.xyz[valid].astype(np.float64)
+    z_ref = float(np.median(p[:, 2]))
+    z = p[:, 2] - z_ref
+    fi, fj = i.astype(np.float64), j.astype(np.float64)
+    one = np.ones_like(fi)
+    # the range terms only where the points spread in range (else they are not determined)
+    use_z = np.std(z) > 2.0
+    zc = z if use_z else np.zeros_like(z)
+    ax, *_ = np.linalg.lstsq(np.c_[one, fj, fi % 2, zc], p[:, 0], rcond=None)
+    by, *_ = np.linalg.lstsq(np.c_[one, fi, zc, fi * zc], p[:, 1], rcond=None)
+    # coefficients were fitted around z_ref: express the lines through z = z_ref
+    a = np.array([ax[0] - ax[3] * z_ref, ax[1], ax[2], ax[3]])
+    b = np.array([by[0] - by[2] * z_ref, by[1] - by[3] * z_ref, by[2], by[3]])
+    if abs(a[1]) < 1e-9 or abs(b[1]) < 1e-9:
+        raise RangesimError("the recorded grid does not step in x along rows and in y down columns")
+    return GridModel(a, b, z_ref)
+
+
+def _mi_vec(mi, arr: np.ndarray, kind: str = "Vector3f"):
+    arr = np.asarray(arr, dtype=np.float32)
+    return getattr(mi, kind)(mi.Float(np.ascontiguousarray(arr[:, 0])), mi.Float(np.ascontiguousarray(arr[:, 1])),
+                             mi.Float(np.ascontiguousarray(arr[:, 2])))
+
+
+class TwinStage:
+    """The mesh in the recorded scan's frame and the primary hits of its grid.
+
+    Parameters
+    ----------
+    recorded : RangeScan
+        An organized recorded scan (scanner frame, mm) with ``pose`` scanner-to-world.
+    mesh : trimesh.Trimesh or path
+        The object, world frame (metres are detected and converted, see :func:`load_mesh_mm`).
+    sensor : str or Sensor, optional
+        Sensor preset whose name goes into ``meta`` and whose tilt / min_signal give
+        default angles.
+    side : {+1, -1, None}
+        The scanner's side along z (+1: the scanner sits at +z looking towards -z); None
+        picks the side whose hits lie nearest the recorded points.
+    """
+
+    def __init__(self, recorded: RangeScan, mesh: Any, sensor: Any = None, *, side: int | None = None,
+                 mesh_scale: float | str = "auto") -> None:
+        from rangesim.core.backend import mitsuba
+        from rangesim.scene.mitsuba_scene import numpy_to_mitsuba_mesh
+
+        self.recorded = recorded
+        self.sensor = sensor
+        self.defaults = _sensor_defaults(sensor)
+        h, w = recorded.shape
+        self.shape = (h, w)
+        pose = np.asarray(recorded.pose, dtype=np.float64)
+        world_ref = recorded.points("world") if recorded.valid.any() else None
+        mesh = load_mesh_mm(mesh, mesh_scale, world_ref)
+        # world -> scanner frame: p = R^T (p_world - t)
+        verts = (np.asarray(mesh.vertices, dtype=np.float64) - pose[:3, 3]) @ pose[:3, :3]
+        self.vertices, self.faces = verts, np.asarray(mesh.faces, dtype=np.int64)
+        self.grid = fit_grid(recorded)
+
+        self.mi = mi = mitsuba()
+        shape = numpy_to_mitsuba_mesh("twin_mesh", verts, self.faces)
+        self.scene = mi.load_dict({"type": "scene", "mesh": shape})
+
+        rows, cols = np.indices((h, w)).reshape(2, -1)
+        origin, direction = self.grid.line(rows, cols)
+        lo, hi = verts.min(axis=0), verts.max(axis=0)
+        self.reach = float(np.linalg.norm(hi - lo) + abs(self.grid.z_ref) + 1000.0)
+        sides = (side,) if side is not None else (1, -1)
+        best = None
+        for s in sides:
+            hits = self._cast(origin, direction, s)
+            score = self._side_score(hits)
+            if best is None or score < best[0]:
+                best = (score, s, hits)
+        _, self.side, (self.hit, self.point, self.normal) = best
+        self.direction = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+        self.hit_index = np.flatnonzero(self.hit)
+        pts = self.point[self.hit_index]
+        nrm = self.normal[self.hit_index]
+        self._mi_points = _mi_vec(mi, pts, "Point3f")
+        self._mi_normals = _mi_vec(mi, nrm)
+        self._cache: dict[tuple[str, float], tuple[np.ndarray, np.ndarray]] = {}
+
+    # -- geometry ------------------------------------------------------------------------
+    def _cast(self, origin: np.ndarray, direction: np.ndarray, side: int):
+        """First hits along every sample line, travelling towards -side * z."""
+        import drjit as dr
+
+        mi = self.mi
+        d = -side * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+        # start on the scanner's side, far outside the mesh
+        start = origin - d * (self.reach / np.abs(d[:, 2:3]))
+        ray = mi.Ray3f(_mi_vec(mi, start, "Point3f"), _mi_vec(mi, d))
+        ray.maxt = 4.0 * self.reach / float(np.abs(d[:, 2]).min())
+        si = self.scene.ray_intersect(ray)
+        valid = si.is_valid()
+        dr.eval(si.p, si.n, valid)
+        hit = np.array(valid, dtype=bool)
+        point = np.array(si.p, dtype=np.float64).reshape(3, -1).T if dr.width(si.p) else np.zeros((0, 3))
+        normal = np.array(si.n, dtype=np.float64).reshape(3, -1).T
+        point[~hit] = np.nan
+        normal[~hit] = np.nan
+        # normals facing the scanner (against the ray)
+        flip = np.sum(normal * d, axis=1) > 0
+        normal[flip] *= -1
+        return hit, point, normal
+
+    def _side_score(self, hits) -> float:
+        hit, point, _ = hits
+        rec = self.recorded.valid.reshape(-1) & hit
+        if not rec.any():
+            return math.inf
+        dz = self.recorded.xyz.reshape(-1, 3)[rec, 2] - point[rec, 2]
+        return float(np.median(np.abs(dz)))
+
+    def laser_direction(self, alpha_deg: float) -> np.ndarray:
+        """Unit vector from a surface point towards the laser (y-z plane)."""
+        a = math.radians(alpha_deg)
+        return np.array([0.0, math.sin(a), self.side * math.cos(a)])
+
+    def camera_direction(self, theta_deg: float) -> np.ndarray:
+        """Unit vector from a surface point towards the camera (x-z plane)."""
+        t = math.radians(theta_deg)
+        return np.array([math.sin(t), 0.0, self.side * math.cos(t)])
+
+    def _reach(self, kind: str, angle: float) -> tuple[np.ndarray, np.ndarray]:
+        """(unblocked, cos of incidence) over the hit cells, towards the laser or camera."""
+        key = (kind, round(float(angle), 6))
+        if key not in self._cache:
+            import drjit as dr
+
+            from rangesim.sensor.shadows import occluded
+
+            mi = self.mi
+            u = self.laser_direction(angle) if kind == "laser" else self.camera_direction(angle)
+            cos = self.normal[self.hit_index] @ u
+            facing = cos > 0
+            if self.hit_index.size:
+                source = self._mi_points + mi.Vector3f(*(u * 2.0 * self.reach).tolist())
+                blocked = occluded(
+                    SimpleNamespace(scene=self.scene), self._mi_points, self._mi_normals, source,
+                    mi.Bool(facing),
+                )
+                dr.eval(blocked)
+                blocked = np.array(blocked, dtype=bool)
+            else:
+                blocked = np.zeros(0, dtype=bool)
+            self._cache[key] = (facing & ~blocked, cos)
+        return self._cache[key]
+
+    def status_codes(self, theta_deg: float, alpha_deg: float, min_cos: float) -> np.ndarray:
+        """(H * W,) uint8 status of every cell under the given geometry."""
+        status = np.full(self.hit.size, np.uint8(Status.MISS))
+        lit, cos_l = self._reach("laser", alpha_deg)
+        seen, cos_c = self._reach("camera", theta_deg)
+        code = np.full(self.hit_index.size, np.uint8(Status.VALID))
+        code[(cos_l < min_cos) | (cos_c < min_cos)] = Status.DROPOUT
+        code[~lit | ~seen] = Status.SHADOW
+        status[self.hit_index] = code
+        return status
+
+    def valid_hit_mask(self, theta_deg: float, alpha_deg: float, min_cos: float) -> np.ndarray:
+        """Validity over the hit cells only (for fast IoU during calibration)."""
+        lit, cos_l = self._reach("laser", alpha_deg)
+        seen, cos_c = self._reach("camera", theta_deg)
+        return lit & seen & (cos_l >= min_cos) & (cos_c >= min_cos)
+
+    # -- the twin ------------------------------------------------------------------------
+    def params(self, **given: float | None) -> dict[str, float]:
+        out = dict(self.defaults)
+        out.update({k: float(v) for k, v in given.items() if v is not None})
+        return out
+
+    def scan(self, *, theta_deg: float | None = None, alpha_deg: float | None = None,
+             sigma_mm: float | None = None, min_cos: float | None = None, seed: int = 0) -> RangeScan:
+        """The twin RangeScan under the given parameters (defaults: the sensor's)."""
+        p = self.params(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos)
+        h, w = self.shape
+        status = self.status_codes(p["theta_deg"], p["alpha_deg"], p["min_cos"])
+        valid = status == Status.VALID
+        rng = np.random.default_rng(seed)
+        noise = rng.normal(0.0, p["sigma_mm"], size=status.size) if p["sigma_mm"] > 0 else np.zeros(status.size)
+        # move along the sample line so the measured point stays on it (dz = noise)
+        line_dir = self.direction / self.direction[:, 2:3]
+        xyz = self.point + noise[:, None] * line_dir
+        xyz[~valid] = np.nan
+        normal = self.normal.copy()
+        intensity = np.zeros(status.size, dtype=np.float32)
+        lit, cos_l = self._reach("laser", p["alpha_deg"])
+        intensity[self.hit_index] = np.clip(cos_l, 0.0, 1.0)
+        face = np.full(status.size, -1, dtype=np.int32)
+        part = np.where(self.hit, 0, -1).astype(np.int32)
+        counts = {
+            "laser_blocked": int(np.count_nonzero(~lit)),
+            "camera_blocked": int(np.count_nonzero(~self._reach("camera", p["theta_deg"])[0])),
+        }
+        meta = {
+            "units": "mm", "frame": self.recorded.meta.get("frame", "scanner"), "organized": True,
+            "twin": {
+                "model": "moving_head_orthographic", **p, "seed": int(seed), "side": int(self.side),
+                "grid": self.grid.as_dict(), "source": self.recorded.meta.get("source"), **counts,
+            },
+            "sensor": {"name": _sensor_name(self.sensor) or "twin"},
+            "seed": int(seed),
+        }
+        return RangeScan(
+            depth=xyz[:, 2].reshape(h, w), xyz=xyz.reshape(h, w, 3), valid=valid.reshape(h, w),
+            normal=normal.reshape(h, w, 3), intensity=intensity.reshape(h, w), part=part.reshape(h, w),
+            face=face.reshape(h, w), status=status.reshape(h, w), pose=self.recorded.pose.copy(), meta=meta,
+            xyz_true=self.point.reshape(h, w, 3),
+        )
+
+
+def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: float | None = None,
+         alpha_deg: float | None = None, sigma_mm: float | None = None, min_cos: float | None = None,
+         seed: int = 0, stage: TwinStage | None = None) -> RangeScan:
+    """Scan ``mesh`` from the recorded scan's viewpoint on the same grid (see module docs).
+
+    Parameters
+    ----------
+    recorded_scan : RangeScan
+        Organized recorded scan, scanner frame, ``pose`` scanner-to-world.
+    mesh : trimesh.Trimesh or path
+        World (mesh) frame.
+    sensor : str or Sensor, optional
+        Preset for default angles and ``meta``.
+    theta_deg, alpha_deg, sigma_mm, min_cos : float, optional
+        Camera angle (x-z plane, signed), laser angle (y-z plane), depth noise std (mm) and
+        the grazing-dropout cosine threshold.
+    seed : int
+        Noise seed.
+    stage : TwinStage, optional
+        A prepared stage (reuses the ray casts).
+    """
+    if stage is None:
+        stage = TwinStage(recorded_scan, mesh, sensor)
+    return stage.scan(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos, seed=seed)

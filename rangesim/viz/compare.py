@@ -1,0 +1,108 @@
+"""One side-by-side picture of a recorded scan and its simulated twin."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import RangeScan
+from rangesim.io.atomic import atomic_path
+
+__all__ = ["save_comparison", "mask_disagreement_rgb"]
+
+#: colours of the valid-mask comparison
+BOTH, RECORDED_ONLY, TWIN_ONLY, NEITHER = (0.75, 0.75, 0.75), (0.85, 0.15, 0.1), (0.1, 0.35, 0.9), (1.0, 1.0, 1.0)
+
+
+def mask_disagreement_rgb(recorded: RangeScan, twin: RangeScan) -> np.ndarray:
+    """(H, W, 3): grey where both are valid, red recorded only, blue twin only, white neither."""
+    rgb = np.empty(recorded.shape + (3,))
+    r, t = recorded.valid, twin.valid
+    rgb[r & t], rgb[r & ~t], rgb[~r & t], rgb[~r & ~t] = BOTH, RECORDED_ONLY, TWIN_ONLY, NEITHER
+    return rgb
+
+
+def _edges_rgb(scan: RangeScan, mask: np.ndarray) -> np.ndarray:
+    from rangesim.viz.preview import depth_rgb
+
+    rgb = depth_rgb(_shaded_alike(scan)) * 0.45
+    rgb[mask] = (1.0, 1.0, 0.2)
+    return rgb
+
+
+def save_comparison(recorded: RangeScan, twin: RangeScan, metrics: dict[str, Any], path: str | Path, *,
+                    detector: str = "gradient", edge_maps: dict | None = None, dpi: int = 110) -> Path:
+    """Write a PNG: recorded vs twin depth, valid masks with the disagreement coloured,
+    residual histograms, and one detector's edges on both.
+
+    ``edge_maps`` ({name: (recorded_map, twin_map)}) avoids running ``detector`` again.
+    """
+    from rangesim.edges import DETECTORS
+    from rangesim.viz.preview import depth_limits, depth_rgb
+
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise RangesimError("picture must be a .png file", source=path)
+    if edge_maps and detector in edge_maps:
+        rec_map, twin_map = edge_maps[detector]
+    else:
+        rec_map, twin_map = DETECTORS[detector](recorded), DETECTORS[detector](twin)
+    limits = depth_limits(recorded) if recorded.valid.any() else None
+
+    fig = Figure(figsize=(15, 9.5))
+    axes = fig.subplots(2, 3)
+    panels = [
+        (axes[0, 0], depth_rgb(_shaded_alike(recorded), limits=limits), "recorded depth"),
+        (axes[0, 1], depth_rgb(_shaded_alike(twin), limits=limits), "twin depth"),
+        (axes[0, 2], mask_disagreement_rgb(recorded, twin), f"valid masks (IoU {metrics.get('iou', float('nan')):.3f})"),
+        (axes[1, 0], _edges_rgb(recorded, rec_map.mask), f"{detector} edges: recorded"),
+        (axes[1, 1], _edges_rgb(twin, twin_map.mask), f"{detector} edges: twin"
+         f" (F1 {metrics.get('edges', {}).get(detector, {}).get('f1', float('nan')):.3f})"),
+    ]
+    for ax, rgb, title in panels:
+        ax.imshow(np.clip(rgb, 0, 1), interpolation="nearest")
+        ax.set_title(title, fontsize=10)
+        ax.set_xticks([]), ax.set_yticks([])
+    axes[0, 2].legend(handles=[Patch(color=BOTH, label="both valid"), Patch(color=RECORDED_ONLY, label="recorded only"),
+                               Patch(color=TWIN_ONLY, label="twin only")], loc="lower right", fontsize=8)
+
+    ax = axes[1, 2]
+    truth = twin.xyz_true
+    if truth is not None:
+        from rangesim.twin.calibrate import range_residuals
+
+        rec_res, twin_res = range_residuals(recorded, truth), range_residuals(twin, truth)
+        both = np.concatenate([rec_res, twin_res])
+        span = float(np.percentile(np.abs(both), 99)) if both.size else 1.0
+        bins = np.linspace(-span, span, 81)
+        ax.hist(np.clip(rec_res, -span, span), bins=bins, histtype="step", color=RECORDED_ONLY, label="recorded")
+        ax.hist(np.clip(twin_res, -span, span), bins=bins, histtype="step", color=TWIN_ONLY, label="twin")
+        ax.legend(fontsize=8)
+    ratio = metrics.get("noise_std_ratio", float("nan"))
+    ax.set_title(f"residuals to the mesh along z (std ratio {ratio:.2f})", fontsize=10)
+    ax.set_xlabel("mm")
+    p = metrics.get("params", {})
+    source = recorded.meta.get("source", "recorded")
+    name = source.get("file", "recorded") if isinstance(source, dict) else Path(str(source)).name
+    fig.suptitle(
+        f"{name} vs twin: theta {p.get('theta_deg', float('nan')):.1f} deg,"
+        f" alpha {p.get('alpha_deg', float('nan')):.1f} deg, sigma {p.get('sigma_mm', float('nan')):.3f} mm,"
+        f" hole recall {metrics.get('hole_recall', float('nan')):.2f}", fontsize=12)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        FigureCanvasAgg(fig).print_png(str(tmp))
+    return path
+
+
+def _shaded_alike(scan):
+    """The scan with its normals dropped, so recorded and twin are both shaded from depth
+    (the twin's exact normals and the recording's estimated ones look different)."""
+    from dataclasses import replace
+
+    return replace(scan, normal=np.full(scan.normal.shape, np.nan, dtype=np.float32))

@@ -1,0 +1,147 @@
+"""The simulated twin of a recorded scan: calibration, comparison metrics, picture and CLI."""
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from rangesim.core.constants import Status
+from rangesim.core.rangescan import RangeScan
+from rangesim.twin import TwinStage, twin
+from rangesim.twin.calibrate import calibrate
+from rangesim.twin.compare import compare
+
+METRIC_KEYS = {"iou", "hole_recall", "residuals", "noise_std_ratio", "edges", "params", "calibration"}
+
+
+def _bunny(data_dir, name):
+    import rangesim as rs
+
+    root = data_dir / "stanford-bunny"
+    scan = rs.load_scan(root / f"{name}.ply", conf=root / "bun.conf")
+    return scan, root / "reconstruction" / "bun_zipper.ply"
+
+
+_FIT_CACHE: dict = {}
+
+
+@pytest.fixture
+def bun000_fit(data_dir):
+    """bun000, the mesh and its calibration, computed once per session (about 2 s)."""
+    if "bun000" not in _FIT_CACHE:
+        scan, mesh = _bunny(data_dir, "bun000")
+        _FIT_CACHE["bun000"] = (scan, mesh, calibrate(scan, mesh, "cyberware_3030"))
+    return _FIT_CACHE["bun000"]
+
+
+# -- synthetic: a box on a plane, orthographic grid ------------------------------------------
+def _box_on_plane():
+    plane = trimesh.Trimesh(np.array([[-60, -60, 0], [60, -60, 0], [60, 60, 0], [-60, 60, 0]], float),
+                            np.array([[0, 1, 2], [0, 2, 3]]), process=False)
+    box = trimesh.creation.box(extents=(30.0, 30.0, 25.0))
+    box.apply_translation((0.0, 0.0, 12.5))
+    return trimesh.util.concatenate([plane, box])
+
+
+def _grid_scan(h=120, w=140, dx=0.5, dy=0.7):
+    """A 'recorded' orthographic grid, every cell valid at z = 0 (a template for the twin)."""
+    i, j = np.indices((h, w))
+    xyz = np.stack([-35 + dx * j, -42 + dy * i, np.where((i + j) % 7 == 0, 3.0, 0.0)], axis=-1).astype(np.float32)
+    n = np.full((h, w, 3), np.nan, np.float32)
+    return RangeScan(depth=xyz[..., 2], xyz=xyz, valid=np.ones((h, w), bool), normal=n,
+                     intensity=np.zeros((h, w)), part=np.zeros((h, w)), face=np.zeros((h, w)),
+                     status=np.zeros((h, w)), meta={"frame": "scanner"})
+
+
+@pytest.mark.parametrize("theta", [-25.0, 20.0])
+def test_calibrate_recovers_theta_on_a_box(theta):
+    mesh = _box_on_plane()
+    template = _grid_scan()
+    truth = twin(template, mesh, theta_deg=theta, alpha_deg=10.0, sigma_mm=0.05, min_cos=0.05, seed=1)
+    assert truth.count(Status.SHADOW) > 200  # the box casts shadows
+    assert truth.valid.sum() > 0.5 * truth.valid.size
+    fit = calibrate(truth, mesh, params=("theta_deg", "alpha_deg", "sigma_mm"))
+    assert np.sign(fit["theta_deg"]) == np.sign(theta)
+    assert abs(fit["theta_deg"] - theta) <= 5.0
+    assert abs(fit["alpha_deg"] - 10.0) <= 5.0
+    assert fit["iou"] > 0.97
+    assert 0.8 <= fit["sigma_mm"] / 0.05 <= 1.25
+
+
+def test_twin_of_box_is_on_the_grid():
+    mesh = _box_on_plane()
+    template = _grid_scan()
+    scan = twin(template, mesh, theta_deg=15.0, alpha_deg=0.0, sigma_mm=0.0, min_cos=0.0)
+    assert scan.shape == template.shape
+    top = scan.valid & (np.abs(scan.xyz[..., 0]) < 10) & (np.abs(scan.xyz[..., 1]) < 10)
+    assert top.any() and np.allclose(scan.depth[top], 25.0, atol=1e-3)
+    floor = scan.valid & (np.abs(scan.xyz[..., 0]) > 25)
+    assert np.allclose(scan.depth[floor], 0.0, atol=1e-3)
+    assert scan.meta["twin"]["theta_deg"] == 15.0
+
+
+# -- recorded bunny ---------------------------------------------------------------------------
+def test_bun000_calibrated_iou(bun000_fit):
+    scan, mesh, fit = bun000_fit
+    tw = twin(scan, mesh, stage=fit["stage"], **{k: fit[k] for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")})
+    iou = np.count_nonzero(tw.valid & scan.valid) / np.count_nonzero(tw.valid | scan.valid)
+    assert fit["iou"] >= 0.9 and iou >= 0.9
+    assert fit["side"] == 1
+
+
+def test_bun000_fitted_sigma_reproduces_noise(bun000_fit):
+    scan, mesh, fit = bun000_fit
+    from rangesim.twin.compare import compare_scans
+
+    tw = twin(scan, mesh, stage=fit["stage"], seed=3,
+              **{k: fit[k] for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")})
+    metrics = compare_scans(scan, tw, detectors=["gradient"])
+    assert 0.05 < fit["sigma_mm"] < 1.0
+    assert 0.8 <= metrics["noise_std_ratio"] <= 1.25
+
+
+def test_compare_returns_every_metric(data_dir):
+    from rangesim.edges import DETECTORS
+
+    scan, mesh = _bunny(data_dir, "bun045")
+    metrics = compare(scan, mesh, "cyberware_3030")
+    assert METRIC_KEYS <= set(metrics)
+    assert set(metrics["edges"]) == set(DETECTORS)
+    for res in metrics["residuals"].values():
+        assert {"median", "std", "p95_abs"} <= set(res)
+    assert metrics["iou"] >= 0.9
+    assert 0.8 <= metrics["noise_std_ratio"] <= 1.25
+    assert 0.0 <= metrics["hole_recall"] <= 1.0
+    json.dumps(metrics)
+
+
+def _cli(argv):
+    from rangesim.cli import compare_commands
+
+    parser = argparse.ArgumentParser()
+    compare_commands.register(parser.add_subparsers())
+    args = parser.parse_args(["compare", *map(str, argv)])
+    return args.func(args)
+
+
+def test_cli_writes_metrics_and_picture(data_dir, tmp_path):
+    root = data_dir / "stanford-bunny"
+    out = tmp_path / "cmp"
+    assert _cli([root / "bun000.ply", "--mesh", root / "reconstruction" / "bun_zipper.ply",
+                 "--conf", root / "bun.conf", "--sensor", "cyberware_3030", "--out", out]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["iou"] >= 0.9
+    png = (out / "compare.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_cli_without_mesh_on_mosd(data_dir, tmp_path):
+    pcd = data_dir / "mosd-kinect" / "test0.pcd"
+    out = tmp_path / "mosd"
+    assert _cli([pcd, "--sensor", "kinect", "--out", out]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["truth"] == "regions"
+    assert all("f1" in e for e in metrics["edges"].values())
