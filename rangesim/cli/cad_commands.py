@@ -3,36 +3,22 @@ from __future__ import annotations
 
 import argparse
 import json
-import tomllib
 from pathlib import Path
 
-from rangesim.cli.common import check_suffix, writing
-from rangesim.core.errors import RangesimError
+from rangesim.cli.common import build_model, check_suffix, writing
 from rangesim.io.atomic import atomic_path
 
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb")
 
 
 def cmd_model(args: argparse.Namespace) -> int:
-    from rangesim.cad.models import MODELS, model_names
 
     out = Path(args.out)
     check_suffix(out, MESH_SUFFIXES, "a mesh")
     tree_path = Path(args.tree) if args.tree else None
     if tree_path is not None:
         check_suffix(tree_path, (".json",), "a part tree")
-    if args.name not in MODELS:
-        raise RangesimError(f"unknown model; built-in models: {', '.join(model_names())}", source=args.name)
-    params = {}
-    for text in args.param:
-        key, sep, raw = text.partition("=")
-        if not sep:
-            raise RangesimError(f"--param expects KEY=VALUE, got {text!r}")
-        try:
-            params[key.strip()] = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError as exc:
-            raise RangesimError(f"--param {key}: not a TOML value: {raw!r}") from exc
-    part = MODELS[args.name](**params)
+    part = build_model(args.name, args.param)
     data = part.mesh.export(file_type=out.suffix.lower().lstrip("."))  # bytes (or str for OBJ)
     with writing(out), atomic_path(out) as tmp:
         Path(tmp).write_bytes(data if isinstance(data, bytes) else data.encode())

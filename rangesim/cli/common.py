@@ -35,3 +35,23 @@ def writing(path: Path, tmp: Path | None = None) -> Iterator[None]:
         relabelled = RangesimError(str(exc).replace(str(tmp), str(path)))
         relabelled.source = str(path)
         raise relabelled from exc
+
+
+def build_model(name: str, param_texts: Sequence[str]):
+    """A built-in CAD model from its name and ``--param KEY=VALUE`` texts (TOML values)."""
+    import tomllib
+
+    from rangesim.cad.models import MODELS, model_names
+
+    if name not in MODELS:
+        raise RangesimError(f"unknown model; built-in models: {', '.join(model_names())}", source=name)
+    params = {}
+    for text in param_texts:
+        key, sep, raw = text.partition("=")
+        if not sep:
+            raise RangesimError(f"--param expects KEY=VALUE, got {text!r}")
+        try:
+            params[key.strip()] = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError as exc:
+            raise RangesimError(f"--param {key}: not a TOML value: {raw!r}") from exc
+    return MODELS[name](**params)

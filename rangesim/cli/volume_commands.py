@@ -3,16 +3,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import tomllib
 from pathlib import Path
 
-from rangesim.cli.common import check_suffix, writing
-from rangesim.core.errors import RangesimError
+from rangesim.cli.common import build_model, check_suffix, writing
 from rangesim.io.atomic import atomic_path
 
 
 def cmd_volumes(args: argparse.Namespace) -> int:
-    from rangesim.cad.models import MODELS, model_names
     from rangesim.volumes.csg import volumetric_model
 
     out = Path(args.out)
@@ -20,18 +17,7 @@ def cmd_volumes(args: argparse.Namespace) -> int:
     picture = Path(args.picture) if args.picture else None
     if picture is not None:
         check_suffix(picture, (".png",), "a picture")
-    if args.name not in MODELS:
-        raise RangesimError(f"unknown model; built-in models: {', '.join(model_names())}", source=args.name)
-    params = {}
-    for text in args.param:
-        key, sep, raw = text.partition("=")
-        if not sep:
-            raise RangesimError(f"--param expects KEY=VALUE, got {text!r}")
-        try:
-            params[key.strip()] = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError as exc:
-            raise RangesimError(f"--param {key}: not a TOML value: {raw!r}") from exc
-    part = MODELS[args.name](**params)
+    part = build_model(args.name, args.param)
     model = volumetric_model(part.tree)
     with writing(out), atomic_path(out) as tmp:
         Path(tmp).write_text(json.dumps(model, indent=1))
