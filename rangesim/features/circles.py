@@ -73,40 +73,62 @@ def circle_hypotheses(
     Hc, Wc = int(np.ceil(H / cell)), int(np.ceil(W / cell))
     r_bins = np.arange(max(2.0, float(radii[0])), float(radii[1]) + radius_step, radius_step)
     tol = np.deg2rad(angle_tol_deg)
-    # every vote at once: (point, radius, angle offset), angle step cell / r (prop. to 1 / r)
+    # every vote at once: (point, radius, angle offset), angle step cell / r (prop. to 1 / r).
+    # float32 throughout; cos/sin of (theta + k) from per-point and per-offset tables (angle
+    # addition), no trig over the (point, offset) grid; cells by truncation in a padded grid
+    # (no bounds masks), integer accumulation with one np.bincount on flat indices.
     n_k = np.maximum(np.ceil(tol * r_bins / cell), 0).astype(int)
     r_of = np.repeat(r_bins, 2 * n_k + 1)
     k_of = np.concatenate([np.arange(-k, k + 1) for k in n_k]) * cell / r_of
     b_of = np.repeat(np.arange(len(r_bins)), 2 * n_k + 1)
-    ang = theta[:, None] + k_of[None, :]
-    dx, dy = r_of * np.cos(ang), r_of * np.sin(ang)
-    cx = np.floor(np.concatenate([xy[:, :1] + dx, xy[:, :1] - dx]) / cell + 0.5 / cell).astype(np.int64)
-    cy = np.floor(np.concatenate([xy[:, 1:] + dy, xy[:, 1:] - dy]) / cell + 0.5 / cell).astype(np.int64)
-    bb = np.broadcast_to(b_of, cx.shape)
-    ok = (cx >= 0) & (cx < Wc) & (cy >= 0) & (cy < Hc)
-    acc = np.bincount((bb[ok] * Hc + cy[ok]) * Wc + cx[ok], minlength=len(r_bins) * Hc * Wc)
-    acc = acc.reshape(len(r_bins), Hc, Wc).astype(np.float32)
-    acc = ndimage.uniform_filter(acc, (1, 3, 3), mode="constant") * 9.0  # 3 x 3 cell sums
+    nr = len(r_bins)
+    pad = int(np.ceil(r_bins[-1] / cell)) + 2
+    Hp, Wp = Hc + 2 * pad, Wc + 2 * pad
+    rc = (r_of * np.cos(k_of) / cell).astype(np.float32)
+    rs_ = (r_of * np.sin(k_of) / cell).astype(np.float32)
+    ct, st = np.cos(theta).astype(np.float32), np.sin(theta).astype(np.float32)
+    dxc = ct[:, None] * rc[None, :]
+    dxc -= st[:, None] * rs_[None, :]
+    dyc = st[:, None] * rc[None, :]
+    dyc += ct[:, None] * rs_[None, :]
+    xs = ((xy[:, 0] + 0.5) / cell + pad).astype(np.float32)[:, None]
+    ys = ((xy[:, 1] + 0.5) / cell + pad).astype(np.float32)[:, None]
+    base = (b_of * (Hp * Wp)).astype(np.int32)[None, :]
+    flat = np.empty((2,) + dxc.shape, np.int32)
+    np.add((ys + dyc).astype(np.int32) * Wp + (xs + dxc).astype(np.int32), base, out=flat[0])
+    np.add((ys - dyc).astype(np.int32) * Wp + (xs - dxc).astype(np.int32), base, out=flat[1])
+    acc = np.bincount(flat.ravel(), minlength=nr * Hp * Wp)
+    acc = acc.reshape(nr, Hp, Wp)[:, pad:pad + Hc, pad:pad + Wc].astype(np.float32)
+    # 3 x 3 cell sums (zero outside the image), separable
+    box = acc.copy()
+    box[:, :, 1:] += acc[:, :, :-1]
+    box[:, :, :-1] += acc[:, :, 1:]
+    acc = box.copy()
+    acc[:, 1:, :] += box[:, :-1, :]
+    acc[:, :-1, :] += box[:, 1:, :]
     score = acc / (2 * np.pi * r_bins[:, None, None])  # threshold proportional to r
-    bi, yi, xi = np.nonzero(score >= threshold)
+    # 3D local maxima (3 radii x 5 x 5 cells): a separable maximum filter picks the cells not
+    # below any neighbour; the exact test (ties: the first cell in scan order wins) then runs
+    # only on those
+    mx = acc
+    for axis, passes in ((2, 2), (1, 2), (0, 1)):  # widths 5, 5, 3 (zero outside, acc >= 0)
+        for _ in range(passes):
+            mx = _max3(mx, axis)
+    bi, yi, xi = np.nonzero((score >= threshold) & (acc >= mx))
     if len(bi) == 0:
         return []
-    # 3D local maxima (3 radii x 5 x 5 cells), looked up only around the cells above threshold
     v = acc[bi, yi, xi]
     is_max = np.ones(len(bi), bool)
-    nr = len(r_bins)
     for ob in (-1, 0, 1):
         for oy in range(-2, 3):
             for ox in range(-2, 3):
-                if ob == oy == ox == 0:
-                    continue
+                if (ob, oy, ox) >= (0, 0, 0):
+                    continue  # later cells: v >= them holds already
                 b2, y2, x2 = bi + ob, yi + oy, xi + ox
                 inside = (b2 >= 0) & (b2 < nr) & (y2 >= 0) & (y2 < Hc) & (x2 >= 0) & (x2 < Wc)
                 nbv = np.zeros(len(bi), np.float32)
                 nbv[inside] = acc[b2[inside], y2[inside], x2[inside]]
-                # ties: the first cell in scan order wins
-                later = (ob, oy, ox) > (0, 0, 0)
-                is_max &= (v > nbv) if not later else (v >= nbv)
+                is_max &= v > nbv
     bi, yi, xi = bi[is_max], yi[is_max], xi[is_max]
     order = np.argsort(-score[bi, yi, xi])[:max_hypotheses]
     bi, yi, xi = bi[order], yi[order], xi[order]
@@ -132,6 +154,17 @@ def circle_hypotheses(
     out = []
     for j in np.nonzero(n_in >= 6)[0]:
         out.append((c[j], float(r[j]), int(votes[j]), pts[sel & (hyp == j)]))
+    return out
+
+
+def _max3(a: np.ndarray, axis: int) -> np.ndarray:
+    """Running maximum of width 3 along ``axis`` (non-negative input, zero outside)."""
+    out = a.copy()
+    lo = [slice(None)] * a.ndim
+    hi = [slice(None)] * a.ndim
+    lo[axis], hi[axis] = slice(1, None), slice(None, -1)
+    np.maximum(out[tuple(lo)], a[tuple(hi)], out=out[tuple(lo)])
+    np.maximum(out[tuple(hi)], a[tuple(lo)], out=out[tuple(hi)])
     return out
 
 

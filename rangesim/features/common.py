@@ -207,3 +207,67 @@ def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, flo
     s = ((starts[k] + shift) % n_bins) * step
     e = s + (ends[k] - starts[k]) * step
     return cov, float(s), float(e)
+
+
+def fit_conics_batched(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fit_conic` on many small point sets at once (RANSAC samples).
+
+    Parameters
+    ----------
+    samples : (K, n, 2) float, n >= 5, pixels
+
+    Returns
+    -------
+    conics : (K, 6) float
+        Unit-norm conics in pixel coordinates (rows of zeros where no fit).
+    ok : (K,) bool
+        Where an ellipse-specific solution exists (4 a c - b^2 > 0).
+    """
+    K = len(samples)
+    m = samples.mean(axis=1, keepdims=True)
+    s = np.maximum(np.abs(samples - m).max(axis=(1, 2)), 1e-9)
+    q = (samples - m) / s[:, None, None]
+    x, y = q[..., 0], q[..., 1]
+    D1 = np.stack([x * x, x * y, y * y], -1)
+    D2 = np.stack([x, y, np.ones_like(x)], -1)
+    S1 = np.einsum("kni,knj->kij", D1, D1)
+    S2 = np.einsum("kni,knj->kij", D1, D2)
+    S3 = np.einsum("kni,knj->kij", D2, D2)
+    ok = np.abs(np.linalg.det(S3)) > 1e-12
+    S3[~ok] = np.eye(3)
+    T = -np.linalg.solve(S3, np.swapaxes(S2, 1, 2))
+    M = S1 + S2 @ T
+    M = np.stack([M[:, 2] / 2, -M[:, 1], M[:, 0] / 2], 1)
+    M[~np.isfinite(M).all(axis=(1, 2))] = 0.0
+    _, v = np.linalg.eig(M)
+    v = np.real(v)
+    cond = 4 * v[:, 0, :] * v[:, 2, :] - v[:, 1, :] ** 2  # (K, 3): per eigenvector
+    has = cond > 0
+    ok &= has.any(1)
+    first = np.argmax(has, axis=1)
+    a1 = v[np.arange(K), :, first]  # (K, 3)
+    a2 = np.einsum("kij,kj->ki", T, a1)
+    A, B, C = (a1 / s[:, None] ** 2).T
+    D, E = (a2[:, :2] / s[:, None]).T
+    F = a2[:, 2]
+    mx, my = m[:, 0, 0], m[:, 0, 1]
+    conics = np.stack([
+        A, B, C,
+        D - 2 * A * mx - B * my,
+        E - 2 * C * my - B * mx,
+        F + A * mx ** 2 + B * mx * my + C * my ** 2 - D * mx - E * my,
+    ], 1)
+    nrm = np.linalg.norm(conics, axis=1)
+    ok &= np.isfinite(nrm) & (nrm > 0)
+    conics = np.where(ok[:, None], conics / np.where(ok, nrm, 1.0)[:, None], 0.0)
+    return conics, ok
+
+
+def sampson_distance_batched(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(K, N) :func:`sampson_distance` of N points to each of K conics."""
+    a, b, c, d, e, f = (conics[:, i:i + 1] for i in range(6))
+    x, y = xy[None, :, 0], xy[None, :, 1]
+    q = a * x * x + b * x * y + c * y * y + d * x + e * y + f
+    gx = 2 * a * x + b * y + d
+    gy = b * x + 2 * c * y + e
+    return np.abs(q) / np.maximum(np.hypot(gx, gy), 1e-12)

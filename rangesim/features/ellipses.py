@@ -13,7 +13,9 @@ from rangesim.features.common import (
     edge_points,
     ellipse_from_conic,
     fit_conic,
+    fit_conics_batched,
     sampson_distance,
+    sampson_distance_batched,
 )
 
 
@@ -164,24 +166,60 @@ def _refine(conic: np.ndarray, xy: np.ndarray, theta: np.ndarray, band: float,
     return conic, sel
 
 
-def _ransac(xy: np.ndarray, rng: np.random.Generator, iters: int = 200, tol: float = 1.0):
-    """Best ellipse (conic, inliers) of points by 6-point RANSAC + refit, or None."""
-    best, best_n = None, 0
+def _ransac(xy: np.ndarray, rng: np.random.Generator, iters: int = 200, tol: float = 1.0,
+            direct_inliers: float = 0.95, local: int = 24):
+    """Best ellipse (conic, inliers) of points, or None.
+
+    First a direct least-squares fit (Fitzgibbon) of all the points: kept when at least
+    ``direct_inliers`` of them lie within ``tol`` px (Sampson distance), then refitted on
+    those. Otherwise 6-point RANSAC as the fallback: ``local`` samples drawn from windows of
+    the ordered chain, then (only if none gives an ellipse) up to ``iters`` in all drawn
+    from the whole chain; each batch fitted and scored at once, then a refit on the best
+    sample's inliers.
+    """
     n = len(xy)
-    for _ in range(iters):
-        c = fit_conic(xy[rng.choice(n, 6, replace=False)])
-        if c is None or ellipse_from_conic(c) is None:
-            continue
-        inl = sampson_distance(c, xy) <= tol
-        if inl.sum() > best_n:
-            best, best_n = c, int(inl.sum())
-            if best_n > 0.9 * n:
-                break
-    if best is None:
+    c = fit_conic(xy)
+    if c is not None and ellipse_from_conic(c) is not None:
+        inl = np.nonzero(sampson_distance(c, xy) <= tol)[0]
+        if len(inl) >= direct_inliers * n:
+            c2 = fit_conic(xy[inl]) if len(inl) < n else c
+            if c2 is not None and ellipse_from_conic(c2) is not None:
+                return c2, np.nonzero(sampson_distance(c2, xy) <= tol)[0]
+    if n < 6:
         return None
-    inl = np.nonzero(sampson_distance(best, xy) <= tol)[0]
+    # samples: ``local`` of them 6 distinct points from a window of a third of the (ordered)
+    # chain, more likely all on one curve than points drawn from the whole chain; the rest of
+    # the ``iters`` only if none of those gives an ellipse
+    idx = _local_samples(n, min(local, iters), rng)
+    res = _best_sample(xy, idx, tol)
+    if res is None and iters > local:
+        res = _best_sample(xy, np.argsort(rng.random((iters - local, n)), axis=1)[:, :6], tol)
+    if res is None:
+        return None
+    inl = np.nonzero(sampson_distance(res, xy) <= tol)[0]
     c = fit_conic(xy[inl])
     return (c, inl) if c is not None and ellipse_from_conic(c) is not None else None
+
+
+def _local_samples(n: int, k: int, rng: np.random.Generator) -> np.ndarray:
+    """(k, 6) indices: 6 distinct points from a random window of max(12, n / 3) points."""
+    L = min(n, max(12, n // 3))
+    start = rng.integers(0, n - L + 1, size=k)
+    return start[:, None] + np.argsort(rng.random((k, L)), axis=1)[:, :6]
+
+
+def _best_sample(xy: np.ndarray, idx: np.ndarray, tol: float) -> np.ndarray | None:
+    """The conic, among those fitted to each row of samples ``idx``, with most inliers."""
+    conics, ok = fit_conics_batched(xy[idx])
+    counts = np.where(ok, (sampson_distance_batched(conics, xy) <= tol).sum(1), -1)
+    best = None
+    for k in np.argsort(-counts, kind="stable"):
+        if counts[k] < 0:
+            break
+        if ellipse_from_conic(conics[k]) is not None:  # real ellipse, not an imaginary one
+            best = conics[k]
+            break
+    return best
 
 
 def ellipses(
@@ -223,6 +261,10 @@ def ellipses(
 
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     H, W = mask.shape
+    if not remove_explained and (scene is None or scan is None):
+        # nothing to remove and no model: chains of the whole mask (edge directions unused)
+        return _chain_ellipses(link(mask, max_gap=2, min_length=min_points),
+                               np.random.default_rng(seed), min_points, axes_range)
     xy, theta = edge_points(edge_map)
     predictions = []
     if scene is not None and scan is not None:
@@ -276,8 +318,15 @@ def ellipses(
     # -- no model: RANSAC on linked chains of the remaining points --
     rest = np.zeros_like(mask)
     rest[xy[keep, 1].astype(int), xy[keep, 0].astype(int)] = True
-    rng = np.random.default_rng(seed)
-    for chain in link(rest, max_gap=2, min_length=min_points):
+    return _chain_ellipses(link(rest, max_gap=2, min_length=min_points),
+                           np.random.default_rng(seed), min_points, axes_range)
+
+
+def _chain_ellipses(chains, rng: np.random.Generator, min_points: int,
+                    axes_range: tuple[float, float]) -> list[Ellipse]:
+    """Ellipses fitted to linked chains: direct least squares, RANSAC as the fallback."""
+    out: list[Ellipse] = []
+    for chain in chains:
         p = chain.points[:, ::-1].astype(float)  # (row, col) -> (x, y)
         res = _ransac(p, rng)
         if res is None:
