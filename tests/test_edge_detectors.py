@@ -240,9 +240,9 @@ def test_scores_against_ground_truth(name, box_scan, box_scene):
     gt = ground_truth_edges(box_scan, box_scene)
     gt = np.where(box_scan.valid, gt, 0)       # no detector sees edges in the laser shadow
     s = edge_scores(DETECTORS[name](box_scan), gt, 2.0)
-    # gradient's non-maximum suppression leaves 2-px steps on one diagonal edge, which the
-    # 1-px (8-connected) truth does not match: 0.89 measured
-    assert s["f1"] >= {"line_fit": 0.85, "gradient": 0.87}.get(name, 0.9), s
+    # gradient: 0.97 measured (its staircase thinning makes diagonal edges 1 px wide,
+    # as the 8-connected truth; 0.89 before it)
+    assert s["f1"] >= {"line_fit": 0.85, "gradient": 0.94}.get(name, 0.9), s
 
 
 def test_without_intrinsics_the_footprint_is_estimated(box_scan):

@@ -27,7 +27,7 @@ def green():
     out = {}
     for view, pose in (("tilt", None), ("top", look_at((0, 0, 300), (0, 0, 0), up=(0, 1, 0)))):
         scan = rs.scan(scene, sensor, seed=0, pose=pose)
-        out[view] = (scan, rs.edges.gradient(scan), rs.evaluate.ground_truth_features(scan, scene))
+        out[view] = (scan, rs.edges.gradient(scan, jump_clearance=0), rs.evaluate.ground_truth_features(scan, scene))
     return scene, out
 
 

@@ -40,7 +40,9 @@ def cmd_features(args: argparse.Namespace) -> int:
     if scene is None and scan.xyz_true is not None:
         source = scan.meta.get("scene")
         scene = str(source) if source and Path(str(source)).is_file() else None
-    edge_map = DETECTORS[args.edges](scan)
+    # rims are fitted whole: keep the creases a jump would otherwise clear around it
+    options = {"jump_clearance": 0} if args.edges == "gradient" else {}
+    edge_map = DETECTORS[args.edges](scan, **options)
     radii = (args.rmin, args.rmax)
     segs = F.lines(edge_map, scan)
     circ = F.circles(edge_map, radii)

@@ -781,3 +781,75 @@ def nonmax_suppress(
     sides[ii, jj] = np.where(side > low / 2, side, np.nan)
     return keep, sides
 
+
+
+def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np.ndarray:
+    """Drop the inner corners of 2-px staircases, keeping 8-connectivity (1 px diagonals).
+
+    Non-maximum suppression leaves diagonal edges as 4-connected staircases (a corner
+    pixel at every step), which an 8-connected 1-px truth does not match one-to-one. A
+    pixel is dropped when two of its 4-neighbours at a right angle (e.g. north and east)
+    are set, the diagonal pixel between them is not (an L, not a 2x2 block), and the
+    opposite 4-neighbours and diagonal are clear: the two stay 8-connected without it
+    and nothing else depends on it. Pixels are removed in two passes by checkerboard
+    parity, so two 4-adjacent pixels are never dropped together (a step's two corners).
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+        Edge pixels (all of them count as neighbours).
+    droppable : (H, W) bool, optional
+        Only these may be dropped (default: all of ``mask``).
+
+    Returns
+    -------
+    (H, W) bool
+        The thinned mask (a new array).
+    """
+    h, w = mask.shape
+    stride = w + 2
+    p = np.pad(mask, 1).ravel()
+    cand = mask if droppable is None else (mask & droppable)
+    ii, jj = np.nonzero(cand)
+    if ii.size == 0:
+        return mask.copy()
+    base = (ii + 1) * stride + (jj + 1)
+    n, s, e, wst = -stride, stride, 1, -1
+    # (a, b, their diagonal, opposite a, opposite b, opposite diagonal)
+    corners = ((n, e, n + e, s, wst, s + wst), (e, s, s + e, wst, n, n + wst),
+               (s, wst, s + wst, n, e, n + e), (wst, n, n + wst, e, s, s + e))
+    parity = ((ii + jj) & 1).astype(bool)
+    for ph in (False, True):
+        b = base[parity == ph]
+        drop = np.zeros(b.size, bool)
+        for a_, b_, d_, oa, ob, od in corners:
+            drop |= p[b + a_] & p[b + b_] & ~p[b + d_] & ~p[b + oa] & ~p[b + ob] & ~p[b + od]
+        p[b[drop]] = False
+    return p.reshape(h + 2, w + 2)[1:-1, 1:-1].copy()
+
+
+#: no crease is kept within this many pixels of a jump: the crest beside an occluding edge
+#: (and the surface just beyond it) is the jump itself, not a roof
+JUMP_CLEARANCE = 2
+
+
+def near_mask(where: np.ndarray, ref: np.ndarray, r: int) -> np.ndarray:
+    """True at pixels of ``where`` within chessboard distance ``r`` of a ``ref`` pixel.
+
+    Sparse: only the pixels of ``where`` look at their (2r+1)^2 window (cheap when
+    ``where`` is thin, e.g. edge candidates); False elsewhere.
+    """
+    h, w = where.shape
+    out = np.zeros((h, w), bool)
+    ii, jj = np.nonzero(where)
+    if ii.size == 0 or r <= 0:
+        return out
+    stride = w + 2 * r
+    rp = np.pad(ref, r).ravel()
+    base = (ii + r) * stride + (jj + r)
+    hit = np.zeros(ii.size, bool)
+    for dr in range(-r, r + 1):
+        for dc in range(-r, r + 1):
+            hit |= rp[base + dr * stride + dc]
+    out[ii[hit], jj[hit]] = True
+    return out

@@ -7,9 +7,9 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges.common import (
-    AXES, JUMP_THRESHOLD, NOISE_FLOOR, NOISE_K_NORMAL, discontinuities, dot3,
-    estimate_depth_noise, measured_normals, noise_threshold, nonmax_suppress, pad_last2,
-    padded_view, scan_depth, scan_points,
+    AXES, JUMP_CLEARANCE, JUMP_THRESHOLD, NOISE_FLOOR, NOISE_K_NORMAL, discontinuities, dot3,
+    estimate_depth_noise, measured_normals, near_mask, noise_threshold, nonmax_suppress, pad_last2,
+    padded_view, scan_depth, scan_points, thin_staircases,
 )
 from rangesim.edges.edgemap import EdgeMap
 
@@ -148,8 +148,11 @@ def normal(
         rank = angles[0] + angles[1] + angles[2] + angles[3]
         np.copyto(rank, np.nan, where=np.isnan(strength))
         crease = nonmax_suppress(rank, theta, crease)
-    labels = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
     jump = disc.occluding
+    # as in gradient: the crest beside a jump is the jump itself, and NMS staircases are thinned
+    crease &= ~near_mask(crease, jump | disc.occluded, JUMP_CLEARANCE)
+    crease = thin_staircases(crease | jump, droppable=crease) & ~jump
+    labels = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
     labels[jump] = EdgeLabel.JUMP
     params = {
         "threshold_deg": float(threshold_deg), "window": window,
