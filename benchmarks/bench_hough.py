@@ -48,7 +48,7 @@ def main() -> None:
 
     # -- circles: head-on view, radii 5..70 px --
     scan = rs.scan(scene, sensor, seed=0, pose=look_at((0, 0, 300), (0, 0, 0), up=(0, 1, 0)))
-    edges = rs.edges.gradient(scan)
+    edges = rs.edges.gradient(scan, jump_clearance=0)
     truth = rs.evaluate.ground_truth_features(scan, scene)
     n_truth = sum(c.visible >= 0.5 for c in truth["circles"])
     radii = np.arange(5, 71)
@@ -74,7 +74,7 @@ def main() -> None:
 
     # -- ellipse: tilted view, one hole rim in a crop --
     scan = rs.scan(scene, sensor, seed=0)
-    edges = rs.edges.gradient(scan)
+    edges = rs.edges.gradient(scan, jump_clearance=0)
     truth = rs.evaluate.ground_truth_features(scan, scene)
     g = next(c for c in truth["circles"] if c.name == "hole_2_rim_top")
     half = int(np.ceil(g.axes[0])) + 4
