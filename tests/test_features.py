@@ -123,3 +123,31 @@ def test_cli_writes_outputs(green, tmp_path):
         assert (tmp_path / "o" / name).is_file()
     report = json.loads((tmp_path / "o" / "features.json").read_text())
     assert report["scores"]["round"]["recall"] == 1.0
+
+
+def test_flat_target_labelled_rims(data_dir, monkeypatch):
+    """The flat machined target's labelled circles (features YAML, read without PyYAML) as
+    ground truth: its visible hole rims are found as ellipses with centre error <= 1 px."""
+    from rangesim.core.geometry import object_transform
+    from rangesim.recorded.features_yml import read_features_yml
+
+    folder = data_dir / "machined-targets"
+    if not (folder / "FlatTargetv3_features.yml").is_file():
+        pytest.skip("flat target data not found")
+    monkeypatch.setenv("RANGESIM_DATA", str(data_dir))
+    scene = rs.load_scene("scenes/flat_target.toml")
+    feats = read_features_yml(folder / "FlatTargetv3_features.yml", folder / "FlatTargetv3_trimesh.obj",
+                              object_transform((-75, 75, 10), (180, 0, 0)))
+    assert len(feats.circles) >= 8 and len(feats.segments) >= 4
+    scene.objects[0].features = feats
+    scan = rs.scan(scene, rs.load_sensor("white_scanner").with_params(QUIET), seed=0)
+    edges = rs.edges.gradient(scan, jump_clearance=0)
+    truth = rs.evaluate.ground_truth_features(scan, scene)
+    visible = [g for g in truth["circles"] if g.visible >= 0.5]
+    assert visible
+    found = F.ellipses(edges, scan, scene)
+    scores = feature_scores({"ellipses": found}, truth, scan)["round"]
+    print("flat target rims:", len(visible), "visible; recall", scores["recall"], "precision",
+          scores["precision"], "centre error", scores["center_error_px"])
+    assert scores["recall"] == 1.0
+    assert scores["center_error_px"]["max"] <= 1.0

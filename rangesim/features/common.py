@@ -89,21 +89,38 @@ def fit_conic(xy: np.ndarray) -> np.ndarray | None:
     (6,) float or None
         Conic ``a x^2 + b x y + c y^2 + d x + e y + f = 0`` in pixel coordinates, normalised
         to unit norm, or None when no ellipse fits.
+
+    Notes
+    -----
+    Called many times per image on small point sets, so the 6 x 6 scatter matrix is one
+    matrix product and the 3 x 3 inverse of its linear block is written out (the points
+    are centred, scaled to [-1, 1]); only the 3 x 3 eigenproblem goes through LAPACK.
     """
-    if len(xy) < 5:
+    n = len(xy)
+    if n < 5:
         return None
     m = xy.mean(axis=0)
-    s = max(float(np.abs(xy - m).max()), 1e-9)
-    x, y = ((xy - m) / s).T
-    D1 = np.column_stack([x * x, x * y, y * y])
-    D2 = np.column_stack([x, y, np.ones_like(x)])
-    S1, S2, S3 = D1.T @ D1, D1.T @ D2, D2.T @ D2
-    try:
-        T = -np.linalg.solve(S3, S2.T)
-    except np.linalg.LinAlgError:
+    q = xy - m
+    s = max(float(np.abs(q).max()), 1e-9)
+    q = q / s
+    x, y = q[:, 0], q[:, 1]
+    D = np.empty((n, 6))
+    D[:, 0] = x * x
+    D[:, 1] = x * y
+    D[:, 2] = y * y
+    D[:, 3] = x
+    D[:, 4] = y
+    D[:, 5] = 1.0
+    S = D.T @ D
+    S1, S2, S3 = S[:3, :3], S[:3, 3:], S[3:, 3:]
+    inv3 = _inv3(S3)
+    if inv3 is None:
         return None
+    T = -inv3 @ S2.T
     M = S1 + S2 @ T
     M = np.array([M[2] / 2, -M[1], M[0] / 2])
+    if not np.isfinite(M).all():
+        return None
     w, v = np.linalg.eig(M)
     v = np.real(v)
     cond = 4 * v[0] * v[2] - v[1] ** 2
@@ -112,18 +129,31 @@ def fit_conic(xy: np.ndarray) -> np.ndarray | None:
         return None
     a1 = v[:, ok[0]]
     a2 = T @ a1
-    A, B, C, D, E, F = (*a1, *a2)
+    A, B, C, D_, E, F = (*a1.tolist(), *a2.tolist())
     # undo the normalisation x' = (x - mx) / s
-    mx, my = m
+    mx, my = float(m[0]), float(m[1])
     A2, B2, C2 = A / s ** 2, B / s ** 2, C / s ** 2
-    D2_, E2 = D / s, E / s
+    D2_, E2 = D_ / s, E / s
     conic = np.array([
         A2, B2, C2,
         D2_ - 2 * A2 * mx - B2 * my,
         E2 - 2 * C2 * my - B2 * mx,
         F + A2 * mx ** 2 + B2 * mx * my + C2 * my ** 2 - D2_ * mx - E2 * my,
     ])
-    return conic / np.linalg.norm(conic)
+    return conic / np.sqrt(conic @ conic)
+
+
+def _inv3(S: np.ndarray) -> np.ndarray | None:
+    """Inverse of a 3 x 3 matrix by cofactors, or None when (near) singular."""
+    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
+    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * A + b * B + c * C
+    scale = max(abs(a), abs(b), abs(c), abs(d), abs(e), abs(f), abs(g), abs(h), abs(i), 1e-300)
+    if not np.isfinite(det) or abs(det) <= 1e-13 * scale ** 3:
+        return None
+    return np.array([[A, c * h - b * i, b * f - c * e],
+                     [B, a * i - c * g, c * d - a * f],
+                     [C, b * g - a * h, a * e - b * d]]) / det
 
 
 def conic_matrix(conic: np.ndarray) -> np.ndarray:
@@ -144,13 +174,34 @@ def conic_from_ellipse(center, axes, angle) -> np.ndarray:
 
 
 def ellipse_from_conic(conic: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """(center (2,), semi-axes (a >= b), major-axis angle in (-pi/2, pi/2]) or None."""
-    from rangesim.evaluate.ground_truth import _conic_to_ellipse
+    """(center (2,), semi-axes (a >= b), major-axis angle in (-pi/2, pi/2]) or None.
 
-    C = conic_matrix(conic)
-    if C[0, 0] < 0:
-        C = -C
-    return _conic_to_ellipse(C)
+    Closed form of the 2 x 2 algebra (centre, eigenvalues and major-axis eigenvector of the
+    quadratic part), the same result as
+    :func:`rangesim.evaluate.ground_truth._conic_to_ellipse` of :func:`conic_matrix`.
+    """
+    a, b, c, d, e, f = (float(v) for v in conic)
+    if a < 0:
+        a, b, c, d, e, f = -a, -b, -c, -d, -e, -f
+    h, gx, gy = b / 2, d / 2, e / 2
+    det = a * c - h * h
+    if not det > 0:
+        return None  # parabola or hyperbola (or not finite)
+    cx = (h * gy - c * gx) / det
+    cy = (h * gx - a * gy) / det
+    f0 = cx * gx + cy * gy + f  # value of the form at the centre
+    mean, half = (a + c) / 2, np.hypot((a - c) / 2, h)
+    lo, hi = mean - half, mean + half  # eigenvalues, lo <= hi; the major axis goes with lo
+    if not (lo > 0 and f0 < 0):
+        return None  # an imaginary ellipse (or a point)
+    # eigenvector of lo: (h, lo - a) or (lo - c, h), whichever is better conditioned
+    v1, v2 = (h, lo - a), (lo - c, h)
+    vx, vy = v1 if v1[0] ** 2 + v1[1] ** 2 >= v2[0] ** 2 + v2[1] ** 2 else v2
+    if vx == 0 and vy == 0:
+        vx = 1.0  # a circle: any direction
+    angle = float(np.arctan2(vy, vx))
+    angle = (angle + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector
+    return np.array([cx, cy]), np.array([np.sqrt(-f0 / lo), np.sqrt(-f0 / hi)]), angle
 
 
 def sampson_distance(conic: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from rangesim.features.common import (
     conic_from_ellipse,
@@ -167,15 +168,16 @@ def _refine(conic: np.ndarray, xy: np.ndarray, theta: np.ndarray, band: float,
 
 
 def _ransac(xy: np.ndarray, rng: np.random.Generator, iters: int = 200, tol: float = 1.0,
-            direct_inliers: float = 0.95, local: int = 24):
+            direct_inliers: float = 0.95, local: int = 24, refits: int = 5):
     """Best ellipse (conic, inliers) of points, or None.
 
     First a direct least-squares fit (Fitzgibbon) of all the points: kept when at least
     ``direct_inliers`` of them lie within ``tol`` px (Sampson distance), then refitted on
-    those. Otherwise 6-point RANSAC as the fallback: ``local`` samples drawn from windows of
-    the ordered chain, then (only if none gives an ellipse) up to ``iters`` in all drawn
-    from the whole chain; each batch fitted and scored at once, then a refit on the best
-    sample's inliers.
+    those. Otherwise 6-point RANSAC as the fallback: ``local`` samples stratified along the
+    points' order (one point from each sixth of the curve, so every sample spans it), then
+    (only if none gives an ellipse) up to ``iters`` in all drawn from the whole set; each
+    batch fitted and scored at once; then up to ``refits`` fits on the inliers of the last
+    conic, until the inlier set stops changing.
     """
     n = len(xy)
     c = fit_conic(xy)
@@ -187,25 +189,30 @@ def _ransac(xy: np.ndarray, rng: np.random.Generator, iters: int = 200, tol: flo
                 return c2, np.nonzero(sampson_distance(c2, xy) <= tol)[0]
     if n < 6:
         return None
-    # samples: ``local`` of them 6 distinct points from a window of a third of the (ordered)
-    # chain, more likely all on one curve than points drawn from the whole chain; the rest of
-    # the ``iters`` only if none of those gives an ellipse
-    idx = _local_samples(n, min(local, iters), rng)
+    idx = _stratified_samples(n, min(local, iters), rng)
     res = _best_sample(xy, idx, tol)
     if res is None and iters > local:
         res = _best_sample(xy, np.argsort(rng.random((iters - local, n)), axis=1)[:, :6], tol)
     if res is None:
         return None
     inl = np.nonzero(sampson_distance(res, xy) <= tol)[0]
-    c = fit_conic(xy[inl])
-    return (c, inl) if c is not None and ellipse_from_conic(c) is not None else None
+    best = None
+    for _ in range(max(refits, 1)):
+        c = fit_conic(xy[inl])
+        if c is None or ellipse_from_conic(c) is None:
+            break
+        new = np.nonzero(sampson_distance(c, xy) <= tol)[0]
+        best = (c, inl)
+        if len(new) == len(inl) and np.array_equal(new, inl):
+            break
+        inl = new
+    return best
 
 
-def _local_samples(n: int, k: int, rng: np.random.Generator) -> np.ndarray:
-    """(k, 6) indices: 6 distinct points from a random window of max(12, n / 3) points."""
-    L = min(n, max(12, n // 3))
-    start = rng.integers(0, n - L + 1, size=k)
-    return start[:, None] + np.argsort(rng.random((k, L)), axis=1)[:, :6]
+def _stratified_samples(n: int, k: int, rng: np.random.Generator) -> np.ndarray:
+    """(k, 6) indices: one point drawn from each sixth of the ordered points."""
+    bounds = np.linspace(0.0, n, 7)
+    return np.minimum((bounds[:-1] + rng.random((k, 6)) * np.diff(bounds)).astype(np.intp), n - 1)
 
 
 def _best_sample(xy: np.ndarray, idx: np.ndarray, tol: float) -> np.ndarray | None:
@@ -250,21 +257,20 @@ def ellipses(
     band over three passes. Kept when its supporting points cover at least ``min_support``
     of its perimeter (about one point per pixel).
 
-    Without a model: ellipses fitted to linked chains (:func:`rangesim.edges.link`) by direct
-    least squares inside RANSAC.
+    Without a model: ellipses fitted to the connected groups of edge pixels
+    (:func:`edge_groups`: 8-connected components after bridging gaps of up to 2 px, no
+    thinning or linking) by direct least squares, RANSAC as the fallback.
 
     Returns
     -------
     list of Ellipse
     """
-    from rangesim.edges.link import link
-
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     H, W = mask.shape
     if not remove_explained and (scene is None or scan is None):
-        # nothing to remove and no model: chains of the whole mask (edge directions unused)
-        return _chain_ellipses(link(mask, max_gap=2, min_length=min_points),
-                               np.random.default_rng(seed), min_points, axes_range)
+        # nothing to remove and no model: groups of the whole mask (edge directions unused)
+        return _chain_ellipses(edge_groups(mask, min_points), np.random.default_rng(seed),
+                               min_points, axes_range)
     xy, theta = edge_points(edge_map)
     predictions = []
     if scene is not None and scan is not None:
@@ -315,19 +321,66 @@ def ellipses(
             out.append(Ellipse((float(e2[0][0]), float(e2[0][1])), (float(e2[1][0]), float(e2[1][1])),
                                float(e2[2]), rms, len(sel), name))
         return out
-    # -- no model: RANSAC on linked chains of the remaining points --
+    # -- no model: direct fits / RANSAC on connected groups of the remaining points --
     rest = np.zeros_like(mask)
     rest[xy[keep, 1].astype(int), xy[keep, 0].astype(int)] = True
-    return _chain_ellipses(link(rest, max_gap=2, min_length=min_points),
-                           np.random.default_rng(seed), min_points, axes_range)
+    return _chain_ellipses(edge_groups(rest, min_points), np.random.default_rng(seed),
+                           min_points, axes_range)
 
 
-def _chain_ellipses(chains, rng: np.random.Generator, min_points: int,
+def edge_groups(mask: np.ndarray, min_points: int = 20, max_gap: int = 1) -> list[np.ndarray]:
+    """Edge pixels grouped into connected components: a light stand-in for linking.
+
+    The pixels of ``mask`` are labelled by the 8-connected components of the mask dilated
+    with a ``(max_gap + 1)``-square (so pixels up to ``max_gap`` missing pixels apart share a
+    group); no thinning, tracing or junction splitting. Each group's points are ordered by
+    their angle around the group's centroid, which follows a closed convex curve such as an
+    ellipse (the RANSAC fallback draws its samples from windows of that order). A direct
+    least-squares conic fit (Fitzgibbon) needs no order at all.
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+    min_points : int
+        Groups with fewer pixels are dropped.
+    max_gap : int
+        Largest number of missing pixels bridged (0: plain 8-connectivity).
+
+    Returns
+    -------
+    list of (N, 2) float arrays
+        (x = column, y = row) of each group's pixels, largest group first.
+    """
+    mask = np.asarray(mask, bool)
+    grown = ndimage.binary_dilation(mask, np.ones((max_gap + 1,) * 2, bool)) if max_gap > 0 else mask
+    lab, n = ndimage.label(grown, _EIGHT)
+    rows, cols = np.nonzero(mask)
+    if n == 0 or len(rows) < min_points:
+        return []
+    g = lab[rows, cols]
+    counts = np.bincount(g, minlength=n + 1)
+    order = np.argsort(g, kind="stable")
+    ends = np.cumsum(counts)
+    xy = np.column_stack([cols, rows]).astype(np.float64)[order]
+    out = []
+    for k in np.argsort(-counts[1:], kind="stable") + 1:
+        if counts[k] < min_points:
+            break
+        p = xy[ends[k] - counts[k]:ends[k]]
+        d = p - p.mean(axis=0)
+        out.append(p[np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")])
+    return out
+
+
+_EIGHT = np.ones((3, 3), bool)
+
+
+def _chain_ellipses(groups: list[np.ndarray], rng: np.random.Generator, min_points: int,
                     axes_range: tuple[float, float]) -> list[Ellipse]:
-    """Ellipses fitted to linked chains: direct least squares, RANSAC as the fallback."""
+    """Ellipses fitted to groups of edge points ((N, 2) x, y arrays, ordered along the
+    curve): direct least squares, RANSAC as the fallback."""
     out: list[Ellipse] = []
-    for chain in chains:
-        p = chain.points[:, ::-1].astype(float)  # (row, col) -> (x, y)
+    for p in groups:
         res = _ransac(p, rng)
         if res is None:
             continue
