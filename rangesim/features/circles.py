@@ -6,7 +6,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from rangesim.features.common import angular_coverage, edge_points, fit_circle
