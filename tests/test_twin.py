@@ -10,7 +10,7 @@ import trimesh
 
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
-from rangesim.twin import TwinStage, twin
+from rangesim.twin import twin
 from rangesim.twin.calibrate import calibrate
 from rangesim.twin.compare import compare
 
