@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.geometry import circle_basis
+
 
 @dataclass(frozen=True)
 class Circle3D:
@@ -38,11 +40,7 @@ class Circle3D:
 
     def points(self, n: int = 64) -> np.ndarray:
         """(n, 3) points around the circle."""
-        normal = np.asarray(self.normal, float) / np.linalg.norm(self.normal)
-        helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
-        e1 = np.cross(normal, helper)
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(normal, e1)
+        e1, e2 = circle_basis(self.normal)
         angle = np.linspace(0, 2 * np.pi, n, endpoint=False)[:, None]
         return np.asarray(self.center) + self.radius * (np.cos(angle) * e1 + np.sin(angle) * e2)
 

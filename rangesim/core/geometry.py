@@ -60,3 +60,42 @@ def object_transform(translate=(0, 0, 0), rotate_deg=(0, 0, 0), scale=1.0) -> np
 def transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply a 4x4 transform to (N, 3) points."""
     return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def circle_basis(normal) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane perpendicular to ``normal`` (right-handed with it)."""
+    normal = np.asarray(normal, dtype=np.float64)
+    normal = normal / np.linalg.norm(normal)
+    helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
+    e1 = np.cross(normal, helper)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(normal, e1)
+
+
+def project_circle(center, normal, radius: float, K: np.ndarray) -> np.ndarray | None:
+    """Image conic of a 3D circle seen by a pinhole camera.
+
+    Parameters
+    ----------
+    center, normal : (3,) array_like
+        Circle centre (mm) and axis in the camera frame (OpenCV axes).
+    radius : float
+        mm.
+    K : (3, 3) intrinsics, pixel (row i, col j) looking along K^-1 (j + 0.5, i + 0.5, 1).
+
+    Returns
+    -------
+    (6,) conic coefficients (a, b, c, d, e, f) of a x^2 + b x y + c y^2 + d x + e y + f = 0 in
+    pixel-centre coordinates (x = column, y = row, integers at pixel centres), or None when
+    the circle's plane passes through the camera centre (seen edge-on).
+    """
+    e1, e2 = circle_basis(normal)
+    shift = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]])
+    # the circle's plane maps to the image by H (x_img ~ H (cos, sin, 1)); the unit circle
+    # diag(1, 1, -1) maps to the conic H^-T diag(1, 1, -1) H^-1
+    H = shift @ K @ np.column_stack([radius * e1, radius * e2, np.asarray(center, dtype=np.float64)])
+    if abs(np.linalg.det(H)) < 1e-12:
+        return None
+    Hi = np.linalg.inv(H)
+    C = Hi.T @ np.diag([1.0, 1.0, -1.0]) @ Hi
+    return np.array([C[0, 0], 2 * C[0, 1], C[1, 1], 2 * C[0, 2], 2 * C[1, 2], C[2, 2]])

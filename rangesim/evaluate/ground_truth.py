@@ -21,7 +21,9 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.geometry import circle_basis, project_circle
 from rangesim.core.rangescan import RangeScan
+from rangesim.features.common import ellipse_from_conic
 
 #: default jump rule: the 3D step between two neighbours within this angle of the viewing ray
 JUMP_ANGLE_DEG = 15.0
@@ -613,25 +615,6 @@ class ImageSegment:
     dihedral_deg: float = 90.0
 
 
-def _conic_to_ellipse(C: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """(center, (a, b), angle) of the ellipse x^T C x = 0 (homogeneous 3x3), or None."""
-    A = C[:2, :2]
-    if np.linalg.det(A) <= 0:
-        return None  # parabola or hyperbola: the circle reaches the camera plane
-    center = np.linalg.solve(A, -C[:2, 2])
-    f0 = float(center @ C[:2, 2] + C[2, 2])  # value of the form at the centre
-    lam, vec = np.linalg.eigh(A)
-    axes2 = -f0 / lam
-    if np.any(axes2 <= 0):
-        return None
-    axes = np.sqrt(axes2)
-    order = np.argsort(-axes)  # major first
-    major = vec[:, order[0]]
-    angle = float(np.arctan2(major[1], major[0]))
-    angle = (angle + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector: (-pi/2, pi/2]
-    return center, axes[order], angle
-
-
 def ground_truth_features(
     scan: RangeScan, scene: Any, *, depth_tol_px: float = 3.0, spacing_px: float = 0.5
 ) -> dict[str, list]:
@@ -674,18 +657,11 @@ def ground_truth_features(
         for c in getattr(feats, "circles", []):
             center = R @ np.asarray(c.center, float) + t
             normal = R @ np.asarray(c.normal, float)
-            normal /= np.linalg.norm(normal)
-            helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
-            e1 = np.cross(normal, helper)
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(normal, e1)
-            H = Kc @ np.column_stack([c.radius * e1, c.radius * e2, center])
-            if abs(np.linalg.det(H)) < 1e-12:
-                continue  # seen edge-on through the camera centre
-            Hi = np.linalg.inv(H)
-            ell = _conic_to_ellipse(Hi.T @ np.diag([1.0, 1.0, -1.0]) @ Hi)
+            conic = project_circle(center, normal, c.radius, K)
+            ell = None if conic is None else ellipse_from_conic(conic)
             if ell is None:
-                continue
+                continue  # seen edge-on, or reaching behind the camera plane
+            e1, e2 = circle_basis(normal)
             # sample by 3D angle, dense enough for the image's longest axis
             n = max(64, int(np.ceil(2 * np.pi * ell[1][0] / spacing_px)))
             ang = np.linspace(0, 2 * np.pi, n, endpoint=False)[:, None]

@@ -162,23 +162,11 @@ def conic_matrix(conic: np.ndarray) -> np.ndarray:
     return np.array([[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]])
 
 
-def conic_from_ellipse(center, axes, angle) -> np.ndarray:
-    """(6,) conic coefficients of the ellipse with centre (x, y), semi-axes (a, b), angle (rad)."""
-    a, b = axes
-    ca, sa = np.cos(angle), np.sin(angle)
-    R = np.array([[ca, -sa], [sa, ca]])
-    A = R @ np.diag([1 / a ** 2, 1 / b ** 2]) @ R.T
-    c = np.asarray(center, float)
-    q = np.array([A[0, 0], 2 * A[0, 1], A[1, 1], *(-2 * A @ c), c @ A @ c - 1])
-    return q / np.linalg.norm(q)
-
-
 def ellipse_from_conic(conic: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
     """(center (2,), semi-axes (a >= b), major-axis angle in (-pi/2, pi/2]) or None.
 
     Closed form of the 2 x 2 algebra (centre, eigenvalues and major-axis eigenvector of the
-    quadratic part), the same result as
-    :func:`rangesim.evaluate.ground_truth._conic_to_ellipse` of :func:`conic_matrix`.
+    quadratic part).
     """
     a, b, c, d, e, f = (float(v) for v in conic)
     if a < 0:

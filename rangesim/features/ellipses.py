@@ -9,7 +9,6 @@ import numpy as np
 from scipy import ndimage
 
 from rangesim.features.common import (
-    conic_from_ellipse,
     conic_normal_angle,
     edge_points,
     ellipse_from_conic,
@@ -108,29 +107,15 @@ def predict_ellipses(scan: Any, circles3d: list, world: bool = True) -> list[tup
     list of (name, conic (6,)) in pixel-centre coordinates; circles whose image is not an
     ellipse are left out.
     """
-    from rangesim.evaluate.ground_truth import _conic_to_ellipse
+    from rangesim.core.geometry import project_circle
 
-    K = scan.K
     inv = np.linalg.inv(np.asarray(scan.pose, float)) if world else np.eye(4)
     R, t = inv[:3, :3], inv[:3, 3]
-    Kc = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]]) @ K
     out = []
     for c in circles3d:
-        center = R @ np.asarray(c.center, float) + t
-        normal = R @ np.asarray(c.normal, float)
-        normal /= np.linalg.norm(normal)
-        helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
-        e1 = np.cross(normal, helper)
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(normal, e1)
-        Hm = Kc @ np.column_stack([c.radius * e1, c.radius * e2, center])
-        if abs(np.linalg.det(Hm)) < 1e-12:
-            continue
-        Hi = np.linalg.inv(Hm)
-        ell = _conic_to_ellipse(Hi.T @ np.diag([1.0, 1.0, -1.0]) @ Hi)
-        if ell is None:
-            continue
-        out.append((c.name, conic_from_ellipse(*ell)))
+        conic = project_circle(R @ np.asarray(c.center, float) + t, R @ np.asarray(c.normal, float), c.radius, scan.K)
+        if conic is not None and ellipse_from_conic(conic) is not None:
+            out.append((c.name, conic / (np.sign(conic[0]) * np.linalg.norm(conic))))  # a > 0
     return out
 
 
