@@ -188,6 +188,29 @@ def _visible(
     return vis, row, col
 
 
+def _clip_near(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Clip camera-frame segments to ``z >= NEAR_CLIP_MM``: (kept indices, new a, new b)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    za, zb = a[:, 2], b[:, 2]
+    keep = (za >= NEAR_CLIP_MM) | (zb >= NEAR_CLIP_MM)
+    crossing = keep & ((za < NEAR_CLIP_MM) | (zb < NEAR_CLIP_MM))
+    tc = np.zeros_like(za)
+    tc[crossing] = (NEAR_CLIP_MM - za[crossing]) / (zb[crossing] - za[crossing])
+    cut = a + tc[:, None] * (b - a)
+    a = np.where(((za < NEAR_CLIP_MM) & keep)[:, None], cut, a)
+    b = np.where(((zb < NEAR_CLIP_MM) & keep)[:, None], cut, b)
+    idx = np.flatnonzero(keep)
+    return idx, a[idx], b[idx]
+
+
+def _perspective_points(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """3D points at image fractions ``s`` of segments a-b (perspective-correct: s -> t)."""
+    za, zb = a[:, 2], b[:, 2]
+    t = s * za / ((1 - s) * zb + s * za)
+    return a + t[:, None] * (b - a)
+
+
 def _sample_segments(
     K: np.ndarray, a: np.ndarray, b: np.ndarray, shape: tuple[int, int], spacing: float = SAMPLE_SPACING_PX
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -212,19 +235,7 @@ def _sample_segments(
         Index of the segment each sample belongs to.
     """
     h, w = shape
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    # clip to the half-space in front of the camera
-    za, zb = a[:, 2], b[:, 2]
-    keep = (za >= NEAR_CLIP_MM) | (zb >= NEAR_CLIP_MM)
-    crossing = keep & ((za < NEAR_CLIP_MM) | (zb < NEAR_CLIP_MM))
-    tc = np.zeros_like(za)
-    tc[crossing] = (NEAR_CLIP_MM - za[crossing]) / (zb[crossing] - za[crossing])
-    cut = a + tc[:, None] * (b - a)
-    a2 = np.where(((za < NEAR_CLIP_MM) & keep)[:, None], cut, a)
-    b2 = np.where(((zb < NEAR_CLIP_MM) & keep)[:, None], cut, b)
-    idx = np.flatnonzero(keep)
-    a2, b2 = a2[idx], b2[idx]
+    idx, a2, b2 = _clip_near(a, b)
     if len(idx) == 0:
         return np.zeros((0, 3)), np.zeros(0, dtype=np.intp)
     ua, ub = _project(K, a2), _project(K, b2)
@@ -247,10 +258,7 @@ def _sample_segments(
     start = np.cumsum(n) - n
     frac = (np.arange(len(seg)) - start[seg]) / np.maximum(n[seg] - 1, 1)
     s = lo[seg] + frac * (hi[seg] - lo[seg])
-    za, zb = a2[seg, 2], b2[seg, 2]
-    t = s * za / ((1 - s) * zb + s * za)
-    pts = a2[seg] + t[:, None] * (b2[seg] - a2[seg])
-    return pts, idx[seg]
+    return _perspective_points(a2[seg], b2[seg], s), idx[seg]
 
 
 # ---------------------------------------------------------------------------------------
@@ -287,21 +295,10 @@ def _raster_segments(
         The pixel each sample marks (inside the image).
     """
     h, w = shape
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
     empty = (np.zeros((0, 3)), np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp))
-    za, zb = a[:, 2], b[:, 2]
-    keep = (za >= NEAR_CLIP_MM) | (zb >= NEAR_CLIP_MM)
-    crossing = keep & ((za < NEAR_CLIP_MM) | (zb < NEAR_CLIP_MM))
-    tc = np.zeros_like(za)
-    tc[crossing] = (NEAR_CLIP_MM - za[crossing]) / (zb[crossing] - za[crossing])
-    cut = a + tc[:, None] * (b - a)
-    a = np.where(((za < NEAR_CLIP_MM) & keep)[:, None], cut, a)
-    b = np.where(((zb < NEAR_CLIP_MM) & keep)[:, None], cut, b)
-    idx = np.flatnonzero(keep)
+    idx, a, b = _clip_near(a, b)
     if len(idx) == 0:
         return empty
-    a, b = a[idx], b[idx]
     ua, ub = _project(K, a), _project(K, b)
     d = ub - ua
     major = (np.abs(d[:, 1]) > np.abs(d[:, 0])).astype(np.intp)  # 0: x (columns), 1: y (rows)
@@ -327,9 +324,7 @@ def _raster_segments(
     pos[np.arange(len(seg)), minor[seg]] = np.floor(other)
     col, row = pos[:, 0], pos[:, 1]
     inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
-    zA, zB = a[seg, 2], b[seg, 2]
-    t = s * zA / ((1 - s) * zB + s * zA)
-    pts = a[seg] + t[:, None] * (b[seg] - a[seg])
+    pts = _perspective_points(a[seg], b[seg], s)
     return (pts[inside], idx[seg[inside]], row[inside].astype(np.intp), col[inside].astype(np.intp))
 
 
@@ -674,15 +669,9 @@ def ground_truth_features(
             continue
         a = np.array([R @ np.asarray(s.start, float) + t for s in segs])
         b = np.array([R @ np.asarray(s.end, float) + t for s in segs])
-        for i, s in enumerate(segs):
-            za, zb = a[i, 2], b[i, 2]
-            if max(za, zb) < NEAR_CLIP_MM:
-                continue
-            # clip to the front of the camera, then project the ends
-            aa, bb = a[i].copy(), b[i].copy()
-            if min(za, zb) < NEAR_CLIP_MM:
-                cut = aa + (NEAR_CLIP_MM - za) / (zb - za) * (bb - aa)
-                aa, bb = (cut, bb) if za < zb else (aa, cut)
+        front, a_front, b_front = _clip_near(a, b)  # the parts in front of the camera
+        for i, aa, bb in zip(front, a_front, b_front):
+            s = segs[i]
             ends = _project(Kc, np.stack([aa, bb]))
             pts, _ = _sample_segments(K, aa[None], bb[None], scan.shape, spacing_px)
             if len(pts):
