@@ -39,8 +39,10 @@ from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.cli.common import check_suffix, writing
 from rangesim.io import atomic_path, load_scan, save_scan
-from rangesim.sensor import load_sensor, preset_names, scan
+from rangesim.scene import load_scene
+from rangesim.sensor import intensity_image, load_sensor, preset_names, scan
 from rangesim.viz import save_preview
+from rangesim.viz.intensity import save_intensity_image
 
 PROG = "rangesim"
 DEFAULT_SENSOR = "white_scanner"
@@ -170,6 +172,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     check_suffix(out, SCAN_SUFFIXES, "scans")
     if preview is not None:
         check_suffix(preview, PREVIEW_SUFFIXES, "previews")
+    intensity = Path(args.intensity_image) if args.intensity_image else None
+    if intensity is not None:
+        check_suffix(intensity, PREVIEW_SUFFIXES + (".npy",), "intensity images")
     changes = dict(_parse_setting(text) for text in args.set)
     pose = _load_pose(Path(args.pose)) if args.pose else None
 
@@ -177,7 +182,25 @@ def cmd_scan(args: argparse.Namespace) -> int:
     sensor = load_sensor(args.sensor)
     if changes:
         sensor = sensor.with_params(changes)
-    result = scan(args.scene, sensor, pose=pose, seed=args.seed)
+    if args.keep_frames and sensor.mode != "rendered":
+        raise RangesimError("--keep-frames needs the rendered mode (--set mode=rendered, or "
+                            "mode = \"rendered\" in the sensor file)", source=sensor.source)
+    scene = load_scene(args.scene)
+    if args.keep_frames:
+        result, stack = scan(scene, sensor, pose=pose, seed=args.seed, keep_frames=True)
+    else:
+        result = scan(scene, sensor, pose=pose, seed=args.seed)
+    extras = []
+    if intensity is not None:
+        image = intensity_image(scene, sensor, pose=result.pose, seed=args.seed)
+        with writing(intensity):
+            save_intensity_image(image, intensity)
+        extras.append(str(intensity))
+    if args.keep_frames:
+        frames_path = out.with_name(out.stem + ".frames.npz")
+        with writing(frames_path):
+            stack.save(frames_path)
+        extras.append(str(frames_path))
     _save_outputs(result, out, preview)
     elapsed = time.perf_counter() - start
 
@@ -185,7 +208,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     total = h * w
     n_valid = int(np.count_nonzero(result.valid))
     invalid = ", ".join(f"{name} {n:,}" for name, n in _status_counts(result)[1:])
-    written = str(out) if preview is None else f"{out} and {preview}"
+    written = ", ".join([str(out)] + ([str(preview)] if preview else []) + extras)
     print(
         f"Scanned {args.scene} with {sensor.name} (seed {args.seed}): {w} x {h} px (W x H), "
         f"{n_valid:,} valid ({_percent(n_valid, total)}); {invalid}. "
@@ -260,6 +283,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "default: the scene's [view], or a pose framing the scene")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a sensor key, e.g. noise.sigma_px=0 (repeatable; TOML values)")
+    p.add_argument("--keep-frames", action="store_true",
+                   help="rendered mode: also write the raw frame stack to OUT's stem + .frames.npz")
+    p.add_argument("--intensity-image", metavar="PNG_OR_NPY",
+                   help="also render the white-light intensity image of the same view (.png or .npy)")
     p.set_defaults(func=cmd_scan)
 
     p = sub.add_parser("sensors", help="list the sensor presets",

@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rangesim.core.backend import mitsuba
+from rangesim.core.errors import RangesimError
+from rangesim.scene.materials import bsdf_dict
 
 if TYPE_CHECKING:
     from rangesim.scene.scene import Scene
@@ -58,11 +60,22 @@ def numpy_to_mitsuba_mesh(name: str, vertices: np.ndarray, faces: np.ndarray, bs
 
 
 def build_mitsuba_scene(scene: "Scene") -> MitsubaScene:
-    """Build the Mitsuba scene of ``scene``'s objects: one ``mi.Mesh`` per object."""
+    """Build the Mitsuba scene of ``scene``'s objects: one ``mi.Mesh`` per object.
+
+    Each mesh carries its object's BSDF (see :mod:`rangesim.scene.materials`): the
+    geometric scanner ignores it, the rendered scanner path-traces through it.
+    """
     mi = mitsuba()
-    shapes = [
-        numpy_to_mitsuba_mesh(f"object{k}", obj.mesh.vertices, obj.mesh.faces)
-        for k, obj in enumerate(scene.objects)
-    ]
-    mi_scene = mi.load_dict({"type": "scene", **{f"object{k}": s for k, s in enumerate(shapes)}})
+    shapes = []
+    for k, obj in enumerate(scene.objects):
+        try:
+            bsdf = mi.load_dict(bsdf_dict(obj.material, obj.albedo))
+        except Exception as exc:  # e.g. an unknown measured conductor name
+            raise RangesimError(f"object {obj.name!r}: bad material ({exc})".splitlines()[0],
+                                source=scene.source) from exc
+        shapes.append(numpy_to_mitsuba_mesh(f"object{k}", obj.mesh.vertices, obj.mesh.faces, bsdf=bsdf))
+    # uniform white room light: only the white-light intensity image uses it (the scanners
+    # cast their own rays and light the scene with the laser alone)
+    mi_scene = mi.load_dict({"type": "scene", "ambient": {"type": "constant", "radiance": 1.0},
+                             **{f"object{k}": s for k, s in enumerate(shapes)}})
     return MitsubaScene(mi_scene, shapes, mi.variant())

@@ -16,6 +16,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import look_at, object_transform
 from rangesim.core.tomlfile import check_keys, read_toml
 from rangesim.core.units import UNITS_MM
+from rangesim.scene.materials import check_material
 from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh, validate_mesh
 from rangesim.scene.primitives import make_primitive
 
@@ -275,7 +276,8 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
     )
     mesh = mesh.copy()
     mesh.apply_transform(matrix)
-    obj = SceneObject(name, mesh, albedo=albedo, source=origin, material=dict(t.get("material", {})))
+    material = check_material(t["material"], where, path) if "material" in t else {}
+    obj = SceneObject(name, mesh, albedo=albedo, source=origin, material=material)
     if "model" in t:
         obj.face_labels, obj.labels = built.face_labels, list(built.labels)
         if scale.shape == () or np.allclose(scale, scale.flat[0]):  # features survive similarity transforms

@@ -21,11 +21,17 @@ from rangesim.core.tomlfile import check_keys, read_toml
 PRESET_DIR = Path(__file__).resolve().parents[2] / "sensors"
 
 SWEEPS = ("rotating", "translating")
-MODES = ("geometric",)
+MODES = ("geometric", "rendered")
+#: sub-frame estimators of the rendered mode's spacetime peak
+PEAK_FITS = ("gaussian", "parabolic")
 
 #: every table and key a sensor accepts, with defaults (None: required)
 SCHEMA: dict[str, dict[str, Any]] = {
-    "camera": {"width": None, "height": None, "fov_deg": None, "aperture_mm": 5.0},
+    "camera": {
+        "width": None, "height": None, "fov_deg": None, "aperture_mm": 5.0,
+        "full_well_e": 20000.0,  # rendered mode: saturation level, electrons
+        "read_noise_e": 10.0,  # rendered mode: read noise, electrons rms
+    },
     "laser": {
         "baseline": None,
         "sweep": "rotating",
@@ -40,6 +46,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "quantization_px": 0.0,
         "min_signal": 0.0,
         "speckle_contrast": 0.0,
+    },
+    # rendered mode only (mode = "rendered"): see rangesim.sensor.rendered
+    "render": {
+        "frames": "auto",  # sweep positions; "auto": one per laser.step
+        "spp": 4,  # paths per pixel
+        "max_depth": 3,  # Mitsuba's convention: 2 = direct light only, 3 = one interreflection
+        "exposure_e": 4000.0,  # electrons at the stripe peak on the white reference target
+        "image_noise": True,  # shot, read and speckle noise on the frames
+        "peak": "gaussian",  # sub-frame peak estimator: gaussian or parabolic
     },
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
@@ -217,6 +232,29 @@ def _validate(params: dict[str, dict[str, Any]], source) -> None:
     for key in ("sigma_px", "quantization_px", "speckle_contrast"):
         _number(params, "noise", key, source, nonneg=True)
     _number(params, "noise", "min_signal", source, nonneg=True)
+    _number(params, "camera", "full_well_e", source, positive=True)
+    _number(params, "camera", "read_noise_e", source, nonneg=True)
+    _validate_render(params, source)
+
+
+def _validate_render(params: dict[str, dict[str, Any]], source) -> None:
+    render = params["render"]
+    if render["frames"] != "auto":
+        _number(params, "render", "frames", source, positive=True, integer=True)
+        if render["frames"] < 3:
+            raise RangesimError(f"render.frames must be at least 3 or \"auto\", got {render['frames']}",
+                                source=source)
+    _number(params, "render", "spp", source, positive=True, integer=True)
+    _number(params, "render", "max_depth", source, positive=True, integer=True)
+    if render["max_depth"] < 2:
+        raise RangesimError("render.max_depth must be at least 2 (2 = direct light only)", source=source)
+    _number(params, "render", "exposure_e", source, positive=True)
+    if not isinstance(render["image_noise"], bool):
+        raise RangesimError(f"render.image_noise must be true or false, got {render['image_noise']!r}",
+                            source=source)
+    if render["peak"] not in PEAK_FITS:
+        raise RangesimError(f"render.peak must be one of {', '.join(PEAK_FITS)}, got {render['peak']!r}",
+                            source=source)
 
 
 def preset_dirs() -> list[Path]:

@@ -55,3 +55,69 @@ def sheet_through(points, sweep: str, baseline: float, tilt_rad: float):
     else:
         raise ValueError(f"unknown sweep {sweep!r}")
     return source, normal
+
+
+def sheet_coordinate(points, sweep: str, baseline: float, tilt_rad: float):
+    """Sweep coordinate ``s`` of the sheet through each point, and the length per unit of ``s``.
+
+    The sweep is a family of sheets indexed by ``s``: the mirror angle for a rotating sweep
+    (radians, ``atan2(x - baseline, z)``: 0 along the optical axis), the signed offset
+    ``n . P`` of the translating sheet (mm). A point at distance ``d`` (mm) from the sheet
+    ``s'`` has ``d ~= lam * (s - s')`` with ``lam`` the distance from the mirror axis
+    (rotating, mm per radian) or 1 (translating).
+
+    Parameters
+    ----------
+    points : mi.Vector3f or (N, 3) ndarray
+        Points in the camera frame, mm. Dr.Jit and NumPy inputs both work.
+    sweep, baseline, tilt_rad
+        As in :func:`sheet_through`.
+
+    Returns
+    -------
+    s, lam : arrays of the input's kind, shape (N,)
+    """
+    import numpy as np
+
+    dx_is_numpy = isinstance(points, np.ndarray)
+    x, z = (points[:, 0], points[:, 2]) if dx_is_numpy else (points.x, points.z)
+    if sweep == "rotating":
+        dx = x - baseline
+        if dx_is_numpy:
+            return np.arctan2(dx, z), np.hypot(dx, z)
+        return dr.atan2(dx, z), dr.sqrt(dx * dx + z * z)
+    if sweep == "translating":
+        s = math.cos(tilt_rad) * x + math.sin(tilt_rad) * z
+        return s, (np.ones_like(s) if dx_is_numpy else dr.full(type(s), 1.0, dr.width(s)))
+    raise ValueError(f"unknown sweep {sweep!r}")
+
+
+def intersect_sheet(rays, s, sweep: str, baseline: float, tilt_rad: float):
+    """Points where camera rays meet the sheets ``s`` (NumPy).
+
+    Parameters
+    ----------
+    rays : (N, 3) ndarray
+        Camera-frame ray directions through the camera centre (any length).
+    s : (N,) ndarray
+        Sweep coordinate of the sheet per ray (see :func:`sheet_coordinate`).
+
+    Returns
+    -------
+    (N, 3) ndarray of points, mm; NaN where the ray runs parallel to its sheet.
+    """
+    import numpy as np
+
+    if sweep == "rotating":
+        # plane through L = (b, 0, 0) containing (sin s, 0, cos s) and y: normal (cos s, 0, -sin s)
+        normal = np.stack([np.cos(s), np.zeros_like(s), -np.sin(s)], axis=-1)
+        offset = normal[:, 0] * baseline
+    elif sweep == "translating":
+        normal = np.broadcast_to(np.array([math.cos(tilt_rad), 0.0, math.sin(tilt_rad)]), rays.shape)
+        offset = s
+    else:
+        raise ValueError(f"unknown sweep {sweep!r}")
+    denom = np.einsum("ij,ij->i", normal, rays)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(np.abs(denom) > 1e-9, offset / denom, np.nan)
+    return rays * t[:, None]

@@ -30,7 +30,8 @@ def default_pose(scene: Scene, sensor: Sensor) -> np.ndarray:
     return scene.framing_pose(distance)
 
 
-def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0) -> RangeScan:
+def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
+         keep_frames: bool = False):
     """Scan a scene with a range sensor.
 
     Parameters
@@ -45,10 +46,13 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0)
     seed : int
         Seed of the noise; the same seed gives the same scan, another seed changes only the
         noise.
+    keep_frames : bool
+        Rendered mode only: also return the raw frame stack
+        (:class:`rangesim.sensor.rendered.FrameStack`).
 
     Returns
     -------
-    RangeScan
+    RangeScan, or (RangeScan, FrameStack) with ``keep_frames``
 
     Examples
     --------
@@ -73,5 +77,11 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0)
     if sensor.mode == "geometric":
         from rangesim.sensor.geometric import scan_geometric
 
+        if keep_frames:
+            raise RangesimError("only the rendered mode has frames (set mode = \"rendered\")", source=sensor.source)
         return scan_geometric(scene, sensor, pose, int(seed))
+    if sensor.mode == "rendered":
+        from rangesim.sensor.rendered import scan_rendered
+
+        return scan_rendered(scene, sensor, pose, int(seed), keep_frames=keep_frames)
     raise RangesimError(f"sensor mode {sensor.mode!r} is not available", source=sensor.source)
