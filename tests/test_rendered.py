@@ -302,3 +302,22 @@ def test_cli_rendered_scan_with_frames_and_intensity(tmp_path):
     assert (tmp_path / "white.png").stat().st_size > 0
     assert main(["scan", str(mesh), "--out", str(tmp_path / "g.npz"), "--keep-frames"]) == 2
     assert not (tmp_path / "g.npz").exists()
+
+
+def test_diff_compares_the_two_modes(tmp_path):
+    from rangesim.cli.main import main
+    from rangesim.viz.scan_difference import depth_difference
+
+    scene = facing_plane()
+    geometric = rs.scan(scene, render_sensor(mode="geometric"), pose=FACING)
+    shifted = rs.scan(scene, render_sensor(mode="geometric"), pose=FACING)
+    shifted.depth = shifted.depth + 0.25
+    shifted.valid[0, :5] = False
+    difference, stats = depth_difference(geometric, shifted)
+    assert np.allclose(difference[shifted.valid], 0.25) and np.isnan(difference[0, :5]).all()
+    assert stats["only_a"] == 5 and stats["median_abs_mm"] == pytest.approx(0.25)
+    rs.save_scan(geometric, tmp_path / "a.npz")
+    rs.save_scan(rs.scan(scene, render_sensor(), pose=FACING), tmp_path / "b.npz")
+    assert main(["diff", str(tmp_path / "a.npz"), str(tmp_path / "b.npz"), "--out", str(tmp_path / "d.png")]) == 0
+    assert (tmp_path / "d.png").stat().st_size > 0
+    assert main(["diff", str(tmp_path / "a.npz"), str(tmp_path / "b.npz"), "--out", str(tmp_path / "d.jpg")]) == 2

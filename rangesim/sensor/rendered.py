@@ -31,6 +31,7 @@ cells; the path-tracing kernels are compiled for the first tile and reused for t
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import drjit as dr
@@ -162,6 +163,14 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     """
     check_backend()
     mi = mitsuba()
+    clock = {"start": time.perf_counter()}
+    timing = {"primary": 0.0, "paths": 0.0, "frames": 0.0, "noise": 0.0, "peaks": 0.0, "triangulation": 0.0}
+
+    def lap(stage: str) -> None:
+        now = time.perf_counter()
+        timing[stage] += now - clock["start"]
+        clock["start"] = now
+
     p = sensor.params
     h, w = sensor.height, sensor.width
     K = sensor.K
@@ -205,6 +214,8 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     speckle = pixel_speckle_contrast(np.linalg.norm(xyz_true, axis=1), p["noise"]["speckle_contrast"],
                                      p["laser"]["wavelength_nm"], p["camera"]["aperture_mm"], float(K[0, 0]))
 
+    lap("primary")
+
     # 2-4. tiles: paths -> frames -> noise -> peaks
     rows_per_tile = max(1, min(h, STACK_CELLS // max(1, w * n_frames)))
     # paths and noise draw from separate streams of the seed; a tile's noise depends on its first row only
@@ -226,6 +237,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
             n_pix = rows * w
             vertices = trace_stripe_paths(mscene, pose, K, w, row0, rows, int(render["spp"]),
                                           int(render["max_depth"]), laser, sensor.reference_distance, path_state)
+            lap("paths")
             counts = _kernel_counts(dr.kernel_history())
             if tile == 0:
                 first_tile = counts
@@ -234,9 +246,11 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
             sl = slice(row0 * w, row0 * w + n_pix)
             stack = splat_frames(vertices.pixel, vertices.weight, vertices.s, vertices.lam, n_pix,
                                  s0, ds, n_frames, sigma_mm)
+            lap("frames")
             rng = (np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(1, row0)))
                    if render["image_noise"] else None)
             electrons = expose(stack, exposure, full_well, read_noise, speckle[sl], rng)
+            lap("noise")
             peaks = find_peaks(electrons, render["peak"], full_well)
             position[sl] = peaks.position
             height[sl] = peaks.height
@@ -244,6 +258,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
             width_ok[sl] = peaks.saturated | (render["peak"] != "gaussian") | (peaks.sigma <= limit)
             if frames_out is not None:
                 frames_out[:, row0:row0 + rows, :] = electrons.T.reshape(n_frames, rows, w)
+            lap("peaks")
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, history_flag)
 
@@ -265,6 +280,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     valid = status == Status.VALID
     measured[~valid] = np.nan
 
+    lap("triangulation")
     normal = np.asarray(dr.ravel(normals)).reshape(h * w, 3)
     normal[~hit] = np.nan
     meta = {
@@ -281,6 +297,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
         "sweep_start": s0,
         "sweep_step": ds,
         "tiles": int(math.ceil(h / rows_per_tile)),
+        "seconds": {stage: round(value, 4) for stage, value in timing.items()},
         "kernels": {"first_tile": first_tile[0], "later_tiles": later[0], "later_cache_hits": later[1]},
         "recast_rays": hits.recast,
         "variant": mi.variant(),
