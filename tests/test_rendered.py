@@ -198,6 +198,23 @@ def test_polished_metal_sphere_drops_out_and_throws_outliers():
     assert matte[1] == 0 and geometric[1] == 0
 
 
+def test_reflectance_edge_biases_only_the_pixels_that_straddle_it():
+    # spacetime analysis (Curless & Levoy 1995): a pixel's temporal profile holds only its own
+    # footprint, so a bright/dark edge pulls the peak only where a footprint straddles it
+    def half(x0, x1, z=350.0):
+        return trimesh.Trimesh([[x0, -100, z], [x1, -100, z], [x1, 100, z], [x0, 100, z]], [[0, 1, 2], [0, 2, 3]],
+                               process=False)
+
+    scene = rs.load_scene([half(-200, 0.3), half(0.3, 200)])  # the edge 0.3 mm into column 32
+    scene.objects[0].albedo, scene.objects[1].albedo = 0.9, 0.05
+    result = rs.scan(scene, render_sensor(**{"render.spp": 16}), pose=FACING)
+    column_bias = np.nanmean(np.where(result.valid, result.depth - result.xyz_true[..., 2], np.nan), axis=0)
+    assert column_bias[32] < -0.5  # the bright sliver drags the peak towards it (and the laser)
+    assert np.all(np.abs(np.delete(column_bias, 32)) < 0.02)
+    geometric = rs.scan(scene, render_sensor(mode="geometric"), pose=FACING)
+    assert np.nanmax(np.abs(geometric.depth - geometric.xyz_true[..., 2])) < 0.01
+
+
 def test_tiles_reuse_compiled_kernels(monkeypatch):
     monkeypatch.setattr(rendered, "STACK_CELLS", 64 * 4 * 300)  # 4 rows per tile: 4 tiles
     result = rs.scan(facing_plane(), render_sensor(), pose=FACING)
