@@ -13,7 +13,7 @@ import rangesim as rs
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.sensor import rendered
-from rangesim.sensor.frames import FWHM_PER_SIGMA, expose, pixel_speckle_contrast, splat_frames
+from rangesim.sensor.frames import expose, pixel_speckle_contrast, splat_frames
 from rangesim.sensor.peaks import find_peaks
 from tests.conftest import make_sensor, plane
 

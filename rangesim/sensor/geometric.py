@@ -21,7 +21,6 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-import rangesim
 from rangesim.core.backend import mitsuba
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
@@ -29,13 +28,12 @@ from rangesim.sensor.config import Sensor
 from rangesim.sensor.laser import sheet_through
 from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.noise import peak_error_px, pixel_random, speckle_sigma_mm
-from rangesim.sensor.rays import cast_primary
+from rangesim.sensor.metadata import scan_meta
+from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import occluded
 from rangesim.sensor.signal import return_signal
 from rangesim.sensor.triangulation import depth_per_pixel, triangulate
 
-#: rays end at this multiple of the far limit: surfaces beyond are "no surface" (Mitsuba #61)
-MAX_RAY_FACTOR = 2.0
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined
 MIN_SHEET_ANGLE = 1e-3
 
@@ -49,17 +47,12 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     f = float(K[0, 0])
     near, far = p["range"]["near"], p["range"]["far"]
     mscene = scene.mitsuba_scene()
-    watertight = np.array([o.watertight for o in scene.objects])
 
     # 1. primary rays
-    corner = float(np.hypot(np.hypot(w / 2 / f, h / 2 / K[1, 1]), 1.0))  # longest ray of unit depth
-    hits = cast_primary(mscene, K, h, w, pose, MAX_RAY_FACTOR * far * corner, watertight)
+    view = camera_hits(scene, sensor, pose)
+    hits, points, normals = view.hits, view.points, view.normals
     hit = hits.hit
     rays = hits.rays
-    points = dr.normalize(rays) * hits.t  # camera frame, mm
-    to_camera = mi.Transform4f(np.linalg.inv(pose).tolist())
-    normals = dr.normalize(to_camera @ hits.normal_world)
-    normals = dr.select(dr.dot(normals, points) > 0, -normals, normals)  # visible side faces the camera
 
     # 2-5. laser geometry, shadows, signal, working range
     sources, sheet_n = sheet_through(points, p["laser"]["sweep"], p["laser"]["baseline"], sensor.tilt_rad)
@@ -103,21 +96,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     dr.eval(*outputs.values())
     arrays = {name: np.asarray(value) for name, value in outputs.items()}
 
-    meta = {
-        "sensor": sensor.to_dict(),
-        "sensor_source": sensor.source,
-        "mode": "geometric",
-        "seed": int(seed),
-        "rangesim_version": rangesim.__version__,
-        "K": K.tolist(),
-        "laser_origin": sensor.laser_origin.tolist(),
-        "scene": scene.source,
-        "objects": [o.name for o in scene.objects],
-        "peak_window_px": window,
-        "recast_rays": hits.recast,
-        "variant": mi.variant(),
-        "units": "mm",
-    }
+    meta = scan_meta(scene, sensor, seed, "geometric", peak_window_px=window, recast_rays=hits.recast)
     xyz = arrays["xyz"].reshape(h, w, 3)
     status_np = arrays["status"].astype(np.uint8).reshape(h, w)
     return RangeScan(

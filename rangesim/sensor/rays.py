@@ -122,3 +122,43 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
         dr.scatter(face, face2, sel, ok)
         dr.eval(t, p, n, part, face)
     return PrimaryHits(rays, t, p, n, part, face, recast)
+
+
+#: camera rays end at this multiple of the far limit: surfaces beyond are "no surface" (Mitsuba #61)
+MAX_RAY_FACTOR = 2.0
+
+
+@dataclass
+class CameraHits:
+    """The primary hits of a view in the camera frame (evaluated Dr.Jit arrays, N = H * W).
+
+    Attributes
+    ----------
+    hits : PrimaryHits
+    points : mi.Vector3f
+        Hit points, camera frame, mm (inf on a miss).
+    normals : mi.Vector3f
+        Unit geometric normals, camera frame, turned to face the camera.
+    """
+
+    hits: PrimaryHits
+    points: Any
+    normals: Any
+
+
+def camera_hits(scene, sensor, pose: np.ndarray) -> CameraHits:
+    """Cast the pixel-centre rays of ``sensor`` from ``pose`` (see :func:`cast_primary`).
+
+    Rays are as long as ``MAX_RAY_FACTOR`` times the far limit along the image corner's ray.
+    """
+    mi = mitsuba()
+    K, h, w = sensor.K, sensor.height, sensor.width
+    corner = float(np.hypot(np.hypot(w / 2 / K[0, 0], h / 2 / K[1, 1]), 1.0))  # longest ray of unit depth
+    watertight = np.array([o.watertight for o in scene.objects])
+    hits = cast_primary(scene.mitsuba_scene(), K, h, w, pose,
+                        MAX_RAY_FACTOR * sensor.params["range"]["far"] * corner, watertight)
+    points = dr.normalize(hits.rays) * hits.t
+    to_camera = mi.Transform4f(np.linalg.inv(pose).tolist())
+    normals = dr.normalize(to_camera @ hits.normal_world)
+    normals = dr.select(dr.dot(normals, points) > 0, -normals, normals)  # the visible side faces the camera
+    return CameraHits(hits, points, normals)

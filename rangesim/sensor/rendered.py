@@ -37,7 +37,6 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-import rangesim
 from rangesim.core.backend import mitsuba
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
@@ -46,7 +45,8 @@ from rangesim.sensor.config import Sensor
 from rangesim.sensor.frames import FWHM_PER_SIGMA, PROFILE_CUTOFF, expose, pixel_speckle_contrast, splat_frames
 from rangesim.sensor.laser import intersect_sheet, sheet_coordinate, sheet_through
 from rangesim.sensor.peaks import find_peaks
-from rangesim.sensor.rays import cast_primary
+from rangesim.sensor.metadata import scan_meta
+from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import occluded
 from rangesim.sensor.stripe_paths import trace_stripe_paths
 
@@ -62,7 +62,6 @@ MAX_WIDTH_RATIO = 2.5
 DETECTION_SIGMAS = 5.0
 #: oldest libLLVM known to lower Mitsuba's BSDF kernels (16 and older abort on llvm.maximum)
 MIN_LLVM = (19, 0, 0)
-MAX_RAY_FACTOR = 2.0
 
 
 @dataclass
@@ -178,15 +177,10 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     laser = {"sweep": p["laser"]["sweep"], "baseline": p["laser"]["baseline"], "tilt_rad": sensor.tilt_rad}
     render = p["render"]
     mscene = scene.mitsuba_scene()
-    watertight = np.array([o.watertight for o in scene.objects])
 
     # 1. ground truth through the pixel centres, and the laser's direct reach
-    corner = float(np.hypot(np.hypot(w / 2 / K[0, 0], h / 2 / K[1, 1]), 1.0))
-    hits = cast_primary(mscene, K, h, w, pose, MAX_RAY_FACTOR * far * corner, watertight)
-    points = dr.normalize(hits.rays) * hits.t
-    to_camera = mi.Transform4f(np.linalg.inv(pose).tolist())
-    normals = dr.normalize(to_camera @ hits.normal_world)
-    normals = dr.select(dr.dot(normals, points) > 0, -normals, normals)
+    view = camera_hits(scene, sensor, pose)
+    hits, points, normals = view.hits, view.points, view.normals
     sources, _ = sheet_through(points, laser["sweep"], laser["baseline"], laser["tilt_rad"])
     facing = dr.dot(normals, sources - points) > 0
     in_range = hits.hit & (points.z >= near) & (points.z <= far)
@@ -283,26 +277,12 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     lap("triangulation")
     normal = np.asarray(dr.ravel(normals)).reshape(h * w, 3)
     normal[~hit] = np.nan
-    meta = {
-        "sensor": sensor.to_dict(),
-        "sensor_source": sensor.source,
-        "mode": "rendered",
-        "seed": int(seed),
-        "rangesim_version": rangesim.__version__,
-        "K": K.tolist(),
-        "laser_origin": sensor.laser_origin.tolist(),
-        "scene": scene.source,
-        "objects": [o.name for o in scene.objects],
-        "frames": n_frames,
-        "sweep_start": s0,
-        "sweep_step": ds,
-        "tiles": int(math.ceil(h / rows_per_tile)),
-        "seconds": {stage: round(value, 4) for stage, value in timing.items()},
-        "kernels": {"first_tile": first_tile[0], "later_tiles": later[0], "later_cache_hits": later[1]},
-        "recast_rays": hits.recast,
-        "variant": mi.variant(),
-        "units": "mm",
-    }
+    meta = scan_meta(
+        scene, sensor, seed, "rendered", frames=n_frames, sweep_start=s0, sweep_step=ds,
+        tiles=int(math.ceil(h / rows_per_tile)), seconds={stage: round(v, 4) for stage, v in timing.items()},
+        kernels={"first_tile": first_tile[0], "later_tiles": later[0], "later_cache_hits": later[1]},
+        recast_rays=hits.recast,
+    )
     xyz = measured.reshape(h, w, 3).astype(np.float32)
     result = RangeScan(
         depth=xyz[..., 2].copy(),

@@ -31,7 +31,7 @@ def default_pose(scene: Scene, sensor: Sensor) -> np.ndarray:
 
 
 def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
-         keep_frames: bool = False):
+         keep_frames: bool = False) -> "RangeScan | tuple[RangeScan, Any]":
     """Scan a scene with a range sensor.
 
     Parameters
