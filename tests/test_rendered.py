@@ -113,9 +113,10 @@ def test_pixel_speckle_contrast_averages_grains_over_the_footprint():
 
 
 # -- whole scans ------------------------------------------------------------------------------
-def test_plane_rendered_and_geometric_agree():
+@pytest.mark.parametrize("sweep", ["rotating", "translating"])
+def test_plane_rendered_and_geometric_agree(sweep):
     scene = facing_plane()
-    sensor = render_sensor()
+    sensor = render_sensor(**{"laser.sweep": sweep})
     exact = rs.scan(scene, sensor, pose=FACING)
     geometric = rs.scan(scene, sensor.with_params({"mode": "geometric"}), pose=FACING)
     assert exact.valid.all() and geometric.valid.all()
