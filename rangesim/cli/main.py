@@ -56,7 +56,7 @@ EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
 COMMAND_MODULES: tuple[str, ...] = (
     "rangesim.cli.cad_commands", "rangesim.cli.curvature_commands", "rangesim.cli.points_commands",
     "rangesim.cli.edge_commands", "rangesim.cli.feature_commands", "rangesim.cli.volume_commands",
-    "rangesim.cli.compare_commands", "rangesim.cli.diff_commands",
+    "rangesim.cli.compare_commands", "rangesim.cli.experiment_commands", "rangesim.cli.diff_commands",
 )
 
 

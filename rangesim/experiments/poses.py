@@ -1,0 +1,254 @@
+"""Random camera poses on a spherical cap around a part, for sweeps and datasets.
+
+A pose table (the ``[pose]`` table of a sweep file, the ``--cap-deg`` / ``--distance`` /
+``--axis`` / ``--target`` options of ``rangesim dataset``) has these keys, all optional:
+
+============== ============================================================================
+key            meaning
+============== ============================================================================
+target         (3,) world point the camera looks at, mm; default: the centre of the
+               bounding box of the scene's first object (the part; scene files list it
+               first)
+axis           (3,) world direction of the cap's axis, from the target towards the camera;
+               default: towards the scene's ``[view]`` position, else (0, -1, 1.4)
+elevation_deg  axis elevation above the world xy plane, degrees (with ``azimuth_deg``,
+               instead of ``axis``)
+azimuth_deg    axis azimuth from world +x towards +y, degrees
+cap_deg        half-angle of the cap, degrees, 0..180 (0: always on the axis);
+               default :data:`DEFAULT_CAP_DEG`
+distance       camera-to-target distance, mm: one number, or [min, max] drawn uniformly;
+               default [near + r, far - r] of the sensor's working range, r the part's
+               bounding radius (the distance that frames the part when that interval is
+               empty)
+============== ============================================================================
+
+Directions are uniform in solid angle over the cap: the polar angle theta from the axis has
+cos(theta) uniform in [cos(cap), 1] and the azimuth phi is uniform in [0, 2 pi). The camera
+sits at ``target + distance * direction`` and looks at the target with world +z up (+y when
+the direction is within 0.06 degrees of vertical).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from rangesim.core.errors import RangesimError
+from rangesim.core.geometry import look_at
+
+#: keys a pose table accepts
+POSE_KEYS = ("target", "axis", "elevation_deg", "azimuth_deg", "cap_deg", "distance")
+#: default half-angle of the cap of view directions, degrees
+DEFAULT_CAP_DEG = 30.0
+#: direction towards the camera when the scene has no [view] (as Scene.framing_pose)
+FALLBACK_AXIS = (0.0, -1.0, 1.4)
+
+
+@dataclass(frozen=True)
+class ViewSample:
+    """One camera pose drawn from a cap.
+
+    Attributes
+    ----------
+    pose : (4, 4) float64
+        Camera-to-world transform (OpenCV camera axes).
+    distance_mm : float
+        Camera centre to target, mm.
+    polar_deg : float
+        Angle between the viewing direction (target to camera) and the cap axis, degrees.
+    elevation_deg, azimuth_deg : float
+        Elevation above the world xy plane and azimuth from +x towards +y of the direction
+        from the target to the camera, degrees.
+    target : (3,) float64
+        The point looked at, world mm.
+    """
+
+    pose: np.ndarray
+    distance_mm: float
+    polar_deg: float
+    elevation_deg: float
+    azimuth_deg: float
+    target: np.ndarray
+
+
+def _vec3(value: Any, key: str, source: Any) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        v = np.empty(0)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise RangesimError(f"pose.{key} must be 3 finite numbers, got {value!r}", source=source)
+    return v
+
+
+def _number(value: Any, key: str, source: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise RangesimError(f"pose.{key} must be a number, got {value!r}", source=source)
+    if not math.isfinite(float(value)):
+        raise RangesimError(f"pose.{key} must be finite, got {value!r}", source=source)
+    return float(value)
+
+
+def check_pose_table(table: Mapping[str, Any], source: Any = None) -> dict[str, Any]:
+    """Validate a pose table (see the module docstring) and return it with plain values.
+
+    Raises
+    ------
+    RangesimError
+        Unknown keys, wrong types or shapes, a cap outside 0..180 degrees, a non-positive
+        or inverted distance range, ``axis`` together with ``elevation_deg``/``azimuth_deg``.
+    """
+    unknown = sorted(set(table) - set(POSE_KEYS))
+    if unknown:
+        raise RangesimError(f"unknown pose key(s) {', '.join(unknown)}; known: {', '.join(POSE_KEYS)}",
+                            source=source)
+    out: dict[str, Any] = {}
+    for key in ("target", "axis"):
+        if key in table:
+            v = _vec3(table[key], key, source)
+            if key == "axis" and np.linalg.norm(v) == 0:
+                raise RangesimError("pose.axis must not be zero", source=source)
+            out[key] = v.tolist()
+    angles = [k for k in ("elevation_deg", "azimuth_deg") if k in table]
+    if angles and "axis" in table:
+        raise RangesimError("give pose.axis or pose.elevation_deg/azimuth_deg, not both", source=source)
+    for key in angles:
+        out[key] = _number(table[key], key, source)
+    if "elevation_deg" in out and not -90.0 <= out["elevation_deg"] <= 90.0:
+        raise RangesimError(f"pose.elevation_deg must lie in -90..90, got {out['elevation_deg']}", source=source)
+    if "cap_deg" in table:
+        cap = _number(table["cap_deg"], "cap_deg", source)
+        if not 0.0 <= cap <= 180.0:
+            raise RangesimError(f"pose.cap_deg must lie in 0..180, got {cap}", source=source)
+        out["cap_deg"] = cap
+    if "distance" in table:
+        d = table["distance"]
+        if isinstance(d, (list, tuple)):
+            if len(d) != 2:
+                raise RangesimError(f"pose.distance must be a number or [min, max], got {d!r}", source=source)
+            lo, hi = (_number(x, "distance", source) for x in d)
+        else:
+            lo = hi = _number(d, "distance", source)
+        if lo <= 0 or hi < lo:
+            raise RangesimError(f"pose.distance must be positive with min <= max, got {d!r}", source=source)
+        out["distance"] = [lo, hi]
+    return out
+
+
+def axis_from_angles(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    """Unit world direction at an elevation above the xy plane and an azimuth from +x to +y."""
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+
+def resolve_pose_table(table: Mapping[str, Any], scene: Any, sensor: Any) -> dict[str, Any]:
+    """Fill in a checked pose table's defaults from the scene and the sensor.
+
+    Parameters
+    ----------
+    table : mapping
+        Output of :func:`check_pose_table`.
+    scene : Scene
+    sensor : Sensor
+
+    Returns
+    -------
+    dict
+        ``target`` (3,), ``axis`` (3,) unit, ``cap_deg`` float, ``distance`` [min, max] (mm).
+    """
+    part = scene.objects[0].mesh
+    lo_b, hi_b = np.asarray(part.bounds[0], float), np.asarray(part.bounds[1], float)
+    target = np.asarray(table.get("target", (lo_b + hi_b) / 2), dtype=np.float64)
+    if "axis" in table:
+        axis = np.asarray(table["axis"], dtype=np.float64)
+    elif "elevation_deg" in table or "azimuth_deg" in table:
+        default = _default_axis(scene, target)
+        el0 = math.degrees(math.asin(np.clip(default[2], -1, 1)))
+        az0 = math.degrees(math.atan2(default[1], default[0]))
+        axis = axis_from_angles(table.get("elevation_deg", el0), table.get("azimuth_deg", az0))
+    else:
+        axis = _default_axis(scene, target)
+    axis = axis / np.linalg.norm(axis)
+    if "distance" in table:
+        distance = [float(x) for x in table["distance"]]
+    else:
+        radius = float(np.linalg.norm(part.vertices - target, axis=1).max())
+        near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
+        lo, hi = near + radius, far - radius
+        if hi < lo:
+            from rangesim.sensor import default_pose  # the distance that frames the scene
+
+            d = float(np.linalg.norm(default_pose(scene, sensor)[:3, 3] - target))
+            lo = hi = d
+        distance = [float(lo), float(hi)]
+    return {"target": target.tolist(), "axis": axis.tolist(),
+            "cap_deg": float(table.get("cap_deg", DEFAULT_CAP_DEG)), "distance": distance}
+
+
+def _default_axis(scene: Any, target: np.ndarray) -> np.ndarray:
+    if scene.view is not None:
+        d = np.asarray(scene.view)[:3, 3] - target
+        if np.linalg.norm(d) > 0:
+            return d / np.linalg.norm(d)
+    d = np.asarray(FALLBACK_AXIS, dtype=np.float64)
+    return d / np.linalg.norm(d)
+
+
+def cap_frame(axis: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation whose third column is the unit ``axis`` (first two: any orthonormal pair)."""
+    z = np.asarray(axis, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def cap_directions(u: np.ndarray, v: np.ndarray, axis: np.ndarray, cap_deg: float) -> np.ndarray:
+    """Unit directions uniform in solid angle over a cap, from uniform numbers in [0, 1).
+
+    Parameters
+    ----------
+    u, v : (N,) float arrays in [0, 1)
+        ``cos(theta) = 1 - u (1 - cos(cap))`` and ``phi = 2 pi v``.
+    axis : (3,) array
+        The cap's axis (normalised here).
+    cap_deg : float
+        Half-angle of the cap, degrees.
+
+    Returns
+    -------
+    (N, 3) float64 unit vectors within ``cap_deg`` of ``axis``.
+    """
+    cos_t = 1.0 - np.asarray(u, dtype=np.float64) * (1.0 - math.cos(math.radians(cap_deg)))
+    sin_t = np.sqrt(np.clip(1.0 - cos_t * cos_t, 0.0, None))
+    phi = 2.0 * np.pi * np.asarray(v, dtype=np.float64)
+    local = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
+    return local @ cap_frame(axis).T
+
+
+def sample_view(resolved: Mapping[str, Any], rng: np.random.Generator) -> ViewSample:
+    """Draw one pose from a resolved pose table (:func:`resolve_pose_table`).
+
+    Three uniform numbers are drawn from ``rng`` whatever the table says (polar, azimuth,
+    distance), so the same generator state gives the same direction with another distance
+    range, and the same distance fraction with another cap.
+    """
+    u, v, w = rng.random(3)
+    target = np.asarray(resolved["target"], dtype=np.float64)
+    axis = np.asarray(resolved["axis"], dtype=np.float64)
+    direction = cap_directions(np.array([u]), np.array([v]), axis, resolved["cap_deg"])[0]
+    lo, hi = resolved["distance"]
+    distance = float(lo + w * (hi - lo))
+    position = target + distance * direction
+    up = (0.0, 0.0, 1.0) if abs(direction[2]) < 1.0 - 5e-7 else (0.0, 1.0, 0.0)
+    pose = look_at(position, target, up=up)
+    polar = math.degrees(math.acos(float(np.clip(direction @ (axis / np.linalg.norm(axis)), -1, 1))))
+    return ViewSample(
+        pose=pose, distance_mm=distance, polar_deg=polar,
+        elevation_deg=math.degrees(math.asin(float(np.clip(direction[2], -1, 1)))),
+        azimuth_deg=math.degrees(math.atan2(direction[1], direction[0])),
+        target=target,
+    )

@@ -1,0 +1,145 @@
+"""``run_sweep``: every task of a sweep file, resumably, then the table and the plots."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rangesim.core.errors import RangesimError
+from rangesim.experiments.executors import Executor, progress_bar
+from rangesim.experiments.grid import SweepTask, plan_sweep
+from rangesim.experiments.results import (
+    build_table, scan_path, task_path, write_json, write_table, write_task_file,
+)
+from rangesim.experiments.sweep_file import SweepSpec, load_sweep
+from rangesim.experiments.tasks import run_sweep_task
+
+
+@dataclass
+class SweepRun:
+    """What :func:`run_sweep` did.
+
+    Attributes
+    ----------
+    out : Path
+        The output folder.
+    table : pandas.DataFrame
+        The results (also in ``out/results.parquet`` and ``.csv``).
+    n_tasks, n_run, n_reused : int
+        Tasks in the sweep, run now, and found finished from an earlier run.
+    seconds : float
+        Wall time of this call.
+    executor : str
+        Where the tasks ran.
+    files : list of Path
+        Table and plot files written.
+    """
+
+    out: Path
+    table: Any
+    n_tasks: int
+    n_run: int
+    n_reused: int
+    seconds: float
+    executor: str
+    files: list[Path] = field(default_factory=list)
+
+
+def _todo(tasks: list[SweepTask], out: Path, keep_scans: bool) -> list[SweepTask]:
+    return [t for t in tasks
+            if not task_path(out, t.key).is_file() or (keep_scans and not scan_path(out, t.key).is_file())]
+
+
+def _describe_error(exc: BaseException) -> str:
+    if isinstance(exc, RangesimError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
+
+
+def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: bool = False,
+              workers: int | None = None, scheduler: str | None = None, progress: bool | None = None,
+              plots: bool = True) -> SweepRun:
+    """Run a sweep: every task not finished yet, then the results table and plots.
+
+    Parameters
+    ----------
+    sweep : str, Path or SweepSpec
+        A sweep file (:mod:`rangesim.experiments.sweep_file`) or one already loaded.
+    out : str or Path
+        Output folder (created); see :mod:`rangesim.experiments.results` for its layout.
+    keep_scans : bool
+        Also write every scan to ``out/scans/<key>.exr``.
+    workers : int, optional
+        Local worker processes (default: the cores available); 0 runs in this process.
+    scheduler : str, optional
+        ``local:N`` (a Dask LocalCluster of N workers) or ``tcp://HOST:PORT`` (a running
+        Dask scheduler); default: the local process pool.
+    progress : bool, optional
+        Progress bar on stderr; default: when stderr is a terminal.
+    plots : bool
+        Draw the plots (F1 against SNR, F1 against each swept parameter).
+
+    Returns
+    -------
+    SweepRun
+
+    Raises
+    ------
+    RangesimError
+        A bad sweep file or output folder; tasks that failed (the others are kept: a rerun
+        only retries the failed ones).
+    """
+    start = time.perf_counter()
+    spec = sweep if isinstance(sweep, SweepSpec) else load_sweep(sweep)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise RangesimError("output must be a directory", source=out)
+    tasks = plan_sweep(spec, keep_scans=keep_scans)
+    todo = _todo(tasks, out, keep_scans)
+    executor = Executor(workers, scheduler, max_tasks=len(todo))  # checks the options before any file
+    write_json(out / "sweep.json", _provenance(spec, len(tasks)))
+    failures: list[tuple[SweepTask, BaseException]] = []
+    where = executor.describe() if todo else "nowhere (every task was finished)"
+    if todo:
+        with executor, progress_bar(len(tasks), len(tasks) - len(todo), f"sweep {spec.name}", progress) as bar:
+            for i, result, error in executor.run(run_sweep_task, [t.payload for t in todo]):
+                task = todo[i]
+                if error is not None:
+                    failures.append((task, error))
+                else:
+                    if result["scan"] is not None:
+                        from rangesim.io import save_scan
+
+                        save_scan(result["scan"], scan_path(out, task.key))
+                    write_task_file(out, task, result["rows"])  # last: the task counts as done
+                bar.update(1)
+    if failures:
+        task, error = min(failures, key=lambda f: f[0].index)
+        shown = ", ".join(f"{k}={v}" for k, v in task.columns.items() if k != "seed")
+        raise RangesimError(
+            f"{len(failures)} of {len(todo)} tasks failed; first ({shown}): {_describe_error(error)}; "
+            f"finished tasks are kept, rerun to retry the others", source=spec.path)
+    table = build_table(tasks, out)
+    files = write_table(table, out)
+    if plots and len(table):
+        from rangesim.viz.sweep_plots import save_sweep_plots
+
+        files += save_sweep_plots(table, spec.swept_keys, out / "plots", title=spec.name,
+                                  tolerance_px=spec.tolerance_px)
+    return SweepRun(out, table, len(tasks), len(todo) - len(failures), len(tasks) - len(todo),
+                    time.perf_counter() - start, where, files)
+
+
+def _provenance(spec: SweepSpec, n_tasks: int) -> dict[str, Any]:
+    import rangesim
+
+    return {
+        "sweep": str(spec.path), "name": spec.name, "description": spec.description,
+        "rangesim_version": rangesim.__version__, "tasks": n_tasks,
+        "scenes": [{"label": s.label, "path": s.path, "sha1": s.sha1} for s in spec.scenes],
+        "sensors": [{"label": s.label, "sensor": s.data} for s in spec.sensors],
+        "grid": spec.grid, "set": spec.fixed, "pose": spec.pose, "views": spec.views,
+        "repeats": spec.repeats, "seed": spec.seed, "detectors": spec.detectors,
+        "tolerance_px": spec.tolerance_px, "crease_deg": spec.crease_deg, "snr_window": spec.snr_window,
+    }

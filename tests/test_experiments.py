@@ -1,0 +1,436 @@
+"""Sweeps, datasets, SNR and the executors of ``rangesim.experiments``.
+
+Kept small and fast: the sweeps scan a box on a floor with a 64 x 48 camera (a few
+milliseconds a scan), so most of the time goes into starting worker processes (a spawned
+pool, a Dask LocalCluster on 127.0.0.1, a ``rangesim sweep`` subprocess killed with SIGKILL).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.cli.main import main
+from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
+from rangesim.experiments import SyntheticDataset, edge_snr, load_sweep, make_dataset, run_sweep
+from rangesim.experiments.grid import derive_seed, plan_sweep, task_key
+from rangesim.experiments.poses import cap_directions
+from rangesim.experiments.results import TASKS_DIR, read_table
+from rangesim.experiments.snr import depth_noise, slope_noise_factor
+from rangesim.experiments.tasks import TIMING_COLUMNS
+
+REPO = Path(__file__).resolve().parents[1]
+
+SCENE_TOML = """\
+units = "mm"
+
+[[object]]
+name = "box"
+primitive = "box"
+size = [120, 90, 50]
+translate = [0, 0, 25]
+albedo = 0.6
+
+[[object]]
+name = "ground"
+primitive = "plane"
+size = [1200, 1200]
+albedo = 0.3
+
+[view]
+position = [0, -250, 380]
+look_at = [0, 0, 20]
+"""
+
+SENSOR_TOML = """\
+name = "tiny"
+[camera]
+width = 64
+height = 48
+fov_deg = 40.0
+[laser]
+baseline = 150.0
+[range]
+near = 100.0
+far = 1000.0
+[noise]
+sigma_px = 0.1
+quantization_px = 0.0625
+"""
+
+SWEEP_TOML = """\
+name = "tiny_sweep"
+scenes = ["scene.toml"]
+sensors = ["tiny.toml"]
+views = 2
+seed = 7
+
+[detectors.gradient]
+jump_clearance = 2
+
+[detectors.normal]
+
+[detectors.pcl_organized]
+
+[pose]
+cap_deg = 25
+distance = [350, 450]
+
+[grid]
+"noise.sigma_px" = [0.05, 0.5]
+"object.box.albedo" = [0.6, 0.9]
+"""
+
+
+@pytest.fixture(scope="module")
+def sweep_dir(tmp_path_factory) -> Path:
+    """A folder with scene.toml, tiny.toml (sensor) and sweep.toml (8 tasks)."""
+    d = tmp_path_factory.mktemp("sweep")
+    (d / "scene.toml").write_text(SCENE_TOML)
+    (d / "tiny.toml").write_text(SENSOR_TOML)
+    (d / "sweep.toml").write_text(SWEEP_TOML)
+    return d
+
+
+@pytest.fixture(scope="module")
+def serial_run(sweep_dir):
+    """The sweep run in this process (workers=0): the reference table."""
+    return run_sweep(sweep_dir / "sweep.toml", sweep_dir / "serial", workers=0, progress=False)
+
+
+def _comparable(table):
+    return table.drop(columns=[c for c in TIMING_COLUMNS if c in table.columns]).reset_index(drop=True)
+
+
+def _assert_same_results(a, b) -> None:
+    import pandas as pd
+
+    pd.testing.assert_frame_equal(_comparable(a), _comparable(b), check_exact=True)
+
+
+# -- SNR -----------------------------------------------------------------------------------
+def _synthetic(z_true: np.ndarray, normals: np.ndarray, f: float, sigma: float, seed: int = 0) -> rs.RangeScan:
+    """A RangeScan of a given noise-free depth image: pinhole K, Gaussian depth noise sigma (mm)."""
+    h, w = z_true.shape
+    K = np.array([[f, 0, w / 2], [0, f, h / 2], [0, 0, 1.0]])
+    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    ray = np.stack([(jj - w / 2) / f, (ii - h / 2) / f, np.ones_like(jj)], axis=-1)
+    depth = z_true + np.random.default_rng(seed).normal(0.0, sigma, z_true.shape)
+    zeros = np.zeros((h, w), np.int32)
+    return rs.RangeScan(
+        depth=depth, xyz=ray * depth[..., None], valid=np.ones((h, w), bool), normal=normals,
+        intensity=np.ones((h, w)), part=zeros, face=zeros, status=np.zeros((h, w), np.uint8),
+        meta={"K": K.tolist()}, xyz_true=ray * z_true[..., None],
+    )
+
+
+def test_snr_of_a_jump_is_step_over_depth_noise():
+    h, w, sigma = 64, 64, 0.05
+    z = np.where(np.arange(w)[None, :] < w // 2, 500.0, 520.0) * np.ones((h, 1))
+    normals = np.broadcast_to([0.0, 0.0, -1.0], (h, w, 3)).copy()
+    labels = np.zeros((h, w), np.uint8)
+    labels[:, w // 2 - 1] = EdgeLabel.JUMP  # the near side
+    scan = _synthetic(z, normals, 100.0, sigma)
+    sigma_z, sigma_fp = depth_noise(scan)
+    assert sigma_z == pytest.approx(sigma, rel=0.05)
+    assert sigma_fp == pytest.approx(sigma / (510.0 / 100.0), rel=0.06)
+    snr = edge_snr(scan, labels)
+    assert snr.snr_jump == pytest.approx(20.0 / sigma, rel=0.05)
+    assert snr.snr == snr.snr_jump and snr.n_jump == h and snr.n_crease == 0
+    assert math.isnan(snr.snr_crease)
+    assert np.isnan(snr.per_pixel[labels == 0]).all()
+    noise_free = edge_snr(_synthetic(z, normals, 100.0, 0.0), labels)
+    assert math.isinf(noise_free.snr_jump) and noise_free.sigma_z == 0.0
+
+
+def test_snr_of_a_crease_is_slope_change_over_slope_noise():
+    """A roof z = z0 + s X (X < 0) and z0 - s X (X > 0) seen head-on: the slope changes by
+    2 s; the slope of a k-pixel least-squares fit has noise sigma_fp sqrt(12 / (k (k^2 - 1)))."""
+    h, w, f, z0, s, sigma = 64, 64, 100.0, 500.0, 0.3, 0.05
+    xr = (np.arange(w) + 0.5 - w / 2) / f  # x' of each column
+    slope = np.where(xr < 0, s, -s)
+    z_row = z0 / (1.0 - slope * xr)  # z = z0 + slope X on the ray X = z x'
+    z = np.broadcast_to(z_row, (h, w)).copy()
+    n = np.stack([slope, np.zeros(w), -np.ones(w)], axis=-1) / np.sqrt(1 + s * s)
+    normals = np.broadcast_to(n, (h, w, 3)).copy()
+    labels = np.zeros((h, w), np.uint8)
+    labels[:, w // 2 - 1] = EdgeLabel.CONVEX
+    scan = _synthetic(z, normals, f, sigma)
+    for k in (2, 3, 5):
+        snr = edge_snr(scan, labels, window=k)
+        sigma_fp = sigma / (z0 / f)
+        expected = 2 * s / (math.sqrt(2) * sigma_fp * math.sqrt(12 / (k * (k * k - 1))))
+        assert snr.snr_crease == pytest.approx(expected, rel=0.06), k
+        assert snr.n_crease == h and math.isnan(snr.snr_jump)
+
+
+def test_slope_noise_factor_matches_least_squares():
+    rng = np.random.default_rng(1)
+    for k in (2, 3, 7):
+        x = np.arange(k, dtype=float)
+        y = rng.normal(size=(40000, k))
+        slopes = (y * (x - x.mean())).sum(axis=1) / ((x - x.mean()) ** 2).sum()
+        assert slopes.std() == pytest.approx(slope_noise_factor(k), rel=0.02)
+
+
+def test_measured_depth_noise_follows_the_triangulation_model():
+    """A plane head-on at 400 mm: sigma_z = z^2 sigma_u / (f b) on the axis."""
+    from tests.conftest import make_sensor, plane, top_down_pose
+
+    sensor = make_sensor(**{"noise.sigma_px": 0.3})
+    scan = rs.scan([plane()], sensor, pose=top_down_pose(400.0), seed=3)
+    sigma_z, _ = depth_noise(scan)
+    expected = 400.0 ** 2 * 0.3 / (sensor.focal_px * 150.0)
+    assert sigma_z == pytest.approx(expected, rel=0.15)
+
+
+# -- poses, keys, seeds --------------------------------------------------------------------
+def test_cap_directions_are_uniform_in_solid_angle():
+    rng = np.random.default_rng(0)
+    axis = np.array([0.2, -1.0, 1.4])
+    d = cap_directions(rng.random(20000), rng.random(20000), axis, 40.0)
+    cos_t = d @ (axis / np.linalg.norm(axis))
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    assert cos_t.min() >= math.cos(math.radians(40.0)) - 1e-12
+    # cos(theta) uniform on [cos 40, 1]: mean and spread of a uniform distribution
+    lo = math.cos(math.radians(40.0))
+    assert cos_t.mean() == pytest.approx((1 + lo) / 2, abs=0.003)
+    assert cos_t.std() == pytest.approx((1 - lo) / math.sqrt(12), rel=0.02)
+
+
+def test_keys_and_seeds_derive_from_parameters(sweep_dir):
+    spec = load_sweep(sweep_dir / "sweep.toml")
+    tasks = plan_sweep(spec)
+    assert len(tasks) == spec.n_tasks == 8
+    assert len({t.key for t in tasks}) == 8 and len({t.payload["noise_seed"] for t in tasks}) == 8
+    again = plan_sweep(load_sweep(sweep_dir / "sweep.toml"))
+    assert [t.key for t in again] == [t.key for t in tasks]
+    # the same views at every noise level (paired comparison), other noise
+    by = {(t.columns["noise.sigma_px"], t.columns["object.box.albedo"], t.columns["view"]): t for t in tasks}
+    a, b = by[(0.05, 0.6, 1)], by[(0.5, 0.6, 1)]
+    assert a.payload["pose_seed"] == b.payload["pose_seed"]
+    assert a.payload["noise_seed"] != b.payload["noise_seed"]
+    assert derive_seed(7, {"x": 1}) == derive_seed(7, {"x": 1}) != derive_seed(8, {"x": 1})
+    assert task_key({"a": 1, "b": [1, 2]}) == task_key({"b": [1, 2], "a": 1})
+
+
+@pytest.mark.parametrize("body, words", [
+    ('scenes = ["scene.toml"]\nviewz = 3', ["viewz"]),
+    ('scenes = ["scene.toml"]\n[grid]\n"noise.sigma_px" = 0.1', ["[grid] noise.sigma_px", "list"]),
+    ('scenes = ["scene.toml"]\n[grid]\nnoise.sigma_px = [0.1]', ["[grid] noise", "quote"]),
+    ('scenes = ["scene.toml"]\n[grid]\n"noise.sigmapx" = [1]', ["sigmapx"]),
+    ('scenes = ["scene.toml"]\n[grid]\n"noise.sigma_px" = [0.1, -1]', ["noise.sigma_px", "negative"]),
+    ('scenes = ["scene.toml"]\ndetectors = ["canny"]', ["canny"]),
+    ('scenes = ["scene.toml"]\n[detectors.gradient]\nthresh = 1', ["detectors.gradient", "thresh"]),
+    ('scenes = ["scene.toml"]\n[grid]\n"object.nothing.albedo" = [0.5]', ["object.nothing.albedo", "nothing"]),
+    ('scenes = ["scene.toml"]\n[grid]\n"object.box.colour" = [1]', ["object.box.colour"]),
+    ('scenes = ["missing.toml"]', ["missing.toml"]),
+    ('scenes = ["scene.toml"]\n[pose]\ncap_deg = 200', ["cap_deg"]),
+    ('scenes = ["scene.toml"]\n[grid]\n"pose.roll" = [1]', ["pose.roll"]),
+    ('scenes = ["scene.toml"]\nviews = -1', ["views"]),
+    ('scenes = ["scene.toml"]\nsensors = ["no_such_sensor"]', ["no_such_sensor"]),
+    ('views = 2', ["scenes"]),
+])
+def test_bad_sweep_files_fail_in_one_line_naming_file_and_key(sweep_dir, tmp_path, body, words):
+    (tmp_path / "scene.toml").write_text(SCENE_TOML)
+    path = tmp_path / "bad.toml"
+    path.write_text(body + "\n")
+    with pytest.raises(RangesimError) as info:
+        load_sweep(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(str(path)), message
+    for word in words:
+        assert word in message, (word, message)
+
+
+# -- sweeps -----------------------------------------------------------------------------------
+def test_sweep_writes_table_plots_and_task_files(serial_run, sweep_dir):
+    out = sweep_dir / "serial"
+    table = serial_run.table
+    assert serial_run.n_tasks == 8 and serial_run.n_run == 8 and serial_run.n_reused == 0
+    assert len(table) == 8 * 3 and list(dict.fromkeys(table["detector"])) == ["gradient", "normal", "pcl_organized"]
+    for column in ("scene", "sensor", "noise.sigma_px", "object.box.albedo", "view", "repeat", "seed", "snr",
+                   "snr_jump", "snr_crease", "sigma_z_mm", "precision", "recall", "f1", "fom", "jump_f1",
+                   "pose_distance_mm", *TIMING_COLUMNS):
+        assert column in table.columns, column
+    assert table["f1"].between(0, 1).all() and (table["snr"] > 0).all()
+    assert table["pose_distance_mm"].between(350, 450).all() and table["pose_polar_deg"].between(0, 25).all()
+    # noisier scans have the lower SNR, for every view
+    snr = table.groupby(["noise.sigma_px", "view"])["snr"].median().unstack()
+    assert (snr.loc[0.5] < snr.loc[0.05] / 4).all()
+    assert len(list((out / TASKS_DIR).glob("*.json"))) == 8
+    _assert_same_results(read_table(out / "results.parquet"), table)
+    csv = read_table(out / "results.csv")
+    assert list(csv.columns) == list(table.columns) and len(csv) == len(table)
+    for name in ("f1_vs_snr.png", "f1_vs_noise.sigma_px.png", "f1_vs_object.box.albedo.png"):
+        assert (out / "plots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    # a rerun reuses every task and writes the same table
+    again = run_sweep(sweep_dir / "sweep.toml", out, workers=0, progress=False, plots=False)
+    assert again.n_run == 0 and again.n_reused == 8
+    _assert_same_results(again.table, table)
+    assert again.table[list(TIMING_COLUMNS)].equals(table[list(TIMING_COLUMNS)])  # read back, not rerun
+
+
+def test_pool_of_two_workers_gives_the_serial_table(serial_run, sweep_dir):
+    run = run_sweep(sweep_dir / "sweep.toml", sweep_dir / "pool2", workers=2, progress=False, plots=False,
+                    keep_scans=True)
+    assert run.executor == "2 local processes" and run.n_run == 8
+    _assert_same_results(run.table, serial_run.table)
+    scans = sorted((sweep_dir / "pool2" / "scans").glob("*.exr"))
+    assert len(scans) == 8
+    scan = rs.load_scan(scans[0])
+    assert scan.shape == (48, 64) and scan.xyz_true is not None
+
+
+def test_dask_local_cluster_gives_the_serial_table(serial_run, sweep_dir):
+    pytest.importorskip("dask.distributed")
+    run = run_sweep(sweep_dir / "sweep.toml", sweep_dir / "dask", scheduler="local:2", progress=False, plots=False)
+    assert run.executor == "Dask LocalCluster of 2 workers" and run.n_run == 8
+    _assert_same_results(run.table, serial_run.table)
+
+
+def test_dask_scheduler_address_gives_the_serial_table(serial_run, sweep_dir):
+    """``tcp://HOST:PORT``: a scheduler someone else started (here: a one-worker cluster on loopback)."""
+    distributed = pytest.importorskip("dask.distributed")
+    import logging
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tcp://127.0.0.1:")
+        run = run_sweep(sweep_dir / "sweep.toml", sweep_dir / "tcp", scheduler=address, progress=False,
+                        plots=False)
+    assert run.executor == f"Dask scheduler {address}" and run.n_run == 8
+    _assert_same_results(run.table, serial_run.table)
+
+
+def test_sigkill_halfway_then_rerun_gives_the_uninterrupted_table(serial_run, sweep_dir):
+    out = sweep_dir / "killed"
+    cmd = [sys.executable, "-m", "rangesim", "sweep", str(sweep_dir / "sweep.toml"), "--out", str(out),
+           "--workers", "1", "--quiet", "--no-plots"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    tasks = out / TASKS_DIR
+    deadline = time.monotonic() + 60
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            if tasks.is_dir() and any(p.suffix == ".json" and not p.name.startswith(".") for p in tasks.iterdir()):
+                break
+            time.sleep(0.01)
+        assert proc.poll() is None, f"the sweep ended before it could be killed: {proc.stderr.read()!r}"
+        os.killpg(proc.pid, signal.SIGKILL)  # the driver and its pool worker
+    finally:
+        proc.wait(timeout=30)
+        proc.stderr.close()
+    done = [p for p in tasks.iterdir() if not p.name.startswith(".")]
+    assert 1 <= len(done) < 8, len(done)
+    assert not (out / "results.parquet").exists()
+    for p in done:  # whole files only (temporary names start with a dot)
+        json.loads(p.read_text())
+    code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(out), "--workers", "1", "--quiet",
+                 "--no-plots"])
+    assert code == 0
+    table = read_table(out / "results.parquet")
+    _assert_same_results(table, serial_run.table)
+    csv = read_table(out / "results.csv")
+    _assert_same_results(csv, read_table(sweep_dir / "serial" / "results.csv"))
+
+
+def test_sweep_cli_summary_and_errors(sweep_dir, capsys, tmp_path):
+    code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(sweep_dir / "serial"), "--workers", "0",
+                 "--quiet", "--no-plots"])
+    out = capsys.readouterr().out
+    assert code == 0 and "8 scans (0 run" in out and "8 reused" in out and "gradient" in out
+    for args, words in (
+        (["--scheduler", "udp://x"], "local:N or tcp://HOST:PORT"),
+        (["--scheduler", "local:0"], "local:N"),
+    ):
+        code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(tmp_path / "x"), *args])
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and err.count("\n") == 1, err
+        assert not (tmp_path / "x").exists()  # options are checked before any file is written
+    code = main(["sweep", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 2 and "nope.toml" in err and err.count("\n") == 1
+    (tmp_path / "file").write_text("")
+    code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(tmp_path / "file")])
+    assert code == 2 and "must be a directory" in capsys.readouterr().err
+
+
+def test_failed_tasks_are_reported_and_the_others_kept(sweep_dir, tmp_path):
+    bad = tmp_path / "sweep.toml"
+    for name in ("scene.toml", "tiny.toml"):
+        (tmp_path / name).write_text((sweep_dir / name).read_text())
+    # an albedo above 1 passes the sweep file (object values are the scene's to check) but fails its tasks
+    bad.write_text(SWEEP_TOML.replace('"object.box.albedo" = [0.6, 0.9]', '"object.box.albedo" = [0.6, 1.5]'))
+    with pytest.raises(RangesimError) as info:
+        run_sweep(bad, tmp_path / "out", workers=0, progress=False)
+    message = str(info.value)
+    assert "4 of 8 tasks failed" in message and "albedo" in message and "\n" not in message
+    assert len(list((tmp_path / "out" / TASKS_DIR).glob("*.json"))) == 4
+    assert not (tmp_path / "out" / "results.parquet").exists()
+
+
+# -- datasets -----------------------------------------------------------------------------------
+def test_dataset_poses_manifest_and_loader(sweep_dir, tmp_path):
+    out = tmp_path / "data"
+    run = make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 3, out, seed=5, cap_deg=35,
+                       distance=(300, 500), workers=0, progress=False)
+    assert run.n_views == 3 and run.n_run == 3
+    manifest = json.loads((out / "manifest.json").read_text())
+    cap = manifest["cap"]
+    axis, target = np.array(cap["axis"]), np.array(cap["target"])
+    assert np.allclose(target, [0, 0, 25]) and cap["distance"] == [300.0, 500.0]
+    ds = SyntheticDataset(out)
+    assert len(ds) == 3
+    poses = []
+    for i in range(3):
+        rec = ds.record(i)
+        pose = np.asarray(rec["pose"])
+        offset = pose[:3, 3] - target
+        d = np.linalg.norm(offset)
+        assert 300 <= d <= 500 and d == pytest.approx(rec["distance_mm"])
+        assert math.degrees(math.acos(offset @ axis / d)) <= 35 + 1e-9
+        assert np.allclose(pose[:3, 2], -offset / d)  # looks at the target
+        sample = ds[i]
+        assert sample["depth"].shape == (48, 64) and sample["xyz_true"].shape == (48, 64, 3)
+        assert sample["edges"].shape == (48, 64) and sample["edges"].dtype == np.uint8
+        assert set(np.unique(sample["edges"])) <= {0, 1, 2, 3} and (sample["edges"] == EdgeLabel.JUMP).any()
+        assert sample["subpart"].shape == (48, 64) and sample["subpart"].max() <= 1
+        assert np.allclose(sample["pose"], pose) and sample["K"].shape == (3, 3)
+        hit = sample["part"] >= 0
+        assert np.allclose(sample["depth_true"][hit], sample["xyz_true"][..., 2][hit])
+        poses.append(pose)
+    assert not np.allclose(poses[0], poses[1])
+    depth_only = SyntheticDataset(out, fields=["depth", "edges"])
+    assert set(depth_only[-1]) == {"depth", "edges"}
+    with pytest.raises(IndexError):
+        ds[3]
+    # a rerun renders nothing and lists the same views; more views keep the first ones
+    again = make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 4, out, seed=5, cap_deg=35,
+                         distance=(300, 500), workers=0, progress=False)
+    assert again.n_reused == 3 and again.n_run == 1
+    assert [r["key"] for r in again.records[:3]] == [ds.record(i)["key"] for i in range(3)]
+
+
+def test_dataset_cli(sweep_dir, tmp_path, capsys):
+    out = tmp_path / "cli_data"
+    code = main(["dataset", "--scene", str(sweep_dir / "scene.toml"), "--sensor", str(sweep_dir / "tiny.toml"),
+                 "--views", "2", "--out", str(out), "--format", "npz", "--workers", "0", "--quiet",
+                 "--set", "camera.width=32", "--set", "camera.height=24"])
+    assert code == 0, capsys.readouterr().err
+    assert "2 views (2 rendered" in capsys.readouterr().out
+    ds = SyntheticDataset(out)
+    assert ds.record(0)["scan"].endswith(".npz") and ds[1]["depth"].shape == (24, 32)
+    code = main(["dataset", "--scene", str(sweep_dir / "scene.toml"), "--views", "2", "--out", str(out),
+                 "--distance", "500", "100"])
+    assert code == 2 and "--distance" in capsys.readouterr().err
