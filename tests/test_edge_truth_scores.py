@@ -405,3 +405,19 @@ def test_crease_hidden_behind_an_occluder_is_not_marked(sensor):
     box_convex = (gt == EdgeLabel.CONVEX) & (scan.part == 2)
     if box_convex.any():
         assert distance_to_segments(pixels(box_convex), near_top).min() > 1.0
+
+
+def test_exact_matching_is_maximum_on_dense_random_blobs():
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import maximum_bipartite_matching
+
+    from rangesim.evaluate.edge_scores import _exact_match
+
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        pred = np.unique(rng.integers(0, 30, (400, 2)), axis=0)
+        gt = np.unique(rng.integers(0, 30, (400, 2)), axis=0)
+        i, j = np.nonzero(((pred[:, None] - gt[None]) ** 2).sum(-1) <= 4)
+        graph = csr_matrix((np.ones(len(i), np.int8), (i, j)), shape=(len(pred), len(gt)))
+        reference = np.count_nonzero(maximum_bipartite_matching(graph, perm_type="column") >= 0)
+        assert _exact_match(i, j, len(pred), len(gt)) == reference
