@@ -37,3 +37,26 @@ def mitsuba() -> ModuleType:
         except Exception as exc:  # e.g. cuda requested without a GPU
             raise RangesimError(f"cannot use Mitsuba variant {variant!r}: {exc}") from exc
     return mi
+
+
+def opaque_transform(matrix):
+    """``mi.Transform4f`` of a 4x4 matrix whose entries enter kernels as opaque variables.
+
+    A transform built from Python floats bakes them into the kernels as literals, so every
+    new camera pose compiles the scan's kernels again (about 70 ms on a CPU core); with
+    opaque entries a new pose reuses them.
+    """
+    import drjit as dr
+    import numpy as np
+
+    mi = mitsuba()
+    m = np.asarray(matrix, dtype=np.float64)
+    return mi.Transform4f(mi.Matrix4f([[dr.opaque(mi.Float, float(m[r, c])) for c in range(4)] for r in range(4)]))
+
+
+def opaque_point(point):
+    """``mi.Point3f`` of a 3-vector whose coordinates enter kernels as opaque variables."""
+    import drjit as dr
+
+    mi = mitsuba()
+    return mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in point))

@@ -21,7 +21,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_transform
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
@@ -59,7 +59,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     albedo = dr.gather(mi.Float, mi.Float(np.array([o.albedo for o in scene.objects], np.float32)), hits.part, hit)
     signal, cos_i = return_signal(albedo, normals, points, sources, sensor.reference_distance)
     in_range = hit & (points.z >= near) & (points.z <= far)
-    to_world = mi.Transform4f(pose.tolist())
+    to_world = opaque_transform(pose)
     blocked = occluded(
         mscene, hits.point_world, hits.normal_world, to_world @ mi.Point3f(sources),
         active=in_range & (cos_i > 0),

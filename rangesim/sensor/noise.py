@@ -54,7 +54,8 @@ def pixel_random(rng: np.random.Generator, n_pixels: int):
     """Per-pixel standard normal and uniform [0, 1) draws, (mi.Float, mi.Float)."""
     mi = mitsuba()
     state = int(rng.integers(0, 2**63))
-    pcg = mi.PCG32(size=n_pixels, initstate=state, initseq=dr.arange(mi.UInt64, n_pixels))
+    # opaque: a literal state would compile a new kernel for every seed
+    pcg = mi.PCG32(size=n_pixels, initstate=dr.opaque(mi.UInt64, state), initseq=dr.arange(mi.UInt64, n_pixels))
     u1, u2, phase = pcg.next_float32(), pcg.next_float32(), pcg.next_float32()
     gaussian = mi.warp.square_to_std_normal(mi.Point2f(u1, u2)).x
     return gaussian, phase

@@ -7,7 +7,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_point, opaque_transform
 
 #: shift (pixels) of the second ray cast by the shared-edge guard
 RECAST_OFFSET_PX = 1e-3
@@ -58,9 +58,9 @@ def pixel_rays(K: np.ndarray, width: int, index, offset: float = 0.0):
 def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
     """Intersect camera-frame rays; returns (t, point, normal, part, face, directions), world frame."""
     mi = mitsuba()
-    to_world = mi.Transform4f(pose.tolist())
+    to_world = opaque_transform(pose)
     d_world = dr.normalize(to_world @ rays)
-    ray = mi.Ray3f(mi.Point3f(*(float(c) for c in pose[:3, 3])), d_world)
+    ray = mi.Ray3f(opaque_point(pose[:3, 3]), d_world)
     ray.maxt = maxt
     si = mscene.scene.ray_intersect(ray)
     hit = si.is_valid()
@@ -151,14 +151,13 @@ def camera_hits(scene, sensor, pose: np.ndarray) -> CameraHits:
 
     Rays are as long as ``MAX_RAY_FACTOR`` times the far limit along the image corner's ray.
     """
-    mi = mitsuba()
     K, h, w = sensor.K, sensor.height, sensor.width
     corner = float(np.hypot(np.hypot(w / 2 / K[0, 0], h / 2 / K[1, 1]), 1.0))  # longest ray of unit depth
     watertight = np.array([o.watertight for o in scene.objects])
     hits = cast_primary(scene.mitsuba_scene(), K, h, w, pose,
                         MAX_RAY_FACTOR * sensor.params["range"]["far"] * corner, watertight)
     points = dr.normalize(hits.rays) * hits.t
-    to_camera = mi.Transform4f(np.linalg.inv(pose).tolist())
+    to_camera = opaque_transform(np.linalg.inv(pose))
     normals = dr.normalize(to_camera @ hits.normal_world)
     normals = dr.select(dr.dot(normals, points) > 0, -normals, normals)  # the visible side faces the camera
     return CameraHits(hits, points, normals)

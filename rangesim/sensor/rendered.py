@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_transform
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
@@ -185,7 +185,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     facing = dr.dot(normals, sources - points) > 0
     in_range = hits.hit & (points.z >= near) & (points.z <= far)
     blocked = occluded(mscene, hits.point_world, hits.normal_world,
-                       mi.Transform4f(pose.tolist()) @ mi.Point3f(sources), active=in_range & facing)
+                       opaque_transform(pose) @ mi.Point3f(sources), active=in_range & facing)
     reachable = hits.hit & facing & ~blocked
     dr.eval(points, normals, reachable, in_range)
     xyz_true = np.asarray(dr.ravel(points)).reshape(h * w, 3).astype(np.float64)

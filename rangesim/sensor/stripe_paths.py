@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_point, opaque_transform
 from rangesim.sensor.laser import sheet_coordinate, sheet_through
 
 
@@ -100,9 +100,9 @@ def trace_stripe_paths(mscene, pose: np.ndarray, K: np.ndarray, width: int, row0
     col = mi.Float(pixel % width) + (stratum + 0.5) / spp
     row = mi.Float(pixel // width + dr.opaque(mi.UInt32, row0)) + pcg.next_float32()
     direction = mi.Vector3f((col - K[0, 2]) / K[0, 0], (row - K[1, 2]) / K[1, 1], 1.0)
-    to_world = mi.Transform4f(pose.tolist())
-    to_camera = mi.Transform4f(np.linalg.inv(pose).tolist())
-    ray = mi.Ray3f(mi.Point3f(*(float(c) for c in pose[:3, 3])), dr.normalize(to_world @ direction))
+    to_world = opaque_transform(pose)
+    to_camera = opaque_transform(np.linalg.inv(pose))
+    ray = mi.Ray3f(opaque_point(pose[:3, 3]), dr.normalize(to_world @ direction))
     ctx = mi.BSDFContext()
     throughput = mi.Float(1.0)
     active = mi.Bool(True)
