@@ -10,20 +10,17 @@ Two workloads, each run through :class:`rangesim.experiments.executors.Executor`
 
 * ``scan``: one ``rangesim.scan`` per task (the pose drawn from the cap, the scene built once
   per worker); the task returns the valid-pixel count.
-* ``pipeline``: a sweep task without its scores: scan, ground-truth edges
-  (:func:`rangesim.evaluate.runs.scan_truth`), SNR, and all five detectors.
-
-The scores are left out on purpose: on some of these views the edge scorer
-(``rangesim.evaluate.edge_scores``) meets a case where SciPy's
-``maximum_bipartite_matching`` takes 20 s to many minutes on one candidate component of
-~1,600 pixels (6,000 pairs), which would time that matcher, not the sweep.
+* ``pipeline``: a full sweep task, exactly what ``rangesim sweep`` runs per scan
+  (:func:`rangesim.experiments.tasks.run_sweep_task`): scan, ground-truth edges, SNR, all
+  five detectors and their scores; the task returns its result rows.
 
 For each worker count the pool is started and warmed up (every worker imports rangesim and
 builds the scene on ``2 * workers`` tasks), then the tasks are timed from the first
 submission to the last result: rate = tasks / seconds. Every run has views of its own, from
-a seed taken from the clock unless ``--seed`` is given: a scan from a pose Dr.Jit has not
-seen compiles its kernels (about 50 ms at 512 x 512), as every view of a real sweep does,
-while a repeated pose would find them in Dr.Jit's on-disk kernel cache. Scaling efficiency = rate(2 workers) / (2 * rate(1 worker)); the target is >= 80 %.
+a seed taken from the clock unless ``--seed`` is given, as every scan of a real sweep has a
+view of its own. New views reuse the compiled kernels (poses and noise seeds are opaque
+kernel inputs). Scaling efficiency = rate(2 workers) / (2 * rate(1 worker)); the target is
+>= 80 %.
 For reference, ``in-process`` runs the same tasks one after the other in this process with
 Dr.Jit's default thread pool (both cores inside one scan).
 
@@ -80,24 +77,12 @@ def scan_task(payload: dict) -> int:
     return int(np.count_nonzero(scan.valid))
 
 
-def pipeline_task(payload: dict) -> int:
-    """A sweep task without the scores: scan, ground truth, SNR, every detector."""
-    import numpy as np
+def pipeline_task(payload: dict) -> dict:
+    """A full sweep task, as ``rangesim sweep`` runs it: scan, ground truth, SNR, every
+    detector and its scores; returns the task's result (its rows) to the driver."""
+    from rangesim.experiments.tasks import run_sweep_task
 
-    import rangesim as rs
-    from rangesim.evaluate.runs import run_detectors, scan_truth
-    from rangesim.experiments.scenes import load_task_scene
-    from rangesim.experiments.snr import edge_snr
-    from rangesim.experiments.tasks import _detector_params, task_pose
-
-    scene = load_task_scene(payload["scene_path"], payload["objects"])
-    sensor = rs.load_sensor(payload["sensor"])
-    pose, _ = task_pose(payload, scene, sensor)
-    scan = rs.scan(scene, sensor, pose=pose, seed=payload["noise_seed"])
-    truth = scan_truth(scan, scene, crease_deg=payload["crease_deg"])
-    edge_snr(scan, truth.labels, window=payload["snr_window"])
-    maps = run_detectors(scan, list(payload["detectors"]), None, params=_detector_params(payload))
-    return int(sum(np.count_nonzero(r["edge_map"].mask) for r in maps.values()))
+    return run_sweep_task(payload)
 
 
 def payloads(size: int, n: int, seed: int) -> list[dict]:
@@ -137,8 +122,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=512, help="camera width and height, px (default 512)")
     ap.add_argument("--scan-tasks", type=int, default=80, help="timed scan-only tasks per run (default 80)")
     ap.add_argument("--pipeline-tasks", type=int, default=12, help="timed pipeline tasks per run (default 12)")
-    ap.add_argument("--seed", type=int, help="seed of the views (default: from the clock, so the poses are new "
-                    "to Dr.Jit's kernel cache)")
+    ap.add_argument("--seed", type=int, help="seed of the views (default: from the clock, so every run has "
+                    "views of its own, as in a sweep)")
     ap.add_argument("--json", type=Path, help="write the figures to this JSON file")
     args = ap.parse_args(argv)
 
@@ -156,7 +141,7 @@ def main(argv=None) -> int:
     print(lines[0], flush=True)
     for k, (name, fn, n) in enumerate((("scan", scan_task, args.scan_tasks),
                                         ("pipeline", pipeline_task, args.pipeline_tasks))):
-        # every run gets views of its own: a new pose costs a Dr.Jit kernel compilation, as in a sweep
+        # every run gets views of its own, as every scan of a sweep has
         per_run = n + 4
         items = payloads(args.size, 3 * per_run, seed + k)
         runs = {}
