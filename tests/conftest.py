@@ -22,6 +22,25 @@ QUIET_SENSOR = {
 }
 
 
+#: a scene file: a 120 x 90 x 50 mm box on a large ground plane (mm)
+BOX_SCENE_TOML = """\
+units = "mm"
+
+[[object]]
+name = "box"
+primitive = "box"
+size = [120, 90, 50]
+translate = [0, 0, 25]
+albedo = 0.6
+
+[[object]]
+name = "ground"
+primitive = "plane"
+size = [1200, 1200]
+albedo = 0.3
+"""
+
+
 def make_sensor(**changes):
     """The quiet sensor with dotted-key changes, e.g. make_sensor(**{"noise.sigma_px": 0.3})."""
     return rs.load_sensor(copy.deepcopy(QUIET_SENSOR)).with_params(changes)

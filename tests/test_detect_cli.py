@@ -16,24 +16,9 @@ import rangesim as rs
 from rangesim.cli.main import main
 from rangesim.core.geometry import look_at
 from rangesim.edges import DETECTORS
-from tests.conftest import make_sensor
+from tests.conftest import BOX_SCENE_TOML, make_sensor
 
-SCENE_TOML = """\
-units = "mm"
-
-[[object]]
-name = "box"
-primitive = "box"
-size = [120, 90, 50]
-translate = [0, 0, 25]
-albedo = 0.6
-
-[[object]]
-name = "ground"
-primitive = "plane"
-size = [1200, 1200]
-albedo = 0.3
-"""
+SCENE_TOML = BOX_SCENE_TOML
 
 ARRAYS = {"mask", "labels", "strength"}
 SCORES = ("precision", "recall", "f1", "fom")

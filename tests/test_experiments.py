@@ -28,25 +28,11 @@ from rangesim.experiments.poses import cap_directions
 from rangesim.experiments.results import TASKS_DIR, read_table
 from rangesim.experiments.snr import depth_noise, slope_noise_factor
 from rangesim.experiments.tasks import TIMING_COLUMNS
+from tests.conftest import BOX_SCENE_TOML
 
 REPO = Path(__file__).resolve().parents[1]
 
-SCENE_TOML = """\
-units = "mm"
-
-[[object]]
-name = "box"
-primitive = "box"
-size = [120, 90, 50]
-translate = [0, 0, 25]
-albedo = 0.6
-
-[[object]]
-name = "ground"
-primitive = "plane"
-size = [1200, 1200]
-albedo = 0.3
-
+SCENE_TOML = BOX_SCENE_TOML + """
 [view]
 position = [0, -250, 380]
 look_at = [0, 0, 20]
