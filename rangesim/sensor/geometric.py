@@ -21,7 +21,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba, opaque_transform
+from rangesim.core.backend import mitsuba
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
@@ -30,7 +30,7 @@ from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.noise import peak_error_px, pixel_random, speckle_sigma_mm
 from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
-from rangesim.sensor.shadows import occluded
+from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
 from rangesim.sensor.triangulation import depth_per_pixel, triangulate
 
@@ -57,14 +57,8 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     # 2-5. laser geometry, shadows, signal, working range
     sources, sheet_n = sheet_through(points, p["laser"]["sweep"], p["laser"]["baseline"], sensor.tilt_rad)
     albedo = dr.gather(mi.Float, mi.Float(np.array([o.albedo for o in scene.objects], np.float32)), hits.part, hit)
-    signal, cos_i = return_signal(albedo, normals, points, sources, sensor.reference_distance)
-    in_range = hit & (points.z >= near) & (points.z <= far)
-    to_world = opaque_transform(pose)
-    blocked = occluded(
-        mscene, hits.point_world, hits.normal_world, to_world @ mi.Point3f(sources),
-        active=in_range & (cos_i > 0),
-    )
-    lit = hit & (cos_i > 0) & ~blocked
+    signal, _ = return_signal(albedo, normals, points, sources, sensor.reference_distance)
+    in_range, lit = laser_reach(mscene, view, sources, pose, near, far)
     signal = dr.select(lit, signal, 0.0)
     weak = (signal < p["noise"]["min_signal"]) | (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
     status = dr.zeros(mi.UInt32, h * w)  # Status.VALID

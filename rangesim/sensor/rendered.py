@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba, opaque_transform
+from rangesim.core.backend import mitsuba
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
@@ -47,7 +47,7 @@ from rangesim.sensor.laser import intersect_sheet, sheet_coordinate, sheet_throu
 from rangesim.sensor.peaks import find_peaks
 from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
-from rangesim.sensor.shadows import occluded
+from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.stripe_paths import trace_stripe_paths
 
 #: largest frame stack (pixels x frames) held at once; sets the tile height
@@ -161,7 +161,6 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     RangeScan, or (RangeScan, FrameStack) with ``keep_frames``.
     """
     check_backend()
-    mi = mitsuba()
     clock = {"start": time.perf_counter()}
     timing = {"primary": 0.0, "paths": 0.0, "frames": 0.0, "noise": 0.0, "peaks": 0.0, "triangulation": 0.0}
 
@@ -182,11 +181,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     view = camera_hits(scene, sensor, pose)
     hits, points, normals = view.hits, view.points, view.normals
     sources, _ = sheet_through(points, laser["sweep"], laser["baseline"], laser["tilt_rad"])
-    facing = dr.dot(normals, sources - points) > 0
-    in_range = hits.hit & (points.z >= near) & (points.z <= far)
-    blocked = occluded(mscene, hits.point_world, hits.normal_world,
-                       opaque_transform(pose) @ mi.Point3f(sources), active=in_range & facing)
-    reachable = hits.hit & facing & ~blocked
+    in_range, reachable = laser_reach(mscene, view, sources, pose, near, far)
     dr.eval(points, normals, reachable, in_range)
     xyz_true = np.asarray(dr.ravel(points)).reshape(h * w, 3).astype(np.float64)
     hit = np.isfinite(xyz_true[:, 2])

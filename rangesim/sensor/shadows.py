@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import drjit as dr
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_transform
 
 
 def occluded(mscene, points_world, normals_world, sources_world, active):
@@ -37,3 +37,34 @@ def occluded(mscene, points_world, normals_world, sources_world, active):
     ray = mi.Ray3f(mi.Point3f(origin), to_source / length)
     ray.maxt = length
     return mscene.scene.ray_test(ray, active) & active
+
+
+def laser_reach(mscene, view, sources, pose, near: float, far: float):
+    """Which camera hits lie in the working range, and which of those the laser lights directly.
+
+    Parameters
+    ----------
+    mscene : MitsubaScene
+    view : CameraHits
+        Primary hits, camera frame (:func:`rangesim.sensor.rays.camera_hits`).
+    sources : mi.Vector3f
+        Laser source lighting each point, camera frame, mm.
+    pose : (4, 4) camera-to-world
+    near, far : float
+        Working range on the camera's z axis, mm.
+
+    Returns
+    -------
+    in_range : mi.Bool
+        A surface was hit with ``near <= z <= far``.
+    lit : mi.Bool
+        A surface was hit, faces its laser source, and nothing blocks the way (tested only
+        in range; out of range it counts as lit when it faces the laser).
+    """
+    mi = mitsuba()
+    hits, points = view.hits, view.points
+    in_range = hits.hit & (points.z >= near) & (points.z <= far)
+    facing = dr.dot(view.normals, sources - points) > 0
+    blocked = occluded(mscene, hits.point_world, hits.normal_world,
+                       opaque_transform(pose) @ mi.Point3f(sources), active=in_range & facing)
+    return in_range, hits.hit & facing & ~blocked
