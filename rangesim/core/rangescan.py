@@ -23,6 +23,7 @@ PIXEL_FIELDS: tuple[tuple[str, type, tuple[int, ...]], ...] = (
 #: optional per-pixel ground truth (synthetic scans only)
 OPTIONAL_PIXEL_FIELDS: tuple[tuple[str, type, tuple[int, ...]], ...] = (
     ("xyz_true", np.float32, (3,)),
+    ("sigma", np.float32, ()),
 )
 
 
@@ -63,6 +64,10 @@ class RangeScan:
         Noise-free surface point behind every pixel that hit a surface (whatever its
         status), camera frame; NaN on a miss. Ground truth for synthetic scans; None for
         recorded data.
+    sigma : (H, W) float32 or None
+        The noise model's predicted std of ``depth`` at every valid pixel (mm; NaN where
+        invalid): what a detector threshold can use. Simulated laser-stripe scans carry it
+        (see :mod:`rangesim.sensor.stripe_noise`); None where no model predicts it.
     """
 
     depth: np.ndarray
@@ -76,6 +81,7 @@ class RangeScan:
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))
     meta: dict[str, Any] = field(default_factory=dict)
     xyz_true: np.ndarray | None = None
+    sigma: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         h, w = np.shape(self.depth)[:2]

@@ -31,6 +31,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "width": None, "height": None, "fov_deg": None, "aperture_mm": 5.0,
         "full_well_e": 20000.0,  # rendered mode: saturation level, electrons
         "read_noise_e": 10.0,  # rendered mode: read noise, electrons rms
+        "psf_px": 1.0,  # optical blur FWHM, pixels (imaged stripe width, rangesim.sensor.stripe_noise)
     },
     "laser": {
         "baseline": None,
@@ -46,6 +47,17 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "quantization_px": 0.0,
         "min_signal": 0.0,
         "speckle_contrast": 0.0,
+        # rangesim.sensor.stripe_noise: all off by default, so a quiet sensor stays exact
+        "signal_px": 0.0,  # detector/shot-noise peak error of the facing white stripe, pixels
+        "correlation_mm": 0.0,  # speckle correlation length on the surface (Gaussian std), mm
+        "edge_gain": 0.0,  # fraction of a truncated stripe's centroid shift that reaches the peak
+        "signal_contrast": 0.0,  # speckle contrast of the detected amplitude (dropout probability)
+    },
+    # the simulated twin of a recording (rangesim.twin): the grid's view geometry
+    "twin": {
+        "theta_deg": None,  # camera direction from the range axis, x-z plane (default laser.tilt_deg)
+        "alpha_deg": 0.0,  # laser direction from the range axis, y-z plane
+        "min_cos": None,  # grazing cut-off on both cosines (default noise.min_signal)
     },
     # rendered mode only (mode = "rendered"): see rangesim.sensor.rendered
     "render": {
@@ -58,6 +70,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
+#: keys whose None default means "derived from other keys" rather than "required"
+OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos"}
 
 
 @dataclass(frozen=True)
@@ -160,7 +174,7 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
         filled = {}
         for key, default in defaults.items():
             value = given.get(key, default)
-            if value is None and default is None and key != "tilt_deg":
+            if value is None and default is None and key not in OPTIONAL_KEYS:
                 raise RangesimError(f"missing required key {table}.{key}", source=source)
             filled[key] = value
         params[table] = filled
@@ -229,8 +243,13 @@ def _validate(params: dict[str, dict[str, Any]], source) -> None:
             f"({params['range']['far']})",
             source=source,
         )
-    for key in ("sigma_px", "quantization_px", "speckle_contrast"):
+    for key in ("sigma_px", "quantization_px", "speckle_contrast", "signal_px", "correlation_mm", "edge_gain",
+                "signal_contrast"):
         _number(params, "noise", key, source, nonneg=True)
+    _number(params, "camera", "psf_px", source, nonneg=True)
+    for key in ("theta_deg", "alpha_deg", "min_cos"):
+        if params["twin"][key] is not None:
+            _number(params, "twin", key, source)
     _number(params, "noise", "min_signal", source, nonneg=True)
     _number(params, "camera", "full_well_e", source, positive=True)
     _number(params, "camera", "read_noise_e", source, nonneg=True)

@@ -27,12 +27,12 @@ from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.laser import sheet_through
 from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
-from rangesim.sensor.noise import peak_error_px, pixel_random, speckle_sigma_mm
+from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
 from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
-from rangesim.sensor.triangulation import depth_per_pixel, triangulate
+from rangesim.sensor.triangulation import triangulate
 
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined
 MIN_SHEET_ANGLE = 1e-3
@@ -60,39 +60,45 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     signal, _ = return_signal(albedo, normals, points, sources, sensor.reference_distance)
     in_range, lit = laser_reach(mscene, view, sources, pose, near, far)
     signal = dr.select(lit, signal, 0.0)
-    weak = (signal < p["noise"]["min_signal"]) | (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
+    noise = StripeNoise.from_params(p)
+    # with a speckle-modulated amplitude the threshold is a probability, drawn in step 7
+    hard_min = 0.0 if noise.signal_contrast > 0 else p["noise"]["min_signal"]
+    weak = (signal < hard_min) | (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
     status = dr.zeros(mi.UInt32, h * w)  # Status.VALID
     for code, condition in ((Status.DROPOUT, weak), (Status.SHADOW, ~lit), (Status.OUT_OF_RANGE, ~in_range),
                             (Status.MISS, ~hit)):  # lowest precedence first
         status = dr.select(condition, int(code), status)
-    valid = status == int(Status.VALID)
-    dr.eval(points, normals, sources, sheet_n, signal, status, lit)
+    dr.eval(points, normals, sources, sheet_n, signal, status, lit, albedo)
+
+    # 7a. dropouts, predicted std and peak errors: the stripe noise model (NumPy)
+    status_np = np.asarray(status).astype(np.uint8)
+    draw = _stripe_draw(noise, seed, (h, w), f, sensor.reference_distance, status_np, points, normals, sources,
+                        sheet_n, rays, signal, albedo)
+    status_np[(status_np == Status.VALID) & ~draw.detected] = Status.DROPOUT
+    valid = mi.Bool(status_np == Status.VALID)
 
     # 6. mixed pixels at depth edges
     window = peak_window_px(p["laser"]["stripe_width"], f, near)
     shift = stripe_mixing_shift(points, sheet_n, lit, signal, valid, w, p["laser"]["stripe_width"], window)
 
-    # 7. peak localisation noise, triangulated against the sheet
-    gaussian, phase = pixel_random(np.random.default_rng(seed), h * w)
-    speckle_mm = speckle_sigma_mm(
-        points, sources, p["noise"]["speckle_contrast"], p["laser"]["wavelength_nm"], p["camera"]["aperture_mm"]
-    )
-    speckle_px = speckle_mm / depth_per_pixel(points, sheet_n, rays, f)
-    sigma = dr.sqrt(p["noise"]["sigma_px"] ** 2 + dr.square(speckle_px))
-    error = peak_error_px(sigma, p["noise"]["quantization_px"], gaussian, phase)
+    # 7b. the peak error triangulated against the sheet
+    error = mi.Float(draw.error_px.astype(np.float32))
     measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + error, f), dr.nan)
     points = dr.select(hit, points, dr.nan)
     normals = dr.select(hit, normals, dr.nan)
     outputs = {
         "xyz": dr.ravel(measured), "xyz_true": dr.ravel(points), "normal": dr.ravel(normals),
-        "intensity": signal, "status": status, "part": hits.part, "face": hits.face,
+        "intensity": signal, "part": hits.part, "face": hits.face, "shift": shift,
     }
     dr.eval(*outputs.values())
     arrays = {name: np.asarray(value) for name, value in outputs.items()}
 
     meta = scan_meta(scene, sensor, seed, "geometric", peak_window_px=window, recast_rays=hits.recast)
     xyz = arrays["xyz"].reshape(h, w, 3)
-    status_np = arrays["status"].astype(np.uint8).reshape(h, w)
+    status_np = status_np.reshape(h, w)
+    # predicted std (mm): the model's peak std with the mixed pixels' centroid shift, through dz/du
+    sigma_px = np.hypot(draw.sigma_px, np.nan_to_num(arrays["shift"]))
+    sigma = np.where(status_np.reshape(-1) == Status.VALID, sigma_px * draw.depth_per_px, np.nan)
     return RangeScan(
         depth=xyz[..., 2].copy(),
         xyz=xyz,
@@ -105,4 +111,35 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
         pose=pose,
         meta=meta,
         xyz_true=arrays["xyz_true"].reshape(h, w, 3),
+        sigma=sigma.reshape(h, w).astype(np.float32),
     )
+
+
+def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float, z_ref: float,
+                 status: np.ndarray, points, normals, sources, sheet_n, rays, signal, albedo):
+    """The inputs of :func:`rangesim.sensor.stripe_noise.simulate` from the camera-frame geometry."""
+    vec = lambda v: np.asarray(dr.ravel(v), dtype=np.float64).reshape(-1, 3)  # noqa: E731
+    P, n, src, sn, r = vec(points), vec(normals), vec(sources), vec(sheet_n), vec(rays)
+    candidate = status == Status.VALID
+    with np.errstate(invalid="ignore", divide="ignore"):
+        to_laser = src - P
+        d_laser = np.linalg.norm(to_laser, axis=1)
+        d_camera = np.linalg.norm(P, axis=1)
+        cos_i = np.einsum("ij,ij->i", n, to_laser) / d_laser
+        amplitude = np.asarray(albedo, np.float64) * cos_i * (z_ref / d_laser) ** 2
+        sin_theta = np.linalg.norm(np.cross(P / d_camera[:, None], to_laser / d_laser[:, None]), axis=1)
+        dzdu = np.abs(P[:, 2] * sn[:, 0] / (f * np.einsum("ij,ij->i", sn, r)))
+        speckle_px = dorsch_sigma_mm(d_camera, sin_theta, noise.speckle_contrast, noise.wavelength_nm,
+                                     noise.aperture_mm) / dzdu
+        magnification = f / d_camera
+    # the stripe is truncated where the surface ends or the laser cannot reach it
+    reached = (status == Status.VALID) | (status == Status.DROPOUT)
+    border_mm = border_distance(reached.reshape(shape)) / np.where(candidate, magnification, 1.0)
+    corr = noise.correlation_mm * f / z_ref
+    clean = lambda a: np.where(candidate & np.isfinite(a), a, 0.0)  # noqa: E731
+    draw = simulate(noise, np.random.default_rng(seed), shape, candidate=candidate, signal=np.asarray(signal),
+                    cos_incidence=clean(cos_i), amplitude=clean(amplitude), magnification=clean(magnification),
+                    reference_magnification=f / z_ref, speckle_px=clean(speckle_px), border_mm=border_mm,
+                    corr_px=(corr, corr))
+    draw.depth_per_px = dzdu
+    return draw

@@ -128,7 +128,7 @@ def calibrate(recorded: RangeScan, mesh: Any, sensor: Any = None,
     values.update(theta_deg=theta, alpha_deg=alpha, min_cos=cmin)
 
     # noise: recorded points against the twin's noise-free hits
-    noise_free = stage.scan(theta_deg=theta, alpha_deg=alpha, min_cos=cmin, sigma_mm=0.0)
+    noise_free = stage.scan(theta_deg=theta, alpha_deg=alpha, min_cos=cmin, quiet=True)
     rec_noise = robust_std(range_residuals(recorded, noise_free.xyz_true))
     if "sigma_mm" in params:
         if not np.isfinite(rec_noise):

@@ -19,7 +19,18 @@ recorded points nearest to the hits). A hit is measured when
 * the return is strong enough: the cosines of incidence of laser and camera both exceed
   ``min_cos`` (else status DROPOUT, a grazing dropout).
 
-Measured depths get Gaussian noise of std ``sigma_mm`` along the range axis.
+Measured depths get the range error of :mod:`rangesim.sensor.stripe_noise`, the model the
+geometric scanner uses: the stripe-peak error (estimator floor, detector noise growing with
+the imaged stripe's width and falling with its brightness, spatially correlated speckle,
+partial stripes at outlines and shadow borders, quantisation) triangulated into range
+through the sensor's dz/du, and dropouts drawn with the probability that the
+speckle-modulated return exceeds ``noise.min_signal``. The grid has no camera pixels, so the
+sensor's camera stands in for the Cyberware's: magnification f / z_ref and
+dz/du = z_ref / (f tan t), t the triangulation angle (``laser.tilt_deg`` for a translating
+sweep, atan(baseline / z_ref) for a rotating one), z_ref the sensor's mid-range. Lengths on
+the surface (stripe footprint, correlation length, border distance) are converted to cells
+with the grid's own steps. ``sigma_mm``, when given, replaces the estimator floor
+(``noise.sigma_px``) by a white range noise of that std.
 
 :class:`TwinStage` holds the geometry that does not depend on those parameters (the mesh
 in the scanner frame, the Mitsuba scene, the primary hits) so a calibration can try many
@@ -29,7 +40,7 @@ from __future__ import annotations
 
 import math
 from types import SimpleNamespace
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,11 +49,14 @@ import numpy as np
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
+from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
 
 __all__ = ["TwinStage", "twin", "DEFAULT_PARAMS", "load_mesh_mm"]
 
 #: parameters of the twin when neither the caller nor the sensor sets them
 DEFAULT_PARAMS: dict[str, float] = {"theta_deg": 20.0, "alpha_deg": 0.0, "sigma_mm": 0.1, "min_cos": 0.1}
+#: the geometry parameters (sensor table ``[twin]``)
+GEOMETRY = ("theta_deg", "alpha_deg", "min_cos")
 
 
 def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray | None = None):
@@ -73,23 +87,70 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
     return mesh
 
 
+def _as_sensor(sensor: Any):
+    if sensor is None or not isinstance(sensor, (str, Path, dict)):
+        return sensor
+    from rangesim.sensor import load_sensor
+
+    return load_sensor(sensor)
+
+
 def _sensor_defaults(sensor: Any) -> dict[str, float]:
-    """Twin parameters a sensor preset suggests (camera tilt -> theta)."""
-    params = dict(DEFAULT_PARAMS)
+    """Twin parameters a sensor gives: its ``[twin]`` table, else camera tilt -> theta.
+
+    Without a sensor the legacy white range noise ``sigma_mm`` applies; with one, the
+    sensor's noise model does (``sigma_mm`` None).
+    """
+    params: dict[str, Any] = dict(DEFAULT_PARAMS)
     if sensor is None:
         return params
-    if isinstance(sensor, str):
-        from rangesim.sensor import load_sensor
-
-        sensor = load_sensor(sensor)
     p = getattr(sensor, "params", {}) or {}
+    twin_table = p.get("twin", {})
     tilt = p.get("laser", {}).get("tilt_deg")
-    if tilt is not None:
+    if twin_table.get("theta_deg") is not None:
+        params["theta_deg"] = float(twin_table["theta_deg"])
+    elif tilt is not None:
         params["theta_deg"] = float(tilt)
+    if twin_table.get("alpha_deg") is not None:
+        params["alpha_deg"] = float(twin_table["alpha_deg"])
     min_signal = p.get("noise", {}).get("min_signal")
-    if min_signal is not None:
+    if twin_table.get("min_cos") is not None:
+        params["min_cos"] = float(twin_table["min_cos"])
+    elif min_signal is not None:
         params["min_cos"] = float(min_signal)
+    params["sigma_mm"] = None
     return params
+
+
+@dataclass(frozen=True)
+class TwinOptics:
+    """The sensor constants that turn the peak-error model into range error on the grid.
+
+    Attributes
+    ----------
+    dz_du : float
+        Range error (mm) per pixel of peak shift, z_ref / (f tan t).
+    magnification : float
+        Pixels per mm on the surface at z_ref (f / z_ref).
+    speckle_px : float
+        The Dorsch limit at z_ref in pixels.
+    """
+
+    dz_du: float = 1.0
+    magnification: float = 1.0
+    speckle_px: float = 0.0
+
+    @classmethod
+    def from_sensor(cls, sensor: Any, noise: StripeNoise) -> "TwinOptics":
+        if sensor is None:
+            return cls()
+        f, z_ref = float(sensor.focal_px), float(sensor.reference_distance)
+        laser = sensor.params["laser"]
+        angle = sensor.tilt_rad if laser["sweep"] == "translating" else math.atan2(laser["baseline"], z_ref)
+        dz_du = z_ref / (f * math.tan(abs(angle)))
+        speckle_mm = float(dorsch_sigma_mm(z_ref, math.sin(abs(angle)), noise.speckle_contrast, noise.wavelength_nm,
+                                           noise.aperture_mm))
+        return cls(dz_du=dz_du, magnification=f / z_ref, speckle_px=speckle_mm / dz_du)
 
 
 def _sensor_name(sensor: Any) -> str | None:
@@ -174,8 +235,10 @@ class TwinStage:
         from rangesim.scene.mitsuba_scene import numpy_to_mitsuba_mesh
 
         self.recorded = recorded
-        self.sensor = sensor
+        self.sensor = sensor = _as_sensor(sensor)
         self.defaults = _sensor_defaults(sensor)
+        self.noise = StripeNoise.from_params(sensor.params) if sensor is not None else StripeNoise()
+        self.optics = TwinOptics.from_sensor(sensor, self.noise)
         h, w = recorded.shape
         self.shape = (h, w)
         pose = np.asarray(recorded.pose, dtype=np.float64)
@@ -295,23 +358,67 @@ class TwinStage:
         return lit & seen & (cos_l >= min_cos) & (cos_c >= min_cos)
 
     # -- the twin ------------------------------------------------------------------------
-    def params(self, **given: float | None) -> dict[str, float]:
+    def params(self, **given: float | None) -> dict[str, float | None]:
         out = dict(self.defaults)
         out.update({k: float(v) for k, v in given.items() if v is not None})
         return out
 
+    @property
+    def cell_mm(self) -> tuple[float, float]:
+        """Grid spacing (down a column, along a row), mm: the fitted y and x steps."""
+        return abs(float(self.grid.b[1])), abs(float(self.grid.a[1]))
+
+    def _on_grid(self, values: np.ndarray) -> np.ndarray:
+        """Values over the hit cells spread to the full grid (0 elsewhere), float64."""
+        out = np.zeros(self.hit.size)
+        out[self.hit_index] = values
+        return out
+
+    def draw(self, params: dict[str, Any], *, seed: int = 0, noise: StripeNoise | None = None,
+             quiet: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Status, range error (mm) and predicted std (mm) of every cell, flat (H * W,).
+
+        ``noise`` replaces the sensor's model (a calibration tries many); ``quiet`` draws
+        nothing: the geometry's status, zero error.
+        """
+        status = self.status_codes(params["theta_deg"], params["alpha_deg"], params["min_cos"])
+        n = status.size
+        if quiet:
+            return status, np.zeros(n), np.where(status == Status.VALID, 0.0, np.nan)
+        noise = self.noise if noise is None else noise
+        optics = self.optics
+        if params.get("sigma_mm") is not None:
+            noise = replace(noise, sigma_px=float(params["sigma_mm"]) / optics.dz_du)
+        cos_l = self._on_grid(np.clip(self._reach("laser", params["alpha_deg"])[1], 0.0, 1.0))
+        cos_c = self._on_grid(np.clip(self._reach("camera", params["theta_deg"])[1], 0.0, 1.0))
+        candidate = status == Status.VALID
+        reached = candidate | (status == Status.DROPOUT)
+        row_mm, col_mm = self.cell_mm
+        border = border_distance(reached.reshape(self.shape), sampling=(row_mm, col_mm))
+        corr = (noise.correlation_mm / row_mm, noise.correlation_mm / col_mm)
+        m = optics.magnification
+        result = simulate(noise, np.random.default_rng(seed), self.shape, candidate=candidate, signal=cos_l * cos_c,
+                          cos_incidence=cos_l, amplitude=cos_l, magnification=np.full(n, m), reference_magnification=m,
+                          speckle_px=np.full(n, optics.speckle_px), border_mm=border, corr_px=corr)
+        status = status.copy()
+        status[candidate & ~result.detected] = Status.DROPOUT
+        return status, result.error_px * optics.dz_du, result.sigma_px * optics.dz_du
+
     def scan(self, *, theta_deg: float | None = None, alpha_deg: float | None = None,
-             sigma_mm: float | None = None, min_cos: float | None = None, seed: int = 0) -> RangeScan:
-        """The twin RangeScan under the given parameters (defaults: the sensor's)."""
+             sigma_mm: float | None = None, min_cos: float | None = None, seed: int = 0,
+             noise: StripeNoise | None = None, quiet: bool = False) -> RangeScan:
+        """The twin RangeScan under the given parameters (defaults: the sensor's).
+
+        ``noise`` replaces the sensor's noise model; ``quiet=True`` gives the noise-free
+        geometry (no range error, no drawn dropouts).
+        """
         p = self.params(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos)
         h, w = self.shape
-        status = self.status_codes(p["theta_deg"], p["alpha_deg"], p["min_cos"])
+        status, error, sigma = self.draw(p, seed=seed, noise=noise, quiet=quiet)
         valid = status == Status.VALID
-        rng = np.random.default_rng(seed)
-        noise = rng.normal(0.0, p["sigma_mm"], size=status.size) if p["sigma_mm"] > 0 else np.zeros(status.size)
-        # move along the sample line so the measured point stays on it (dz = noise)
+        # move along the sample line so the measured point stays on it (dz = error)
         line_dir = self.direction / self.direction[:, 2:3]
-        xyz = self.point + noise[:, None] * line_dir
+        xyz = self.point + error[:, None] * line_dir
         xyz[~valid] = np.nan
         normal = self.normal.copy()
         intensity = np.zeros(status.size, dtype=np.float32)
@@ -323,11 +430,13 @@ class TwinStage:
             "laser_blocked": int(np.count_nonzero(~lit)),
             "camera_blocked": int(np.count_nonzero(~self._reach("camera", p["theta_deg"])[0])),
         }
+        noise_used = self.noise if noise is None else noise
         meta = {
             "units": "mm", "frame": self.recorded.meta.get("frame", "scanner"), "organized": True,
             "twin": {
                 "model": "moving_head_orthographic", **p, "seed": int(seed), "side": int(self.side),
                 "grid": self.grid.as_dict(), "source": self.recorded.meta.get("source"), **counts,
+                "noise": None if quiet else asdict(noise_used), "dz_du_mm": self.optics.dz_du,
             },
             "sensor": {"name": _sensor_name(self.sensor) or "twin"},
             "seed": int(seed),
@@ -336,13 +445,13 @@ class TwinStage:
             depth=xyz[:, 2].reshape(h, w), xyz=xyz.reshape(h, w, 3), valid=valid.reshape(h, w),
             normal=normal.reshape(h, w, 3), intensity=intensity.reshape(h, w), part=part.reshape(h, w),
             face=face.reshape(h, w), status=status.reshape(h, w), pose=self.recorded.pose.copy(), meta=meta,
-            xyz_true=self.point.reshape(h, w, 3),
+            xyz_true=self.point.reshape(h, w, 3), sigma=np.where(valid, sigma, np.nan).reshape(h, w),
         )
 
 
 def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: float | None = None,
          alpha_deg: float | None = None, sigma_mm: float | None = None, min_cos: float | None = None,
-         seed: int = 0, stage: TwinStage | None = None) -> RangeScan:
+         seed: int = 0, stage: TwinStage | None = None, quiet: bool = False) -> RangeScan:
     """Scan ``mesh`` from the recorded scan's viewpoint on the same grid (see module docs).
 
     Parameters
@@ -353,9 +462,13 @@ def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: 
         World (mesh) frame.
     sensor : str or Sensor, optional
         Preset for default angles and ``meta``.
-    theta_deg, alpha_deg, sigma_mm, min_cos : float, optional
-        Camera angle (x-z plane, signed), laser angle (y-z plane), depth noise std (mm) and
-        the grazing-dropout cosine threshold.
+    theta_deg, alpha_deg, min_cos : float, optional
+        Camera angle (x-z plane, signed), laser angle (y-z plane) and the grazing-dropout
+        cosine threshold (defaults: the sensor's ``[twin]`` table).
+    sigma_mm : float, optional
+        A white range-noise floor (mm) in place of the sensor's ``noise.sigma_px``.
+    quiet : bool
+        The noise-free geometry (no range error, no drawn dropouts).
     seed : int
         Noise seed.
     stage : TwinStage, optional
@@ -363,4 +476,5 @@ def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: 
     """
     if stage is None:
         stage = TwinStage(recorded_scan, mesh, sensor)
-    return stage.scan(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos, seed=seed)
+    return stage.scan(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos, seed=seed,
+                      quiet=quiet)

@@ -1,0 +1,399 @@
+"""One noise and dropout model for every laser-stripe scan (geometric scanner and twin alike).
+
+The range error of a stripe scanner is the error of the stripe-peak position on the
+sensor, e (pixels along the row), triangulated into depth (``dz/du`` mm per pixel, from the
+sensor's geometry). This module turns per-pixel physical quantities into the std of e, draws
+e, and draws the dropouts. Inputs are flat NumPy arrays over an (H, W) grid, so the same
+code serves the geometric scanner (camera pixels) and the twin of a recording (grid cells).
+
+Terms of the peak error (all in pixels, added in quadrature)
+------------------------------------------------------------
+Imaged stripe width. A sheet of FWHM ``s`` (mm) falling on a surface at laser incidence
+``i`` covers ``s / cos i`` across the stripe; imaged with magnification ``m = f / d``
+(pixels per mm) and blurred by the optics (``camera.psf_px``, Gaussian FWHM), the stripe is
+
+    w = sqrt(psf^2 + (m s / cos i)^2)  pixels,  w0 = the same on a facing surface at z_ref.
+
+1. ``noise.sigma_px`` -- the sub-pixel estimator's floor, white, independent of the stripe.
+2. ``noise.signal_px`` -- detector and shot noise. The Cramer-Rao bound for the position of
+   a Gaussian line of width w and peak amplitude A under additive pixel noise is
+   sigma = sigma_n sqrt(2 w' / sqrt(pi)) / A (w' its std), so
+
+       sigma_signal = signal_px * sqrt(w / w0) / A,   A = albedo cos i (z_ref / d_L)^2,
+
+   ``A`` the stripe's image brightness (a Lambertian surface's radiance; a pixel's value
+   does not depend on the viewing distance or angle). White from pixel to pixel. On an
+   inclined surface w grows as 1 / cos i and A falls as cos i: sigma ~ cos(i)^-1.5.
+3. Speckle (``noise.speckle_contrast`` C, ``camera.aperture_mm`` D, ``laser.wavelength_nm``):
+   the Dorsch et al. (1994) limit sigma_z = C lambda / (2 pi sin u_obs sin theta) for a
+   stripe as narrow as a speckle grain; a wider stripe holds w / w0 more grains, whose
+   random intensities move the centroid as a random walk, so sigma_speckle ~ sqrt(w / w0).
+   Speckle is a property of the surface patch, not of the pixel: neighbouring peaks see
+   the same grains, so this term is a **spatially correlated** field, white noise filtered
+   with a Gaussian of std ``noise.correlation_mm`` (mm on the surface, converted to pixels
+   by the caller) and scaled back to unit variance.
+4. Partial stripes (``noise.edge_gain`` g): where an outline or a shadow border lies inside
+   the stripe's footprint, the imaged stripe is truncated (Curless and Levoy 1995). A
+   Gaussian profile of std sigma_s = s / (2.355 cos i) on the surface cut at distance delta
+   from its centre has its centroid moved by sigma_s phi(t) / Phi(t), t = delta / sigma_s
+   (the mean of a truncated normal); the peak estimator keeps a fraction g of it:
+
+       sigma_edge = g m sigma_s phi(t) / Phi(t)   pixels  (correlated like speckle),
+
+   which gives the heavy tails at outlines and shadow borders.
+5. ``noise.quantization_px`` q: the peak is reported in steps of q; the true peak sits at a
+   random phase of that grid, adding q^2 / 12 of variance.
+
+Dropouts
+--------
+The detected peak amplitude is the mean return S (:func:`rangesim.sensor.signal.return_signal`)
+times the speckle intensity X of the stripe, a unit-mean Gamma variable of contrast
+``noise.signal_contrast`` c (c = 1: fully developed speckle, exponential intensity; c = 0: no
+fluctuation). A pixel is detected when S X >= ``noise.min_signal``:
+
+    P(valid) = P(X >= S_min / S) = Q(1 / c^2, S_min / (S c^2))   (regularised upper gamma),
+
+so dropouts become likely as S falls (grazing angles, dark surfaces) and appear sparsely,
+but not never, on bright facing surfaces. The uniform draws behind the decision come
+from a correlated field too (``Phi`` of a Gaussian field), so dropouts form small holes.
+
+Predicted uncertainty
+---------------------
+:func:`peak_sigma_px` returns the std of e that the model predicts per pixel, including the
+quantisation variance; the callers multiply it by ``dz/du`` to give ``RangeScan.sigma`` (mm).
+
+References
+----------
+.. [1] R. G. Dorsch, G. Haeusler, J. M. Herrmann, "Laser triangulation: fundamental
+   uncertainty in distance measurement", Applied Optics 33(7), 1306-1314 (1994),
+   doi:10.1364/AO.33.001306.
+.. [2] B. Curless, M. Levoy, "Better optical triangulation through spacetime analysis",
+   ICCV 1995, 987-994, doi:10.1109/ICCV.1995.466772.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import ndimage, special
+
+__all__ = [
+    "StripeNoise", "stripe_width_px", "dorsch_sigma_mm", "partial_stripe_shift_mm",
+    "peak_sigma_px", "correlated_field", "draw_peak_error_px", "detection_probability",
+    "draw_detected", "NOISE_KEYS", "border_distance", "StripeDraw", "simulate",
+]
+
+FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+#: below this cosine the footprint formulas are clipped (the stripe covers the whole cell)
+MIN_COS = 0.02
+#: the noise keys of the model and their defaults (all off: a quiet sensor stays exact)
+NOISE_KEYS: dict[str, float] = {
+    "sigma_px": 0.0, "quantization_px": 0.0, "min_signal": 0.0, "speckle_contrast": 0.0,
+    "signal_px": 0.0, "correlation_mm": 0.0, "edge_gain": 0.0, "signal_contrast": 0.0,
+}
+
+
+@dataclass(frozen=True)
+class StripeNoise:
+    """Parameters of the model (see the module docstring), from a sensor's tables.
+
+    Attributes
+    ----------
+    sigma_px, signal_px, quantization_px : float
+        Peak-error terms 1, 2 and 5, pixels.
+    speckle_contrast : float
+        Speckle contrast C of term 3 (0 disables it).
+    correlation_mm : float
+        Std (mm on the surface) of the Gaussian kernel of the correlated terms (0: white).
+    edge_gain : float
+        Fraction g of a truncated stripe's centroid shift that reaches the peak (term 4).
+    min_signal, signal_contrast : float
+        Detection threshold on S and the contrast of the speckle intensity X.
+    stripe_width_mm, psf_px, wavelength_nm, aperture_mm : float
+        Sheet FWHM, optical blur FWHM, laser wavelength and entrance pupil.
+    """
+
+    sigma_px: float = 0.0
+    signal_px: float = 0.0
+    quantization_px: float = 0.0
+    speckle_contrast: float = 0.0
+    correlation_mm: float = 0.0
+    edge_gain: float = 0.0
+    min_signal: float = 0.0
+    signal_contrast: float = 0.0
+    stripe_width_mm: float = 0.0
+    psf_px: float = 1.0
+    wavelength_nm: float = 670.0
+    aperture_mm: float = 5.0
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Mapping[str, Any]]) -> "StripeNoise":
+        """From a sensor's ``params`` (tables ``noise``, ``laser``, ``camera``)."""
+        n, laser, cam = params["noise"], params["laser"], params["camera"]
+        return cls(
+            **{k: float(n.get(k, v)) for k, v in NOISE_KEYS.items()},
+            stripe_width_mm=float(laser.get("stripe_width", 0.0)), psf_px=float(cam.get("psf_px", 1.0)),
+            wavelength_nm=float(laser.get("wavelength_nm", 670.0)), aperture_mm=float(cam.get("aperture_mm", 5.0)),
+        )
+
+
+def stripe_width_px(cos_incidence: np.ndarray, magnification: np.ndarray | float, stripe_width_mm: float,
+                    psf_px: float) -> np.ndarray:
+    """Imaged stripe width w = sqrt(psf^2 + (m s / cos i)^2), pixels (FWHM).
+
+    Parameters
+    ----------
+    cos_incidence : (N,) array
+        Cosine of the laser's incidence angle on the surface.
+    magnification : (N,) array or float
+        Pixels per mm on the surface across the stripe (f / distance).
+    stripe_width_mm, psf_px : float
+        Sheet FWHM (mm) and optical blur FWHM (pixels).
+
+    Examples
+    --------
+    >>> w = stripe_width_px(np.array([1.0, 0.5]), 2.0, 1.0, 0.0)
+    >>> w.tolist()
+    [2.0, 4.0]
+    """
+    c = np.clip(np.abs(np.asarray(cos_incidence, np.float64)), MIN_COS, 1.0)
+    foot = np.asarray(magnification, np.float64) * stripe_width_mm / c
+    return np.sqrt(psf_px**2 + foot**2)
+
+
+def dorsch_sigma_mm(distance_mm: np.ndarray | float, sin_triangulation: np.ndarray | float, contrast: float,
+                    wavelength_nm: float, aperture_mm: float) -> np.ndarray:
+    """Speckle-limited depth uncertainty C lambda / (2 pi sin u_obs sin theta), mm [1]_.
+
+    ``sin u_obs = (D / 2) / sqrt((D / 2)^2 + distance^2)``; theta the angle between the
+    camera ray and the laser ray at the point.
+
+    Examples
+    --------
+    >>> round(float(dorsch_sigma_mm(400.0, 0.35, 1.0, 670.0, 6.0)), 4)
+    0.0406
+    """
+    half = 0.5 * aperture_mm
+    sin_u = half / np.sqrt(half * half + np.square(distance_mm))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return contrast * (wavelength_nm * 1e-6) / (2 * math.pi * sin_u * np.asarray(sin_triangulation))
+
+
+def partial_stripe_shift_mm(edge_distance_mm: np.ndarray, cos_incidence: np.ndarray, stripe_width_mm: float
+                            ) -> np.ndarray:
+    """Centroid shift (mm on the surface) of a stripe truncated at ``edge_distance_mm``.
+
+    A Gaussian footprint of std sigma_s = s / (2.355 cos i) cut at distance delta from its
+    centre has its centroid moved by sigma_s phi(t) / Phi(t), t = delta / sigma_s [2]_.
+    Negligible (< 1e-3 sigma_s) beyond about 3.3 sigma_s.
+
+    Examples
+    --------
+    >>> s = partial_stripe_shift_mm(np.array([0.0, 10.0]), np.array([1.0, 1.0]), 2.355)
+    >>> np.round(s, 4).tolist()  # cut at the centre: sqrt(2 / pi); far away: nothing
+    [0.7979, 0.0]
+    """
+    c = np.clip(np.abs(np.asarray(cos_incidence, np.float64)), MIN_COS, 1.0)
+    sigma_s = stripe_width_mm * FWHM_TO_SIGMA / c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.asarray(edge_distance_mm, np.float64) / sigma_s
+        # phi / Phi, written with erfcx so it stays finite for large negative or positive t
+        ratio = np.sqrt(2.0 / math.pi) / special.erfcx(-t / math.sqrt(2.0))
+        shift = np.where(sigma_s > 0, sigma_s * ratio, 0.0)
+    return np.where(np.isfinite(shift), shift, 0.0)
+
+
+def peak_sigma_px(noise: StripeNoise, *, width_ratio: np.ndarray, amplitude: np.ndarray,
+                  speckle_px: np.ndarray, edge_px: np.ndarray) -> dict[str, np.ndarray]:
+    """Std of each term of the peak error, pixels (see the module docstring).
+
+    Parameters
+    ----------
+    noise : StripeNoise
+    width_ratio : (N,) array
+        w / w0, the imaged stripe width over the facing stripe's.
+    amplitude : (N,) array
+        A, the stripe's image brightness relative to a white facing target at z_ref.
+    speckle_px : (N,) array
+        The Dorsch limit converted to pixels (for a stripe of width w0).
+    edge_px : (N,) array
+        The truncated stripe's centroid shift, pixels (before ``edge_gain``).
+
+    Returns
+    -------
+    dict of (N,) float64 arrays
+        ``white`` (terms 1-2), ``correlated`` (terms 3-4), ``total`` (all, with the
+        quantisation variance q^2 / 12).
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root_w = np.sqrt(np.maximum(width_ratio, 0.0))
+        a = np.maximum(np.asarray(amplitude, np.float64), 1e-6)
+        white = np.sqrt(noise.sigma_px**2 + np.square(noise.signal_px * root_w / a))
+        correlated = np.sqrt(np.square(speckle_px * root_w) + np.square(noise.edge_gain * edge_px))
+    white = np.where(np.isfinite(white), white, 0.0)
+    correlated = np.where(np.isfinite(correlated), correlated, 0.0)
+    total = np.sqrt(white**2 + correlated**2 + noise.quantization_px**2 / 12.0)
+    return {"white": white, "correlated": correlated, "total": total}
+
+
+def correlated_field(rng: np.random.Generator, shape: tuple[int, int], corr_px: tuple[float, float]) -> np.ndarray:
+    """A unit-variance Gaussian random field on an (H, W) grid, float64.
+
+    White normal noise filtered by a Gaussian kernel of std ``corr_px`` (rows, columns) in
+    cells and divided by the kernel's L2 norm, so every cell keeps variance 1 while
+    neighbours correlate as exp(-k^2 / (4 corr^2)) at a lag of k cells. A std of 0 along
+    an axis leaves that axis white.
+
+    Examples
+    --------
+    >>> f = correlated_field(np.random.default_rng(0), (200, 200), (2.0, 2.0))
+    >>> bool(abs(f.std() - 1) < 0.1), bool(np.corrcoef(f[:, :-1].ravel(), f[:, 1:].ravel())[0, 1] > 0.85)
+    (True, True)
+    """
+    white = rng.standard_normal(shape)
+    sr, sc = (max(float(s), 0.0) for s in corr_px)
+    if sr < 0.05 and sc < 0.05:
+        return white
+    field = ndimage.gaussian_filter(white, (sr, sc), mode="wrap", truncate=4.0)
+    # the filter's L2 norm: its response to a unit impulse
+    size = (min(shape[0], int(8 * sr) + 3) | 1, min(shape[1], int(8 * sc) + 3) | 1)
+    impulse = np.zeros(size)
+    impulse[size[0] // 2, size[1] // 2] = 1.0
+    norm = float(np.sqrt(np.sum(np.square(ndimage.gaussian_filter(impulse, (sr, sc), mode="constant", truncate=4.0)))))
+    return field / norm
+
+
+def draw_peak_error_px(rng: np.random.Generator, shape: tuple[int, int], sigmas: Mapping[str, np.ndarray],
+                       quantization_px: float, corr_px: tuple[float, float]) -> np.ndarray:
+    """Draw the peak error (pixels) of every cell of an (H, W) grid, flat (H * W,) float64.
+
+    ``sigmas`` from :func:`peak_sigma_px` (flat, H * W). The white terms use independent
+    normals, the correlated terms one field of :func:`correlated_field`; quantisation to
+    steps of q at a uniform random phase comes last.
+    """
+    n = shape[0] * shape[1]
+    white = rng.standard_normal(n)
+    field = correlated_field(rng, shape, corr_px).reshape(-1)
+    phase = rng.random(n)
+    error = sigmas["white"] * white + sigmas["correlated"] * field
+    if quantization_px > 0:
+        offset = phase * quantization_px  # where the true peak sits on the quantiser grid
+        error = quantization_px * np.round((offset + error) / quantization_px) - offset
+    return error
+
+
+def detection_probability(signal: np.ndarray, min_signal: float, contrast: float) -> np.ndarray:
+    """P(S X >= S_min) with X a unit-mean Gamma of contrast c (see the module docstring).
+
+    Examples
+    --------
+    >>> p = detection_probability(np.array([1.0, 0.1, 0.01]), 0.05, 1.0)  # exp(-S_min / S)
+    >>> np.round(p, 3).tolist()
+    [0.951, 0.607, 0.007]
+    >>> detection_probability(np.array([0.06, 0.04]), 0.05, 0.0).tolist()  # a hard threshold
+    [1.0, 0.0]
+    """
+    s = np.asarray(signal, np.float64)
+    if contrast <= 0 or min_signal <= 0:
+        return ((s >= min_signal) & (s > 0)).astype(np.float64)
+    k = 1.0 / contrast**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where(s > 0, min_signal / (s * contrast**2), np.inf)
+    return special.gammaincc(k, x)
+
+
+def draw_detected(rng: np.random.Generator, shape: tuple[int, int], probability: np.ndarray,
+                  corr_px: tuple[float, float]) -> np.ndarray:
+    """Flat (H * W,) bool: detected where a correlated uniform draw falls below ``probability``.
+
+    The uniform draws are Phi of a :func:`correlated_field`, so they are uniform in every
+    cell and correlated like the speckle; certain outcomes (p = 0 or 1) use no randomness.
+    """
+    u = special.ndtr(correlated_field(rng, shape, corr_px)).reshape(-1)
+    return u < np.asarray(probability, np.float64)
+
+
+def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """Distance from each cell to the nearest outline or shadow border, flat (H * W,).
+
+    ``measurable`` (H, W) bool: cells whose surface the stripe reaches (not a miss, shadow
+    or out of range). The border lies half a cell beyond the last measurable cell, so a
+    cell next to it gets half a cell's spacing. ``sampling``: cell spacing (rows, columns)
+    in the output's unit. Cells with no border anywhere get +inf.
+    """
+    m = np.asarray(measurable, bool)
+    if m.all():
+        return np.full(m.size, np.inf)
+    dist = ndimage.distance_transform_edt(m, sampling=sampling)
+    return np.maximum(dist - 0.5 * min(sampling), 0.0).reshape(-1)
+
+
+@dataclass
+class StripeDraw:
+    """What :func:`simulate` decides for every cell of the grid (flat, H * W).
+
+    Attributes
+    ----------
+    error_px : float64 array
+        Peak error, pixels (0 where the cell is not a candidate).
+    sigma_px : float64 array
+        The model's predicted std of the peak error, pixels (NaN where not a candidate).
+    detected : bool array
+        Candidates that pass the dropout draw.
+    """
+
+    error_px: np.ndarray
+    sigma_px: np.ndarray
+    detected: np.ndarray
+
+
+def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int], *, candidate: np.ndarray,
+             signal: np.ndarray, cos_incidence: np.ndarray, amplitude: np.ndarray, magnification: np.ndarray,
+             reference_magnification: float, speckle_px: np.ndarray, border_mm: np.ndarray,
+             corr_px: tuple[float, float]) -> StripeDraw:
+    """Dropouts, predicted std and peak errors of one scan: the one mechanism every scanner calls.
+
+    Parameters
+    ----------
+    noise : StripeNoise
+    rng : numpy.random.Generator
+        Draws in a fixed order: dropout field (only when ``noise.signal_contrast`` > 0), then
+        the white normals, the correlated field and the quantiser phases.
+    shape : (H, W)
+    candidate : (N,) bool
+        Cells that would be measured before the dropout draw (lit, seen, in range).
+    signal : (N,) array
+        Mean return S (the dropout law).
+    cos_incidence, amplitude, magnification : (N,) arrays
+        Laser incidence cosine, image brightness A, pixels per mm across the stripe.
+    reference_magnification : float
+        Pixels per mm at the reference distance (the facing stripe's width w0).
+    speckle_px : (N,) array
+        Dorsch limit in pixels.
+    border_mm : (N,) array
+        Distance to the nearest outline or shadow border on the surface, mm.
+    corr_px : (rows, columns)
+        Correlation std of the correlated terms, cells.
+    """
+    n = shape[0] * shape[1]
+    candidate = np.asarray(candidate, bool).reshape(-1)
+    if noise.signal_contrast > 0 and noise.min_signal > 0:
+        p = detection_probability(signal, noise.min_signal, noise.signal_contrast)
+        detected = candidate & draw_detected(rng, shape, np.where(candidate, p, 0.0), corr_px)
+    else:
+        detected = candidate.copy()
+    s = noise.stripe_width_mm
+    w = stripe_width_px(cos_incidence, magnification, s, noise.psf_px)
+    w0 = float(stripe_width_px(np.ones(1), reference_magnification, s, noise.psf_px)[0])
+    ratio = w / w0 if w0 > 0 else np.ones(n)
+    if noise.edge_gain > 0 and s > 0:
+        edge_px = partial_stripe_shift_mm(border_mm, cos_incidence, s) * magnification
+    else:
+        edge_px = np.zeros(n)
+    sigmas = peak_sigma_px(noise, width_ratio=ratio, amplitude=amplitude, speckle_px=speckle_px, edge_px=edge_px)
+    sigmas = {k: np.where(candidate, v, 0.0) for k, v in sigmas.items()}
+    error = draw_peak_error_px(rng, shape, sigmas, noise.quantization_px, corr_px)
+    return StripeDraw(error_px=np.where(detected, error, 0.0), sigma_px=np.where(detected, sigmas["total"], np.nan),
+                      detected=detected)
