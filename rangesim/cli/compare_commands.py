@@ -77,7 +77,12 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise RangesimError("the recorded scan has no valid point", source=path)
     fixed = {k: getattr(args, k) for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")
              if getattr(args, k) is not None}
-    fit = [k for k in ("theta_deg", "alpha_deg", "sigma_mm") if k not in fixed] if not args.no_fit else []
+    if args.no_fit:
+        fit: Any = []
+    elif args.fit:
+        fit = [k for k in ("theta_deg", "alpha_deg", "sigma_mm") if k not in fixed]
+    else:
+        fit = "auto"  # a calibrated sensor (a [twin] table) is used as it is
     metrics, twin_scan, edge_maps = compare(scan, args.mesh, args.sensor, params=fixed, fit=fit,
                                             seed=args.seed, return_scans=True)
     metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **metrics}
@@ -85,10 +90,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
     _write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
     p = metrics["params"]
-    print(f"twin: theta {p['theta_deg']:.1f} deg, alpha {p['alpha_deg']:.1f} deg, sigma {p['sigma_mm']:.3f} mm, "
+    noise = "the sensor's noise model" if p["sigma_mm"] is None else f"sigma {p['sigma_mm']:.3f} mm"
+    print(f"twin: theta {p['theta_deg']:.1f} deg, alpha {p['alpha_deg']:.1f} deg, {noise}, "
           f"min_cos {p['min_cos']:.2f}")
-    print(f"IoU {metrics['iou']:.3f}  hole recall {metrics['hole_recall']:.3f}  "
-          f"noise std ratio {metrics['noise_std_ratio']:.3f}")
+    print(f"IoU {metrics['iou']:.3f} (no-physics twin {metrics['iou_no_physics']:.3f})  hole recall "
+          f"{metrics['hole_recall']:.3f}  noise std ratio {metrics['noise_std_ratio']:.3f}")
+    r = metrics["realism"]
+    print("  std ratio by incidence: " + "  ".join(f"{k} {v:.2f}" for k, v in r["std_ratio_by_incidence"].items()))
+    print("  neighbour correlation recorded/twin: " + "  ".join(
+        f"{k} {r['recorded']['neighbour_correlation'][k]:.2f}/{r['twin']['neighbour_correlation'][k]:.2f}"
+        for k in ("row", "column")) + f"  p99 ratio {r['p99_ratio']:.2f}")
     for name, e in metrics["edges"].items():
         print(f"  {name:<15} F1 {e['f1']:.3f}")
     print(f"wrote {out}/metrics.json, {out}/compare.png")
@@ -99,8 +110,9 @@ def register(sub) -> None:
     from rangesim.edges import DETECTORS
 
     p = sub.add_parser("compare", help="compare a recorded scan with its simulated twin",
-                       description="Twin a recorded scan (scan the mesh from its viewpoint on its grid, "
-                       "calibrating the sensor angles and noise) and write metrics.json and compare.png. "
+                       description="Twin a recorded scan (scan the mesh from its viewpoint on its grid with the "
+                       "sensor's calibration; an uncalibrated sensor's angles and noise are fitted to this view) "
+                       "and write metrics.json and compare.png. "
                        "Without --mesh: run the detectors and score them against the scan's label regions.")
     p.add_argument("recorded", metavar="RECORDED", help="recorded scan (.ply range grid, .pcd, .msu, ...)")
     p.add_argument("--mesh", help="reference mesh of the object (world frame)")
@@ -112,6 +124,8 @@ def register(sub) -> None:
     p.add_argument("--sigma-mm", dest="sigma_mm", type=float, help="fix the depth noise std (else fitted)")
     p.add_argument("--min-cos", dest="min_cos", type=float, help="grazing-dropout cosine threshold")
     p.add_argument("--no-fit", action="store_true", help="no calibration: sensor defaults and the values given")
+    p.add_argument("--fit", action="store_true",
+                   help="refit the angles and a white noise on this view even if the sensor is calibrated")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--detector", default="gradient", choices=list(DETECTORS), help="edges shown in the picture")
     p.add_argument("--tolerance", type=float, default=2.0, help="edge matching tolerance, pixels (without --mesh)")

@@ -56,7 +56,8 @@ EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
 COMMAND_MODULES: tuple[str, ...] = (
     "rangesim.cli.cad_commands", "rangesim.cli.curvature_commands", "rangesim.cli.points_commands",
     "rangesim.cli.edge_commands", "rangesim.cli.feature_commands", "rangesim.cli.volume_commands",
-    "rangesim.cli.compare_commands", "rangesim.cli.experiment_commands", "rangesim.cli.diff_commands",
+    "rangesim.cli.compare_commands", "rangesim.cli.calibrate_commands", "rangesim.cli.experiment_commands",
+    "rangesim.cli.diff_commands",
 )
 
 
@@ -252,6 +253,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         lines.append(f"depth: {depth.min():.3f} .. {depth.max():.3f} mm")
     else:
         lines.append("depth: no valid pixels")
+    if result.sigma is not None:
+        sig = result.sigma[result.valid & np.isfinite(result.sigma)]
+        if sig.size:
+            p5, p50, p95 = np.percentile(sig, [5, 50, 95])
+            lines.append(f"predicted depth std (sigma): median {p50:.4f} mm, 5-95 % {p5:.4f} .. {p95:.4f} mm")
     lines.append("pose (camera-to-world):")
     # rounding first and adding 0.0 turns -0.0 and -1e-17 into a plain 0.0000
     lines += ["  [" + "  ".join(f"{round(v, 4) + 0.0:10.4f}" for v in row) + " ]" for row in result.pose]

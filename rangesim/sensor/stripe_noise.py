@@ -14,24 +14,29 @@ Imaged stripe width. A sheet of FWHM ``s`` (mm) falling on a surface at laser in
 
     w = sqrt(psf^2 + (m s / cos i)^2)  pixels,  w0 = the same on a facing surface at z_ref.
 
-1. ``noise.sigma_px`` -- the sub-pixel estimator's floor, white, independent of the stripe.
-2. ``noise.signal_px`` -- detector and shot noise. The Cramer-Rao bound for the position of
-   a Gaussian line of width w and peak amplitude A under additive pixel noise is
+1. ``noise.sigma_px`` -- the sub-pixel estimator's and the detector's floor, white (each
+   pixel's own read-out), independent of the stripe.
+2. ``noise.signal_px`` -- signal-limited localisation. The Cramer-Rao bound for the position
+   of a Gaussian line of width w and peak amplitude A under additive intensity noise is
    sigma = sigma_n sqrt(2 w' / sqrt(pi)) / A (w' its std), so
 
        sigma_signal = signal_px * sqrt(w / w0) / A,   A = albedo cos i (z_ref / d_L)^2,
 
    ``A`` the stripe's image brightness (a Lambertian surface's radiance; a pixel's value
-   does not depend on the viewing distance or angle). White from pixel to pixel. On an
-   inclined surface w grows as 1 / cos i and A falls as cos i: sigma ~ cos(i)^-1.5.
+   does not depend on the viewing distance or angle). On an inclined surface w grows as
+   1 / cos i and A falls as cos i: sigma ~ cos(i)^-1.5. In laser-stripe images the
+   intensity noise that limits this bound is the speckle of the surface (it dwarfs shot
+   noise at working exposures, Dorsch et al. 1994), and speckle belongs to the surface
+   patch, not to the pixel: neighbouring peaks (and, in a sweep, the frames whose stripe
+   overlaps the same patch) see the same grains. So this term is **spatially correlated**,
+   like term 3.
 3. Speckle (``noise.speckle_contrast`` C, ``camera.aperture_mm`` D, ``laser.wavelength_nm``):
    the Dorsch et al. (1994) limit sigma_z = C lambda / (2 pi sin u_obs sin theta) for a
    stripe as narrow as a speckle grain; a wider stripe holds w / w0 more grains, whose
    random intensities move the centroid as a random walk, so sigma_speckle ~ sqrt(w / w0).
-   Speckle is a property of the surface patch, not of the pixel: neighbouring peaks see
-   the same grains, so this term is a **spatially correlated** field, white noise filtered
-   with a Gaussian of std ``noise.correlation_mm`` (mm on the surface, converted to pixels
-   by the caller) and scaled back to unit variance.
+   Terms 2-4 share one **correlated field**: white noise filtered with a Gaussian of std
+   ``noise.correlation_mm`` (mm on the surface, converted to pixels by the caller) and
+   scaled back to unit variance.
 4. Partial stripes (``noise.edge_gain`` g): where an outline or a shadow border lies inside
    the stripe's footprint, the imaged stripe is truncated (Curless and Levoy 1995). A
    Gaussian profile of std sigma_s = s / (2.355 cos i) on the surface cut at distance delta
@@ -224,14 +229,15 @@ def peak_sigma_px(noise: StripeNoise, *, width_ratio: np.ndarray, amplitude: np.
     Returns
     -------
     dict of (N,) float64 arrays
-        ``white`` (terms 1-2), ``correlated`` (terms 3-4), ``total`` (all, with the
+        ``white`` (term 1), ``correlated`` (terms 2-4), ``total`` (all, with the
         quantisation variance q^2 / 12).
     """
     with np.errstate(divide="ignore", invalid="ignore"):
         root_w = np.sqrt(np.maximum(width_ratio, 0.0))
         a = np.maximum(np.asarray(amplitude, np.float64), 1e-6)
-        white = np.sqrt(noise.sigma_px**2 + np.square(noise.signal_px * root_w / a))
-        correlated = np.sqrt(np.square(speckle_px * root_w) + np.square(noise.edge_gain * edge_px))
+        white = np.full(np.shape(root_w), float(noise.sigma_px))
+        correlated = np.sqrt(np.square(noise.signal_px * root_w / a) + np.square(speckle_px * root_w)
+                             + np.square(noise.edge_gain * edge_px))
     white = np.where(np.isfinite(white), white, 0.0)
     correlated = np.where(np.isfinite(correlated), correlated, 0.0)
     total = np.sqrt(white**2 + correlated**2 + noise.quantization_px**2 / 12.0)

@@ -10,29 +10,21 @@ recorded points and the twin's noise-free hits in the same cells.
 """
 from __future__ import annotations
 
-from typing import Any, Iterable
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
+from rangesim.twin.realism import robust_std
 from rangesim.twin.stage import TwinStage
 
-__all__ = ["calibrate", "robust_std", "range_residuals", "mask_iou"]
+__all__ = ["calibrate", "robust_std", "range_residuals", "mask_iou", "search_geometry"]
 
 FITTABLE = ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")
 THETA_COARSE = np.arange(-40.0, 40.0 + 1e-9, 5.0)
 ALPHA_COARSE = np.arange(-30.0, 30.0 + 1e-9, 5.0)
 MIN_COS_GRID = np.array([0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3])
-
-
-def robust_std(values: np.ndarray) -> float:
-    """1.4826 x the median absolute deviation from the median (NaN for no values)."""
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return float("nan")
-    return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -46,40 +38,75 @@ def range_residuals(scan: RangeScan, truth: np.ndarray) -> np.ndarray:
     return (scan.xyz[ok, 2].astype(np.float64) - truth[ok, 2].astype(np.float64))
 
 
-def _search(stage: TwinStage, recorded_valid: np.ndarray, thetas, alphas, cosines) -> tuple[float, tuple]:
-    """Best (IoU, (theta, alpha, min_cos)) over the grid."""
-    idx = stage.hit_index
-    rec_hit = recorded_valid[idx]
-    rec_outside = int(np.count_nonzero(recorded_valid)) - int(np.count_nonzero(rec_hit))
+def _search(stages: Sequence[TwinStage], thetas, alphas, cosines) -> tuple[float, tuple]:
+    """Best (joint IoU, (theta, alpha, min_cos)) over the grid; intersections and unions add up over views."""
+    prepared = []
+    for st in stages:
+        rec_valid = st.recorded.valid.reshape(-1)
+        rec_hit = rec_valid[st.hit_index]
+        prepared.append((st, rec_hit, int(np.count_nonzero(rec_valid)) - int(np.count_nonzero(rec_hit))))
     best = (-1.0, (0.0, 0.0, 0.0))
     for theta in thetas:
-        seen, cos_c = stage._reach("camera", float(theta))
         for alpha in alphas:
-            lit, cos_l = stage._reach("laser", float(alpha))
-            base = seen & lit
-            low = np.minimum(cos_c, cos_l)
-            for c in cosines:
-                v = base & (low >= c)
-                inter = np.count_nonzero(v & rec_hit)
-                union = np.count_nonzero(v | rec_hit) + rec_outside
-                iou = inter / union if union else 1.0
+            inter = np.zeros(len(cosines))
+            union = np.zeros(len(cosines))
+            for st, rec_hit, rec_outside in prepared:
+                seen, cos_c = st._reach("camera", float(theta))
+                lit, cos_l = st._reach("laser", float(alpha))
+                base = seen & lit
+                low = np.minimum(cos_c, cos_l)
+                for k, c in enumerate(cosines):
+                    v = base & (low >= c)
+                    inter[k] += np.count_nonzero(v & rec_hit)
+                    union[k] += np.count_nonzero(v | rec_hit) + rec_outside
+            for k, c in enumerate(cosines):
+                iou = inter[k] / union[k] if union[k] else 1.0
                 # ties: prefer the smaller |angles| found first (grids run from - to +)
                 if iou > best[0] + 1e-12:
-                    best = (iou, (float(theta), float(alpha), float(c)))
+                    best = (float(iou), (float(theta), float(alpha), float(c)))
     return best
 
 
-def calibrate(recorded: RangeScan, mesh: Any, sensor: Any = None,
+def search_geometry(stages: Sequence[TwinStage], *, theta_grid: Iterable[float] | None = None,
+                    alpha_grid: Iterable[float] | None = None, cosines: Iterable[float] | None = None,
+                    fixed: dict[str, float] | None = None, refine: bool = True) -> tuple[float, tuple]:
+    """The camera angle, laser angle and grazing cut-off that maximise the joint valid-mask IoU.
+
+    A coarse grid (5-degree steps) and, with ``refine``, 1-degree steps (+-4) around its
+    optimum. Names in ``fixed`` (``theta_deg``, ``alpha_deg``, ``min_cos``) are held at the
+    given value. Returns ``(iou, (theta_deg, alpha_deg, min_cos))``.
+    """
+    fixed = fixed or {}
+    thetas = [fixed["theta_deg"]] if "theta_deg" in fixed else (
+        np.asarray(list(theta_grid), float) if theta_grid is not None else THETA_COARSE)
+    alphas = [fixed["alpha_deg"]] if "alpha_deg" in fixed else (
+        np.asarray(list(alpha_grid), float) if alpha_grid is not None else ALPHA_COARSE)
+    cos_set = [fixed["min_cos"]] if "min_cos" in fixed else (
+        np.asarray(list(cosines), float) if cosines is not None else MIN_COS_GRID)
+    iou, (theta, alpha, cmin) = _search(stages, thetas, alphas, cos_set)
+    if refine and ("theta_deg" not in fixed or "alpha_deg" not in fixed):
+        thetas = [theta] if "theta_deg" in fixed else theta + np.arange(-4.0, 4.0 + 1e-9)
+        alphas = [alpha] if "alpha_deg" in fixed else alpha + np.arange(-4.0, 4.0 + 1e-9)
+        iou, (theta, alpha, cmin) = _search(stages, thetas, alphas, cos_set)
+    return iou, (theta, alpha, cmin)
+
+
+def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any = None,
               params: Iterable[str] = ("theta_deg", "alpha_deg", "sigma_mm"), *,
               initial: dict[str, float] | None = None, stage: TwinStage | None = None,
               theta_grid: Iterable[float] | None = None, alpha_grid: Iterable[float] | None = None,
               refine: bool = True) -> dict[str, Any]:
-    """Estimate the twin's parameters by matching the recording.
+    """Estimate the twin's parameters by matching the recording(s).
+
+    Given a list of recordings, fits one parameter set to all of them jointly (geometry,
+    dropout curve and range-error terms; :func:`rangesim.twin.joint.calibrate_views`, whose
+    result holds the calibrated ``sensor`` and its ``toml``). Given one RangeScan, fits the
+    geometry and the legacy white noise ``sigma_mm`` to that view alone (described below).
 
     Parameters
     ----------
-    recorded : RangeScan
-        The recorded organized scan (scanner frame, ``pose`` set).
+    recorded : RangeScan or sequence of RangeScan
+        The recorded organized scan(s) (scanner frame, ``pose`` set).
     mesh : trimesh.Trimesh or path
         The object in the world frame.
     sensor : str or Sensor, optional
@@ -104,6 +131,10 @@ def calibrate(recorded: RangeScan, mesh: Any, sensor: Any = None,
         ``recorded_noise_mm`` (robust std of the recorded residuals), ``side`` and the
         ``stage`` (for :func:`rangesim.twin.twin`).
     """
+    if not isinstance(recorded, RangeScan):  # several views: one joint calibration
+        from rangesim.twin.joint import calibrate_views
+
+        return calibrate_views(list(recorded), mesh, sensor)
     params = tuple(params)
     unknown = [p for p in params if p not in FITTABLE]
     if unknown:
@@ -111,20 +142,13 @@ def calibrate(recorded: RangeScan, mesh: Any, sensor: Any = None,
     if stage is None:
         stage = TwinStage(recorded, mesh, sensor)
     values = stage.params(**(initial or {}))
-    recorded_valid = recorded.valid.reshape(-1)
 
     fit_theta, fit_alpha = "theta_deg" in params, "alpha_deg" in params
     fit_cos = "min_cos" in params or fit_theta or fit_alpha
-    thetas = np.asarray(list(theta_grid), float) if theta_grid is not None else THETA_COARSE
-    alphas = np.asarray(list(alpha_grid), float) if alpha_grid is not None else ALPHA_COARSE
-    theta_set = thetas if fit_theta else [values["theta_deg"]]
-    alpha_set = alphas if fit_alpha else [values["alpha_deg"]]
-    cos_set = MIN_COS_GRID if fit_cos else [values["min_cos"]]
-    iou, (theta, alpha, cmin) = _search(stage, recorded_valid, theta_set, alpha_set, cos_set)
-    if refine and (fit_theta or fit_alpha):
-        theta_set = theta + np.arange(-4.0, 4.0 + 1e-9) if fit_theta else [theta]
-        alpha_set = alpha + np.arange(-4.0, 4.0 + 1e-9) if fit_alpha else [alpha]
-        iou, (theta, alpha, cmin) = _search(stage, recorded_valid, theta_set, alpha_set, cos_set)
+    fixed = {k: values[k] for k, fit in (("theta_deg", fit_theta), ("alpha_deg", fit_alpha), ("min_cos", fit_cos))
+             if not fit}
+    iou, (theta, alpha, cmin) = search_geometry([stage], theta_grid=theta_grid, alpha_grid=alpha_grid, fixed=fixed,
+                                                refine=refine)
     values.update(theta_deg=theta, alpha_deg=alpha, min_cos=cmin)
 
     # noise: recorded points against the twin's noise-free hits

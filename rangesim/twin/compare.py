@@ -9,6 +9,12 @@ All metrics are computed on the common grid (same H x W, same frame):
   signed distance along the range axis (mm): median, std, robust std, 95th percentile of
   |distance|, count;
 * ``noise_std_ratio``: robust std of the twin's residuals over the recording's;
+* ``iou_no_physics``: the IoU of a twin without shadows, dropouts or grazing limit (valid
+  wherever the mesh is hit), the baseline the physics must beat;
+* ``realism``: :func:`rangesim.twin.realism.realism_stats` of recording and twin (robust
+  std per incidence bin, neighbour correlation along rows and columns, 99th percentile
+  |residual|, share more than 0.5 mm off), their ratios, and the dropout share per
+  incidence bin of both (incidence: the hit's normal against the range axis z);
 * ``edges``: per detector of :data:`rangesim.edges.DETECTORS`, precision / recall / F1 of the
   twin's edge map against the recording's (tolerance 2 px).
 """
@@ -19,7 +25,8 @@ from typing import Any, Iterable
 import numpy as np
 
 from rangesim.core.rangescan import RangeScan
-from rangesim.twin.calibrate import calibrate, mask_iou, range_residuals, robust_std
+from rangesim.twin.calibrate import calibrate, mask_iou, range_residuals
+from rangesim.twin.realism import dropout_by_bin, incidence_deg, realism_stats, residual_grid, robust_std
 from rangesim.twin.stage import TwinStage, twin
 
 __all__ = ["compare", "compare_scans", "residual_stats", "edge_agreement"]
@@ -65,6 +72,27 @@ def edge_agreement(recorded: RangeScan, twin_scan: RangeScan, detectors: Iterabl
     return out
 
 
+def realism_comparison(recorded: RangeScan, twin_scan: RangeScan) -> dict[str, Any]:
+    """Realism statistics of recording and twin against the twin's noise-free hits, and their ratios."""
+    truth = twin_scan.xyz_true
+    surface = np.isfinite(truth).all(axis=2)
+    incidence = incidence_deg(twin_scan.normal, np.array([0.0, 0.0, 1.0]))
+    stats = {name: realism_stats(residual_grid(scan, truth), incidence)
+             for name, scan in (("recorded", recorded), ("twin", twin_scan))}
+    rec, tw = stats["recorded"], stats["twin"]
+    ratio = lambda a, b: float(a / b) if b and np.isfinite(a) and np.isfinite(b) else float("nan")  # noqa: E731
+    return {
+        **stats,
+        "std_ratio_by_incidence": {k: ratio(tw["by_incidence"][k]["robust_std"], v["robust_std"])
+                                   for k, v in rec["by_incidence"].items()},
+        "correlation_difference": {k: float(tw["neighbour_correlation"][k] - v)
+                                   for k, v in rec["neighbour_correlation"].items()},
+        "p99_ratio": ratio(tw["p99_abs"], rec["p99_abs"]),
+        "dropout_by_incidence": {"recorded": dropout_by_bin(recorded.valid, surface, incidence),
+                                 "twin": dropout_by_bin(twin_scan.valid, surface, incidence)},
+    }
+
+
 def compare_scans(recorded: RangeScan, twin_scan: RangeScan, *, detectors: Iterable[str] | None = None,
                   edge_maps: dict | None = None) -> dict[str, Any]:
     """Metrics of a recorded scan against its twin (the twin must carry ``xyz_true``)."""
@@ -82,6 +110,8 @@ def compare_scans(recorded: RangeScan, twin_scan: RangeScan, *, detectors: Itera
              if rec_res["robust_std"] and np.isfinite(rec_res["robust_std"]) else float("nan"))
     return {
         "iou": mask_iou(recorded.valid, twin_scan.valid),
+        "iou_no_physics": mask_iou(recorded.valid, silhouette),
+        "realism": realism_comparison(recorded, twin_scan),
         "hole_recall": float(np.count_nonzero(holes & ~twin_scan.valid) / n_holes) if n_holes else 1.0,
         "recorded_holes": n_holes,
         "valid": {"recorded": int(recorded.valid.sum()), "twin": int(twin_scan.valid.sum()),
@@ -94,8 +124,8 @@ def compare_scans(recorded: RangeScan, twin_scan: RangeScan, *, detectors: Itera
 
 
 def compare(recorded: RangeScan, mesh: Any, sensor: Any = None, *, params: dict[str, float] | None = None,
-            fit: Iterable[str] | None = ("theta_deg", "alpha_deg", "sigma_mm"), seed: int = 0,
-            detectors: Iterable[str] | None = None, return_scans: bool = False):
+            fit: Iterable[str] | str | None = "auto", seed: int = 0,
+            detectors: Iterable[str] | None = None, return_scans: bool = False, stage: TwinStage | None = None):
     """Twin the recording (calibrating the parameters in ``fit`` first) and compare.
 
     Parameters
@@ -105,14 +135,19 @@ def compare(recorded: RangeScan, mesh: Any, sensor: Any = None, *, params: dict[
     sensor : str or Sensor, optional
     params : dict, optional
         Fixed twin parameters (used as given; not refitted unless named in ``fit``).
-    fit : iterable of str or None
-        Parameters to calibrate (None or empty: none).
+    fit : iterable of str, "auto" or None
+        Parameters to calibrate on this view (None or empty: none). ``"auto"``: none when the
+        sensor carries a calibration (a ``[twin]`` table with ``theta_deg``, as
+        ``rangesim calibrate`` writes), else the legacy single-view fit of ``theta_deg``,
+        ``alpha_deg`` and ``sigma_mm``.
     seed : int
         Noise seed of the twin.
     detectors : iterable of str, optional
         Edge detectors to compare (default all).
     return_scans : bool
         Also return the twin scan and the edge maps: ``(metrics, twin, edge_maps)``.
+    stage : TwinStage, optional
+        A prepared stage of this recording (reuses the ray casts).
 
     Returns
     -------
@@ -120,9 +155,13 @@ def compare(recorded: RangeScan, mesh: Any, sensor: Any = None, *, params: dict[
         :func:`compare_scans` metrics plus ``params`` (the twin's parameters) and
         ``calibration`` (the fit's IoU and fitted names, when fitted).
     """
-    stage = TwinStage(recorded, mesh, sensor)
+    if stage is None:
+        stage = TwinStage(recorded, mesh, sensor)
     values = stage.params(**(params or {}))
     calibration = None
+    if isinstance(fit, str) and fit == "auto":
+        calibrated = stage.sensor is not None and stage.sensor.params.get("twin", {}).get("theta_deg") is not None
+        fit = None if calibrated else ("theta_deg", "alpha_deg", "sigma_mm")
     if fit:
         result = calibrate(recorded, mesh, sensor, params=fit, initial=params, stage=stage)
         values = {k: result[k] for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")}
@@ -131,7 +170,8 @@ def compare(recorded: RangeScan, mesh: Any, sensor: Any = None, *, params: dict[
     twin_scan = twin(recorded, mesh, sensor, seed=seed, stage=stage, **values)
     edge_maps: dict = {}
     metrics = compare_scans(recorded, twin_scan, detectors=detectors, edge_maps=edge_maps)
-    metrics["params"] = {**{k: float(v) for k, v in values.items()}, "side": int(stage.side), "seed": int(seed)}
+    metrics["params"] = {**{k: None if v is None else float(v) for k, v in values.items()}, "side": int(stage.side),
+                         "seed": int(seed), "noise": twin_scan.meta["twin"]["noise"]}
     if calibration is not None:
         metrics["calibration"] = calibration
     if return_scans:

@@ -54,8 +54,8 @@ def save_comparison(recorded: RangeScan, twin: RangeScan, metrics: dict[str, Any
         rec_map, twin_map = DETECTORS[detector](recorded), DETECTORS[detector](twin)
     limits = depth_limits(recorded) if recorded.valid.any() else None
 
-    fig = Figure(figsize=(15, 9.5))
-    axes = fig.subplots(2, 3)
+    fig = Figure(figsize=(20, 9.5))
+    axes = fig.subplots(2, 4)
     panels = [
         (axes[0, 0], depth_rgb(_shaded_alike(recorded), limits=limits), "recorded depth"),
         (axes[0, 1], depth_rgb(_shaded_alike(twin), limits=limits), "twin depth"),
@@ -83,21 +83,73 @@ def save_comparison(recorded: RangeScan, twin: RangeScan, metrics: dict[str, Any
         ax.hist(np.clip(rec_res, -span, span), bins=bins, histtype="step", color=RECORDED_ONLY, label="recorded")
         ax.hist(np.clip(twin_res, -span, span), bins=bins, histtype="step", color=TWIN_ONLY, label="twin")
         ax.legend(fontsize=8)
+        ax.set_yscale("log")
     ratio = metrics.get("noise_std_ratio", float("nan"))
     ax.set_title(f"residuals to the mesh along z (std ratio {ratio:.2f})", fontsize=10)
     ax.set_xlabel("mm")
+    _noise_vs_incidence(axes[0, 3], recorded, twin)
+    _realism_table(axes[1, 3], metrics.get("realism"))
     p = metrics.get("params", {})
     source = recorded.meta.get("source", "recorded")
     name = source.get("file", "recorded") if isinstance(source, dict) else Path(str(source)).name
+    sigma = p.get("sigma_mm")
+    noise = "sensor noise model" if sigma is None else f"sigma {sigma:.3f} mm"
     fig.suptitle(
         f"{name} vs twin: theta {p.get('theta_deg', float('nan')):.1f} deg,"
-        f" alpha {p.get('alpha_deg', float('nan')):.1f} deg, sigma {p.get('sigma_mm', float('nan')):.3f} mm,"
+        f" alpha {p.get('alpha_deg', float('nan')):.1f} deg, {noise},"
         f" hole recall {metrics.get('hole_recall', float('nan')):.2f}", fontsize=12)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         FigureCanvasAgg(fig).print_png(str(tmp))
     return path
+
+
+def _noise_vs_incidence(ax, recorded: RangeScan, twin: RangeScan) -> None:
+    """Robust std of the range residual against incidence (5-degree bins), recording and twin."""
+    from rangesim.twin.realism import incidence_deg, residual_grid, robust_std
+
+    if twin.xyz_true is None:
+        ax.set_axis_off()
+        return
+    incidence = incidence_deg(twin.normal, np.array([0.0, 0.0, 1.0]))
+    edges = np.arange(0.0, 90.01, 5.0)
+    for scan, color, label in ((recorded, RECORDED_ONLY, "recorded"), (twin, TWIN_ONLY, "twin")):
+        r = residual_grid(scan, twin.xyz_true)
+        centres, stds = [], []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            sel = np.isfinite(r) & (incidence >= lo) & (incidence < hi)
+            if np.count_nonzero(sel) >= 30:
+                centres.append(0.5 * (lo + hi))
+                stds.append(robust_std(r[sel]))
+        ax.plot(centres, stds, "o-", color=color, label=label, ms=4)
+    ax.set_yscale("log")
+    ax.set_xlabel("incidence (deg, normal vs range axis)")
+    ax.set_ylabel("robust std of the range residual (mm)")
+    ax.set_title("noise vs incidence", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+
+
+def _realism_table(ax, realism: dict | None) -> None:
+    """The realism metrics as text: per-bin std ratio, correlations, tails, dropouts."""
+    ax.set_axis_off()
+    if not realism:
+        return
+    rec, tw = realism["recorded"], realism["twin"]
+    lines = ["incidence   rec std   twin std   ratio   drop rec/twin"]
+    for key, b in rec["by_incidence"].items():
+        d = realism["dropout_by_incidence"]
+        lines.append(f"{key:>8}  {b['robust_std']:8.3f}  {tw['by_incidence'][key]['robust_std']:9.3f}"
+                     f"  {realism['std_ratio_by_incidence'][key]:6.2f}   {d['recorded'][key]:.3f}/{d['twin'][key]:.3f}")
+    rc, tc = rec["neighbour_correlation"], tw["neighbour_correlation"]
+    lines += ["", f"neighbour corr. row     {rc['row']:.2f} / {tc['row']:.2f}",
+              f"neighbour corr. column  {rc['column']:.2f} / {tc['column']:.2f}",
+              f"p99 |residual|          {rec['p99_abs']:.2f} / {tw['p99_abs']:.2f} mm",
+              f"share > {rec['off_mm']} mm          {rec['share_off']:.3f} / {tw['share_off']:.3f}",
+              "(recorded / twin)"]
+    ax.text(0.0, 1.0, "\n".join(lines), family="monospace", fontsize=9, va="top", transform=ax.transAxes)
+    ax.set_title("realism metrics", fontsize=10)
 
 
 def _shaded_alike(scan):

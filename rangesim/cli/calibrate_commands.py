@@ -1,0 +1,67 @@
+"""``rangesim calibrate``: one sensor calibration fitted jointly on several recordings (a sensor TOML)."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rangesim.cli.common import writing
+from rangesim.core.errors import RangesimError
+from rangesim.io.atomic import atomic_path
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from rangesim.io import load_scan
+    from rangesim.twin.joint import calibrate_views
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".toml":
+        raise RangesimError("the calibrated sensor must be written to a .toml file", source=out)
+    mesh = Path(args.mesh)
+    if not mesh.is_file():
+        raise RangesimError("mesh file not found", source=mesh)
+    recordings = []
+    for name in args.recorded:
+        scan = load_scan(name, conf=args.conf) if args.conf else load_scan(name)
+        if not scan.valid.any():
+            raise RangesimError("the recorded scan has no valid point", source=name)
+        recordings.append(scan)
+    result = calibrate_views(recordings, mesh, args.sensor, names=[Path(r).stem for r in args.recorded],
+                             fit_noise=not args.geometry_only, max_evaluations=args.evaluations)
+    text = result["toml"]
+    if args.name:
+        text = text.replace(f'name = "{result["sensor"].name}"', f'name = "{args.name}"', 1)
+    with writing(out), atomic_path(out) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+    g, d, n = result["geometry"], result["dropout"], result["noise"]
+    print(f"geometry: theta {g['theta_deg']:.1f} deg, alpha {g['alpha_deg']:.1f} deg, min_cos {g['min_cos']:.2f}"
+          f"  (joint noise-free IoU {result['iou']:.4f})")
+    print(f"dropouts: min_signal {d['min_signal']:.4g}, signal_contrast {d['signal_contrast']:.2f}"
+          f"  (joint IoU {d['iou']:.4f})")
+    if n:
+        print("range error: " + ", ".join(f"{k} {v:.4g}" for k, v in n.items() if k not in ("cost", "evaluations"))
+              + f"  (cost {n['cost']:.4f}, {n['evaluations']} evaluations)")
+    if args.report:
+        report = Path(args.report)
+        with writing(report), atomic_path(report) as tmp:
+            Path(tmp).write_text(json.dumps({k: result[k] for k in ("geometry", "iou", "dropout", "noise", "views")},
+                                            indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {out}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("calibrate", help="fit one sensor calibration to several recordings",
+                       description="Fit one twin geometry, dropout curve and range-error model jointly to every "
+                       "recording given (the views differ only by their pose) and write it as a sensor TOML that "
+                       "scan, twin, compare and sweeps take like any preset.")
+    p.add_argument("recorded", nargs="+", metavar="REC", help="recorded organized scans of one scanner")
+    p.add_argument("--mesh", required=True, help="reference mesh of the object (world frame)")
+    p.add_argument("--conf", help="Stanford .conf file with the recordings' poses")
+    p.add_argument("--sensor", required=True, help="the scanner's preset (starting values, everything not fitted)")
+    p.add_argument("--out", required=True, metavar="SENSOR.toml", help="calibrated sensor file")
+    p.add_argument("--name", help="name of the calibrated sensor (default: the preset's)")
+    p.add_argument("--report", metavar="FIT.json", help="also write the fit's report as JSON")
+    p.add_argument("--geometry-only", action="store_true", help="fit geometry and dropouts, keep the noise terms")
+    p.add_argument("--evaluations", type=int, default=300, help="budget of the range-error fit (default 300)")
+    p.set_defaults(func=cmd_calibrate)
