@@ -14,7 +14,7 @@ from rangesim.twin import twin
 from rangesim.twin.calibrate import calibrate
 from rangesim.twin.compare import compare
 
-METRIC_KEYS = {"iou", "hole_recall", "residuals", "noise_std_ratio", "edges", "params", "calibration"}
+METRIC_KEYS = {"iou", "iou_no_physics", "realism", "hole_recall", "residuals", "noise_std_ratio", "edges", "params"}
 
 
 def _bunny(data_dir, name):
@@ -145,3 +145,70 @@ def test_cli_without_mesh_on_mosd(data_dir, tmp_path):
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["truth"] == "regions"
     assert all("f1" in e for e in metrics["edges"].values())
+
+
+# -- the shared noise model, joint calibration and realism metrics -------------------------------
+def test_twin_noise_grows_with_incidence_and_is_correlated(data_dir):
+    from rangesim.twin.realism import binned_robust_std, incidence_deg, neighbour_correlation, residual_grid
+
+    scan, mesh = _bunny(data_dir, "bun045")
+    tw = twin(scan, mesh, "cyberware_3030", seed=2)
+    r = residual_grid(tw, tw.xyz_true)
+    inc = incidence_deg(tw.normal, np.array([0.0, 0.0, 1.0]))
+    bins = binned_robust_std(r, inc)
+    assert bins["75-90"]["robust_std"] > 5 * bins["0-30"]["robust_std"]  # steep growth with incidence
+    corr = neighbour_correlation(r)
+    assert corr["row"] > 0.4 and corr["column"] > 0.4  # not white
+    # the predicted std matches the drawn error: unit z-score per incidence bin
+    z = r / tw.sigma.astype(np.float64)
+    for key, (lo, hi) in zip(bins, ((0, 30), (30, 60), (60, 75), (75, 90))):
+        sel = np.isfinite(z) & (inc >= lo) & (inc < hi)
+        if sel.sum() >= 500:
+            assert np.std(z[sel]) == pytest.approx(1.0, abs=0.1), key
+
+
+def test_joint_calibration_writes_a_sensor_that_loads_back(data_dir, tmp_path):
+    import rangesim as rs
+    from rangesim.twin.joint import calibrate_views
+
+    a, mesh = _bunny(data_dir, "bun000")
+    b, _ = _bunny(data_dir, "bun045")
+    fit = calibrate_views([a, b], mesh, "cyberware_3030", max_evaluations=25)
+    assert fit["iou"] > 0.95 and set(fit["geometry"]) == {"theta_deg", "alpha_deg", "min_cos"}
+    path = tmp_path / "cal.toml"
+    path.write_text(fit["toml"])
+    sensor = rs.load_sensor(path)
+    assert sensor.params["twin"]["theta_deg"] == fit["geometry"]["theta_deg"]
+    assert sensor.params["noise"]["signal_px"] == pytest.approx(fit["noise"]["signal_px"], rel=1e-4)
+    tw = twin(b, mesh, sensor)  # the calibrated sensor drives the twin like any preset
+    assert tw.meta["twin"]["theta_deg"] == fit["geometry"]["theta_deg"]
+
+
+def test_compare_with_the_shipped_calibration_reports_realism(data_dir):
+    scan, mesh = _bunny(data_dir, "bun045")
+    m = compare(scan, mesh, "cyberware_3030", detectors=["gradient"])
+    assert "calibration" not in m  # the shipped calibration is used as it is, no refit
+    r = m["realism"]
+    assert set(r["std_ratio_by_incidence"]) == {"0-30", "30-60", "60-75", "75-90"}
+    assert set(r["dropout_by_incidence"]) == {"recorded", "twin"}
+    assert m["iou"] >= 0.92 and m["iou_no_physics"] > 0.9
+    # shapes the targets ask for, on a view of the calibration set
+    assert abs(r["correlation_difference"]["row"]) <= 0.15 and abs(r["correlation_difference"]["column"]) <= 0.15
+    assert 1 / 1.5 <= r["p99_ratio"] <= 1.5
+    assert 0.8 <= r["std_ratio_by_incidence"]["30-60"] <= 1.25
+
+
+def test_cli_calibrate_geometry_only(data_dir, tmp_path):
+    from rangesim.cli.main import main
+    import rangesim as rs
+
+    root = data_dir / "stanford-bunny"
+    out = tmp_path / "cw.toml"
+    assert main(["calibrate", str(root / "bun045.ply"), "--mesh", str(root / "reconstruction" / "bun_zipper.ply"),
+                 "--conf", str(root / "bun.conf"), "--sensor", "cyberware_3030", "--out", str(out),
+                 "--geometry-only", "--name", "my_cyberware"]) == 0
+    sensor = rs.load_sensor(out)
+    assert sensor.name == "my_cyberware" and sensor.params["twin"]["theta_deg"] is not None
+    assert main(["calibrate", str(root / "bun045.ply"), "--mesh", str(tmp_path / "missing.ply"),
+                 "--sensor", "cyberware_3030", "--out", str(tmp_path / "x.toml")]) == 2
+    assert not (tmp_path / "x.toml").exists()

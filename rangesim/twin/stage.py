@@ -29,8 +29,8 @@ sensor's camera stands in for the Cyberware's: magnification f / z_ref and
 dz/du = z_ref / (f tan t), t the triangulation angle (``laser.tilt_deg`` for a translating
 sweep, atan(baseline / z_ref) for a rotating one), z_ref the sensor's mid-range. Lengths on
 the surface (stripe footprint, correlation length, border distance) are converted to cells
-with the grid's own steps. ``sigma_mm``, when given, replaces the estimator floor
-(``noise.sigma_px``) by a white range noise of that std.
+with the grid's own steps. ``sigma_mm``, when given, replaces the range-error terms by the
+legacy white range noise of that std (the dropout curve stays).
 
 :class:`TwinStage` holds the geometry that does not depend on those parameters (the mesh
 in the scanner frame, the Mitsuba scene, the primary hits) so a calibration can try many
@@ -387,8 +387,9 @@ class TwinStage:
             return status, np.zeros(n), np.where(status == Status.VALID, 0.0, np.nan)
         noise = self.noise if noise is None else noise
         optics = self.optics
-        if params.get("sigma_mm") is not None:
-            noise = replace(noise, sigma_px=float(params["sigma_mm"]) / optics.dz_du)
+        if params.get("sigma_mm") is not None:  # the legacy twin: white range noise of that std alone
+            noise = StripeNoise(sigma_px=float(params["sigma_mm"]) / optics.dz_du, min_signal=noise.min_signal,
+                                signal_contrast=noise.signal_contrast)
         cos_l = self._on_grid(np.clip(self._reach("laser", params["alpha_deg"])[1], 0.0, 1.0))
         cos_c = self._on_grid(np.clip(self._reach("camera", params["theta_deg"])[1], 0.0, 1.0))
         candidate = status == Status.VALID
@@ -466,7 +467,7 @@ def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: 
         Camera angle (x-z plane, signed), laser angle (y-z plane) and the grazing-dropout
         cosine threshold (defaults: the sensor's ``[twin]`` table).
     sigma_mm : float, optional
-        A white range-noise floor (mm) in place of the sensor's ``noise.sigma_px``.
+        A white range noise (mm) in place of the sensor's range-error model (legacy).
     quiet : bool
         The noise-free geometry (no range error, no drawn dropouts).
     seed : int

@@ -1,0 +1,134 @@
+"""The stripe noise model (rangesim.sensor.stripe_noise) against its laws, in the scanner and the twin."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+import rangesim as rs
+from rangesim.core.constants import Status
+from rangesim.sensor import stripe_noise as sn
+from tests.conftest import make_sensor, plane, top_down_pose
+
+
+# -- the laws on their own -------------------------------------------------------------------
+@pytest.mark.parametrize("corr", [0.7, 1.5, 3.0])
+def test_correlated_field_has_unit_variance_and_gaussian_correlation(corr):
+    f = sn.correlated_field(np.random.default_rng(3), (300, 300), (corr, corr))
+    assert f.std() == pytest.approx(1.0, abs=0.08)
+    for lag in (1, 2):
+        rho = np.corrcoef(f[:, :-lag].ravel(), f[:, lag:].ravel())[0, 1]
+        assert rho == pytest.approx(math.exp(-lag**2 / (4 * corr**2)), abs=0.04)
+
+
+def test_detection_probability_is_the_gamma_speckle_law():
+    s = np.array([2.0, 0.5, 0.1, 0.02])
+    # fully developed speckle: exponential intensity, P(S X >= m) = exp(-m / S)
+    np.testing.assert_allclose(sn.detection_probability(s, 0.05, 1.0), np.exp(-0.05 / s), rtol=1e-9)
+    # lower contrast: a steeper curve through the same threshold, 1 above and 0 below in the limit
+    p = sn.detection_probability(s, 0.05, 0.25)
+    assert p[0] > 0.999 and p[-1] < 0.01 and np.all(np.diff(p) < 0)
+    draws = sn.draw_detected(np.random.default_rng(0), (200, 200), np.full(40000, 0.3), (1.5, 1.5))
+    assert draws.mean() == pytest.approx(0.3, abs=0.03)
+
+
+def test_truncated_stripe_centroid_shift():
+    s = 1.0 / sn.FWHM_TO_SIGMA  # sigma_s = 1 mm on a facing surface
+    cut = sn.partial_stripe_shift_mm(np.array([0.0, 1.0, 5.0]), np.ones(3), s)
+    phi = lambda t: math.exp(-t * t / 2) / math.sqrt(2 * math.pi)  # noqa: E731
+    Phi = lambda t: 0.5 * (1 + math.erf(t / math.sqrt(2)))  # noqa: E731
+    np.testing.assert_allclose(cut, [phi(t) / Phi(t) for t in (0.0, 1.0, 5.0)], rtol=1e-6)
+    # an inclined surface widens the footprint by 1 / cos i, and the shift with it
+    wide = sn.partial_stripe_shift_mm(np.array([0.0]), np.array([0.5]), s)
+    assert wide[0] == pytest.approx(2 * cut[0], rel=1e-6)
+
+
+def test_signal_term_grows_as_cos_to_the_minus_three_halves():
+    noise = sn.StripeNoise(signal_px=0.1, stripe_width_mm=1.0, psf_px=0.0)
+    cos = np.array([1.0, 0.5, 0.25])
+    w = sn.stripe_width_px(cos, 2.0, 1.0, 0.0) / 2.0
+    sig = sn.peak_sigma_px(noise, width_ratio=w, amplitude=cos, speckle_px=np.zeros(3), edge_px=np.zeros(3))
+    np.testing.assert_allclose(sig["total"], 0.1 * cos**-1.5, rtol=1e-9)
+    assert np.all(sig["white"] == 0)  # the signal-limited term is speckle-correlated
+
+
+# -- in the geometric scanner ------------------------------------------------------------------
+def _tilted_plane(angle_deg):
+    p = plane()
+    p.apply_transform(trimesh.transformations.rotation_matrix(math.radians(angle_deg), [0, 1, 0]))
+    return p
+
+
+def test_depth_noise_grows_with_incidence_as_the_law_says():
+    # rotating sweep, plane tilted about the camera's y axis: the laser incidence grows with the tilt
+    changes = {"noise.signal_px": 0.3, "laser.stripe_width": 0.5, "camera.psf_px": 0.0}
+    sensor = make_sensor(**changes)
+    stds, predicted = [], []
+    for angle in (0.0, -50.0):  # -50: the plane turns away from the laser (incidence about 70 deg)
+        scan = rs.scan([_tilted_plane(angle)], sensor, pose=top_down_pose(400.0), seed=2)
+        c = scan.valid.copy()
+        c[:, :60] = False
+        c[:, 100:] = False
+        stds.append(np.std((scan.depth - scan.xyz_true[..., 2])[c]))
+        predicted.append(np.median(scan.sigma[c]))
+    assert stds[1] / stds[0] > 1.5  # noise grows with incidence ...
+    assert stds[1] / stds[0] == pytest.approx(predicted[1] / predicted[0], rel=0.15)  # ... as predicted
+
+
+@pytest.mark.parametrize("terms", [
+    {"noise.sigma_px": 0.2},
+    # small errors: the linearised prediction holds while the error stays well inside the surface's curvature
+    {"noise.signal_px": 0.03, "noise.speckle_contrast": 0.5, "noise.correlation_mm": 0.6, "laser.stripe_width": 0.5,
+     "noise.quantization_px": 0.0625, "noise.edge_gain": 0.5},
+])
+def test_z_score_has_unit_std_in_every_incidence_bin(terms):
+    sphere = trimesh.creation.icosphere(subdivisions=6, radius=80.0)
+    sensor = make_sensor(**{"camera.width": 240, "camera.height": 200, **terms})
+    scan = rs.scan([sphere], sensor, pose=top_down_pose(480.0), seed=5)
+    assert scan.sigma is not None and scan.sigma.dtype == np.float32
+    assert np.isfinite(scan.sigma[scan.valid]).all() and np.isnan(scan.sigma[~scan.valid]).all()
+    z = (scan.depth - scan.xyz_true[..., 2]) / scan.sigma
+    cos_e = -np.einsum("ijk,ijk->ij", scan.normal, scan.xyz_true) / np.linalg.norm(scan.xyz_true, axis=2)
+    incidence = np.degrees(np.arccos(np.clip(cos_e, 0, 1)))
+    checked = 0
+    for lo, hi in ((0, 30), (30, 60), (60, 75), (75, 90)):
+        sel = scan.valid & (incidence >= lo) & (incidence < hi)
+        if sel.sum() >= 300:
+            assert np.std(z[sel]) == pytest.approx(1.0, abs=0.1), (lo, hi)
+            checked += 1
+    assert checked >= 3
+
+
+def test_speckle_correlation_length_carries_into_the_depth_error():
+    corr_mm, z = 3.0, 400.0  # 1.2 px: a kernel the pixel grid resolves
+    sensor = make_sensor(**{"noise.speckle_contrast": 1.0, "noise.correlation_mm": corr_mm})
+    scan = rs.scan([plane()], sensor, pose=top_down_pose(z), seed=4)
+    e = scan.depth - z
+    corr_px = corr_mm * sensor.K[0, 0] / sensor.reference_distance
+    rho = np.corrcoef(e[:, :-1].ravel(), e[:, 1:].ravel())[0, 1]
+    assert rho == pytest.approx(math.exp(-1 / (4 * corr_px**2)), abs=0.05)
+
+
+def test_dropouts_follow_the_speckle_detection_law():
+    sensor = make_sensor(**{"noise.min_signal": 0.1, "noise.signal_contrast": 1.0})
+    scan = rs.scan([plane()], sensor, pose=top_down_pose(600.0), seed=1)
+    s = scan.intensity[scan.part == 0]
+    expected = np.mean(1 - np.exp(-0.1 / s))
+    assert 0.05 < expected < 0.6
+    assert scan.count(Status.DROPOUT) / s.size == pytest.approx(expected, abs=0.02)
+    again = rs.scan([plane()], sensor, pose=top_down_pose(600.0), seed=1)
+    np.testing.assert_array_equal(scan.status, again.status)  # deterministic per seed
+
+
+@pytest.mark.parametrize("suffix", [".exr", ".npz"])
+def test_sigma_round_trips_and_info_shows_it(tmp_path, suffix, capsys):
+    from rangesim.cli.main import main
+
+    scan = rs.scan([plane()], make_sensor(**{"noise.sigma_px": 0.2}), pose=top_down_pose(400.0), seed=0)
+    path = scan.save(tmp_path / f"s{suffix}")
+    back = rs.load_scan(path)
+    np.testing.assert_array_equal(back.sigma, scan.sigma)
+    assert main(["info", str(path)]) == 0
+    assert "predicted depth std (sigma)" in capsys.readouterr().out
