@@ -29,17 +29,10 @@ TARGETS = {"iou": 0.92, "ratio": (0.8, 1.25), "correlation": 0.15, "p99": 1.5, "
 
 
 def uncalibrated():
-    """The cyberware preset without its shipped calibration (the fit's starting point)."""
+    """The preset's starting point before calibration (``sensors/uncalibrated/cyberware_3030.toml``)."""
     import rangesim as rs
 
-    s = rs.load_sensor("cyberware_3030")
-    d = s.to_dict()
-    d.pop("twin", None)
-    d["camera"]["aperture_mm"] = 8.0
-    for key in ("sigma_px", "signal_px", "correlation_mm", "edge_gain", "signal_contrast", "min_signal"):
-        d["noise"].pop(key, None)
-    d["noise"].update(sigma_px=0.15, min_signal=0.05)
-    return rs.load_sensor(d)
+    return rs.load_sensor(ROOT / "sensors" / "uncalibrated" / "cyberware_3030.toml")
 
 
 def row(view, role, m):

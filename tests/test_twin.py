@@ -174,7 +174,7 @@ def test_joint_calibration_writes_a_sensor_that_loads_back(data_dir, tmp_path):
     a, mesh = _bunny(data_dir, "bun000")
     b, _ = _bunny(data_dir, "bun045")
     fit = calibrate_views([a, b], mesh, "cyberware_3030", max_evaluations=25)
-    assert fit["iou"] > 0.95 and set(fit["geometry"]) == {"theta_deg", "alpha_deg", "min_cos"}
+    assert fit["iou"] > 0.95 and set(fit["geometry"]) == {"theta_deg", "alpha_deg", "min_cos", "camera_views"}
     path = tmp_path / "cal.toml"
     path.write_text(fit["toml"])
     sensor = rs.load_sensor(path)
@@ -212,3 +212,37 @@ def test_cli_calibrate_geometry_only(data_dir, tmp_path):
     assert main(["calibrate", str(root / "bun045.ply"), "--mesh", str(tmp_path / "missing.ply"),
                  "--sensor", "cyberware_3030", "--out", str(tmp_path / "x.toml")]) == 2
     assert not (tmp_path / "x.toml").exists()
+
+
+def test_two_camera_views_see_what_either_sees():
+    mesh = _box_on_plane()
+    template = _grid_scan()
+    one = twin(template, mesh, theta_deg=25.0, alpha_deg=0.0, min_cos=0.0, quiet=True)
+    other = twin(template, mesh, theta_deg=-25.0, alpha_deg=0.0, min_cos=0.0, quiet=True)
+    both = twin(template, mesh, theta_deg=25.0, alpha_deg=0.0, min_cos=0.0, quiet=True, camera_views=2)
+    assert one.count(Status.SHADOW) > 100 and other.count(Status.SHADOW) > 100
+    # the box hides a strip beside it from each view; from both sides only the laser's shadows remain
+    np.testing.assert_array_equal(both.valid, one.valid | other.valid)
+    assert both.count(Status.SHADOW) < min(one.count(Status.SHADOW), other.count(Status.SHADOW))
+
+
+def test_registration_error_grows_as_tan_incidence():
+    from rangesim.twin.stage import Registration, TwinStage
+
+    # a plane tilted by 60 deg about y and a flat one: range error std = std_mm tan(incidence)
+    tilted = trimesh.Trimesh(np.array([[-60, -60, -60 * np.tan(np.radians(60))], [60, -60, 60 * np.tan(np.radians(60))],
+                                       [60, 60, 60 * np.tan(np.radians(60))], [-60, 60, -60 * np.tan(np.radians(60))]]),
+                             np.array([[0, 1, 2], [0, 2, 3]]), process=False)
+    stds = {}
+    for name, mesh in (("flat", _box_on_plane()), ("tilted", tilted)):
+        stage = TwinStage(_grid_scan(), mesh, side=1)
+        stage.registration = Registration(std_mm=0.2, length_mm=1.0)
+        stage.defaults["sigma_mm"] = None  # no legacy white noise: the (all-zero) stripe model and the registration
+        tw = stage.scan(theta_deg=0.0, alpha_deg=0.0, min_cos=0.0, seed=3)
+        sel = tw.valid & (np.abs(tw.xyz_true[..., 0] - (0 if name == "tilted" else -28)) < 5)
+        err = (tw.depth - tw.xyz_true[..., 2])[sel]
+        stds[name] = float(np.std(err))
+        np.testing.assert_allclose(tw.sigma[sel], 0.2 * (np.tan(np.radians(60)) if name == "tilted" else 0.0),
+                                   atol=1e-6)
+    assert stds["flat"] < 1e-6
+    assert stds["tilted"] == pytest.approx(0.2 * np.tan(np.radians(60)), rel=0.12)

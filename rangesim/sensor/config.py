@@ -58,6 +58,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "theta_deg": None,  # camera direction from the range axis, x-z plane (default laser.tilt_deg)
         "alpha_deg": 0.0,  # laser direction from the range axis, y-z plane
         "min_cos": None,  # grazing cut-off on both cosines (default noise.min_signal)
+        "camera_views": 1,  # 2: the stripe is watched from both sides of the sheet (+-theta_deg)
+        # not the scanner: the recording's misregistration against the reference mesh, so the
+        # twin's residuals hold what the recorded ones hold (rangesim.twin.stage)
+        "registration_mm": 0.0,  # std of the lateral misregistration, mm
+        "registration_length_mm": 3.0,  # its correlation length (Gaussian std) on the grid, mm
     },
     # rendered mode only (mode = "rendered"): see rangesim.sensor.rendered
     "render": {
@@ -250,6 +255,11 @@ def _validate(params: dict[str, dict[str, Any]], source) -> None:
     for key in ("theta_deg", "alpha_deg", "min_cos"):
         if params["twin"][key] is not None:
             _number(params, "twin", key, source)
+    _number(params, "twin", "camera_views", source, positive=True, integer=True)
+    if params["twin"]["camera_views"] not in (1, 2):
+        raise RangesimError(f"twin.camera_views must be 1 or 2, got {params['twin']['camera_views']}", source=source)
+    _number(params, "twin", "registration_mm", source, nonneg=True)
+    _number(params, "twin", "registration_length_mm", source, nonneg=True)
     _number(params, "noise", "min_signal", source, nonneg=True)
     _number(params, "camera", "full_well_e", source, positive=True)
     _number(params, "camera", "read_noise_e", source, nonneg=True)

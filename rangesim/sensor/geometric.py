@@ -7,12 +7,16 @@ Mitsuba variant's backend, LLVM on the CPU or CUDA on a GPU):
 2. ``laser``: the sheet that lights each hit and where its light comes from.
 3. ``shadows``: one ``ray_test`` towards the laser -> status 2 where blocked, or where the
    laser is behind the visible surface.
-4. ``signal``: Lambertian return with inverse-square falloff -> status 3 below ``min_signal``.
+4. ``signal``: Lambertian return with inverse-square falloff.
 5. working range on the true depth -> status 4 outside [near, far].
 6. ``mixed_pixels`` (NumPy, near depth edges only): centroid shift where a finite-width
    stripe straddles a depth edge.
-7. ``noise`` + ``triangulation``: peak localisation error (Gaussian, speckle, quantisation)
-   moves the point inside the laser sheet along the camera-ray/sheet intersection.
+7. ``stripe_noise`` (NumPy, one mechanism with the twin of a recording): status 3 where the
+   return, dimmed where the stripe is cut by an outline or shadow border, is below
+   ``min_signal`` (a hard threshold, or a speckle probability with ``signal_contrast``);
+   the peak error (floor, signal-limited term, correlated speckle, partial stripes,
+   quantisation) and its predicted std ``sigma``; ``triangulation`` moves the point inside
+   the laser sheet along the camera-ray/sheet intersection.
 
 Precedence of status codes: miss (1) > out of range (4) > laser shadow (2) > dropout (3).
 """
@@ -61,9 +65,8 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     in_range, lit = laser_reach(mscene, view, sources, pose, near, far)
     signal = dr.select(lit, signal, 0.0)
     noise = StripeNoise.from_params(p)
-    # with a speckle-modulated amplitude the threshold is a probability, drawn in step 7
-    hard_min = 0.0 if noise.signal_contrast > 0 else p["noise"]["min_signal"]
-    weak = (signal < hard_min) | (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
+    # the min_signal threshold (hard, or a probability) is applied in step 7a, where truncated stripes are known
+    weak = (signal <= 0) | (dr.abs(dr.dot(sheet_n, rays)) < MIN_SHEET_ANGLE)
     status = dr.zeros(mi.UInt32, h * w)  # Status.VALID
     for code, condition in ((Status.DROPOUT, weak), (Status.SHADOW, ~lit), (Status.OUT_OF_RANGE, ~in_range),
                             (Status.MISS, ~hit)):  # lowest precedence first

@@ -38,43 +38,47 @@ def range_residuals(scan: RangeScan, truth: np.ndarray) -> np.ndarray:
     return (scan.xyz[ok, 2].astype(np.float64) - truth[ok, 2].astype(np.float64))
 
 
-def _search(stages: Sequence[TwinStage], thetas, alphas, cosines) -> tuple[float, tuple]:
-    """Best (joint IoU, (theta, alpha, min_cos)) over the grid; intersections and unions add up over views."""
+def _search(stages: Sequence[TwinStage], thetas, alphas, cosines, views=(1,)) -> tuple[float, tuple]:
+    """Best (joint IoU, (theta, alpha, min_cos, views)) over the grid; intersections and unions add up over views."""
     prepared = []
     for st in stages:
         rec_valid = st.recorded.valid.reshape(-1)
         rec_hit = rec_valid[st.hit_index]
         prepared.append((st, rec_hit, int(np.count_nonzero(rec_valid)) - int(np.count_nonzero(rec_hit))))
-    best = (-1.0, (0.0, 0.0, 0.0))
-    for theta in thetas:
-        for alpha in alphas:
-            inter = np.zeros(len(cosines))
-            union = np.zeros(len(cosines))
-            for st, rec_hit, rec_outside in prepared:
-                seen, cos_c = st._reach("camera", float(theta))
-                lit, cos_l = st._reach("laser", float(alpha))
-                base = seen & lit
-                low = np.minimum(cos_c, cos_l)
+    best = (-1.0, (0.0, 0.0, 0.0, 1))
+    for n_views in views:
+        for theta in thetas:
+            for alpha in alphas:
+                inter = np.zeros(len(cosines))
+                union = np.zeros(len(cosines))
+                for st, rec_hit, rec_outside in prepared:
+                    seen, cos_c = st.camera_reach(float(theta), n_views)
+                    lit, cos_l = st._reach("laser", float(alpha))
+                    base = seen & lit
+                    low = np.minimum(cos_c, cos_l)
+                    for k, c in enumerate(cosines):
+                        v = base & (low >= c)
+                        inter[k] += np.count_nonzero(v & rec_hit)
+                        union[k] += np.count_nonzero(v | rec_hit) + rec_outside
                 for k, c in enumerate(cosines):
-                    v = base & (low >= c)
-                    inter[k] += np.count_nonzero(v & rec_hit)
-                    union[k] += np.count_nonzero(v | rec_hit) + rec_outside
-            for k, c in enumerate(cosines):
-                iou = inter[k] / union[k] if union[k] else 1.0
-                # ties: prefer the smaller |angles| found first (grids run from - to +)
-                if iou > best[0] + 1e-12:
-                    best = (float(iou), (float(theta), float(alpha), float(c)))
+                    iou = inter[k] / union[k] if union[k] else 1.0
+                    # ties: prefer one view and the smaller |angles| found first (grids run from - to +)
+                    if iou > best[0] + 1e-12:
+                        best = (float(iou), (float(theta), float(alpha), float(c), int(n_views)))
     return best
 
 
 def search_geometry(stages: Sequence[TwinStage], *, theta_grid: Iterable[float] | None = None,
                     alpha_grid: Iterable[float] | None = None, cosines: Iterable[float] | None = None,
-                    fixed: dict[str, float] | None = None, refine: bool = True) -> tuple[float, tuple]:
+                    fixed: dict[str, float] | None = None, refine: bool = True, views: Iterable[int] = (1,)
+                    ) -> tuple[float, tuple]:
     """The camera angle, laser angle and grazing cut-off that maximise the joint valid-mask IoU.
 
     A coarse grid (5-degree steps) and, with ``refine``, 1-degree steps (+-4) around its
-    optimum. Names in ``fixed`` (``theta_deg``, ``alpha_deg``, ``min_cos``) are held at the
-    given value. Returns ``(iou, (theta_deg, alpha_deg, min_cos))``.
+    optimum. Names in ``fixed`` (``theta_deg``, ``alpha_deg``, ``min_cos``, ``camera_views``)
+    are held at the given value; ``views`` lists the camera-view counts tried (1, or 2 for a
+    head watching the stripe from both sides). Returns
+    ``(iou, (theta_deg, alpha_deg, min_cos, camera_views))``.
     """
     fixed = fixed or {}
     thetas = [fixed["theta_deg"]] if "theta_deg" in fixed else (
@@ -83,12 +87,13 @@ def search_geometry(stages: Sequence[TwinStage], *, theta_grid: Iterable[float] 
         np.asarray(list(alpha_grid), float) if alpha_grid is not None else ALPHA_COARSE)
     cos_set = [fixed["min_cos"]] if "min_cos" in fixed else (
         np.asarray(list(cosines), float) if cosines is not None else MIN_COS_GRID)
-    iou, (theta, alpha, cmin) = _search(stages, thetas, alphas, cos_set)
+    view_set = [int(fixed["camera_views"])] if "camera_views" in fixed else [int(v) for v in views]
+    iou, (theta, alpha, cmin, nv) = _search(stages, thetas, alphas, cos_set, view_set)
     if refine and ("theta_deg" not in fixed or "alpha_deg" not in fixed):
         thetas = [theta] if "theta_deg" in fixed else theta + np.arange(-4.0, 4.0 + 1e-9)
         alphas = [alpha] if "alpha_deg" in fixed else alpha + np.arange(-4.0, 4.0 + 1e-9)
-        iou, (theta, alpha, cmin) = _search(stages, thetas, alphas, cos_set)
-    return iou, (theta, alpha, cmin)
+        iou, (theta, alpha, cmin, nv) = _search(stages, thetas, alphas, cos_set, [nv])
+    return iou, (theta, alpha, cmin, nv)
 
 
 def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any = None,
@@ -147,8 +152,9 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
     fit_cos = "min_cos" in params or fit_theta or fit_alpha
     fixed = {k: values[k] for k, fit in (("theta_deg", fit_theta), ("alpha_deg", fit_alpha), ("min_cos", fit_cos))
              if not fit}
-    iou, (theta, alpha, cmin) = search_geometry([stage], theta_grid=theta_grid, alpha_grid=alpha_grid, fixed=fixed,
-                                                refine=refine)
+    fixed.setdefault("camera_views", int(values.get("camera_views", 1)))
+    iou, (theta, alpha, cmin, _) = search_geometry([stage], theta_grid=theta_grid, alpha_grid=alpha_grid,
+                                                   fixed=fixed, refine=refine)
     values.update(theta_deg=theta, alpha_deg=alpha, min_cos=cmin)
 
     # noise: recorded points against the twin's noise-free hits

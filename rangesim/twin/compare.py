@@ -13,8 +13,9 @@ All metrics are computed on the common grid (same H x W, same frame):
   wherever the mesh is hit), the baseline the physics must beat;
 * ``realism``: :func:`rangesim.twin.realism.realism_stats` of recording and twin (robust
   std per incidence bin, neighbour correlation along rows and columns, 99th percentile
-  |residual|, share more than 0.5 mm off), their ratios, and the dropout share per
-  incidence bin of both (incidence: the hit's normal against the range axis z);
+  |residual|, share more than 0.5 mm off) of recording and twin on the cells both
+  measured, their ratios, and the dropout share per incidence bin of both (incidence: the
+  hit's normal against the range axis z);
 * ``edges``: per detector of :data:`rangesim.edges.DETECTORS`, precision / recall / F1 of the
   twin's edge map against the recording's (tolerance 2 px).
 """
@@ -31,6 +32,8 @@ from rangesim.twin.stage import TwinStage, twin
 
 __all__ = ["compare", "compare_scans", "residual_stats", "edge_agreement"]
 
+#: the range axis of a twin's grid (the incidence of a cell is its normal against it)
+RANGE_AXIS = np.array([0.0, 0.0, 1.0])
 #: matching tolerance (pixels) of the edge-map agreement
 EDGE_TOLERANCE_PX = 2.0
 
@@ -76,8 +79,10 @@ def realism_comparison(recorded: RangeScan, twin_scan: RangeScan) -> dict[str, A
     """Realism statistics of recording and twin against the twin's noise-free hits, and their ratios."""
     truth = twin_scan.xyz_true
     surface = np.isfinite(truth).all(axis=2)
-    incidence = incidence_deg(twin_scan.normal, np.array([0.0, 0.0, 1.0]))
-    stats = {name: realism_stats(residual_grid(scan, truth), incidence)
+    incidence = incidence_deg(twin_scan.normal, RANGE_AXIS)
+    # like with like: the noise of both on the cells both measured (the masks' disagreement is the IoU's)
+    common = recorded.valid & twin_scan.valid
+    stats = {name: realism_stats(np.where(common, residual_grid(scan, truth), np.nan), incidence)
              for name, scan in (("recorded", recorded), ("twin", twin_scan))}
     rec, tw = stats["recorded"], stats["twin"]
     ratio = lambda a, b: float(a / b) if b and np.isfinite(a) and np.isfinite(b) else float("nan")  # noqa: E731

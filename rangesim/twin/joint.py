@@ -5,16 +5,20 @@ their pose (the recording's own ``pose``, from a ``.conf`` file for the Stanford
 :func:`calibrate_views` fits one parameter set to all of them at once, in three stages, each
 maximising an objective summed over the views:
 
-1. **Geometry** (``twin.theta_deg``, ``twin.alpha_deg``, ``twin.min_cos``): the valid-mask IoU of
-   the noise-free twins, summed over views (intersections and unions added up), by a coarse grid
-   and a 1-degree refinement (:func:`rangesim.twin.calibrate.search_geometry`).
+1. **Geometry** (``twin.theta_deg``, ``twin.alpha_deg``, ``twin.min_cos``, ``twin.camera_views``):
+   the valid-mask IoU of the noise-free twins, summed over views (intersections and unions
+   added up), by a coarse grid and a 1-degree refinement, with the stripe watched by one
+   camera view or by two, one on either side of the sheet
+   (:func:`rangesim.twin.calibrate.search_geometry`).
 2. **Dropout curve** (``noise.min_signal``, ``noise.signal_contrast``): the joint valid-mask
    IoU of twins whose dropouts are drawn with P(valid) from
    :func:`rangesim.sensor.stripe_noise.detection_probability` (fixed seeds), over a grid
    that includes the hard threshold (contrast 0); the Bernoulli log-likelihood of the
    recorded masks is reported beside it.
 3. **Range error** (``noise.sigma_px``, ``noise.signal_px``, ``camera.aperture_mm`` for the
-   speckle, ``noise.correlation_mm``, ``noise.edge_gain``): the twins' residual statistics
+   speckle, ``camera.psf_px`` (the blur that sets where the stripe's width starts to grow
+   with incidence), ``noise.correlation_mm``, ``noise.edge_gain``, and ``twin.registration_mm``,
+   the recordings' misregistration to the mesh): the twins' residual statistics
    matched to the recordings' (:mod:`rangesim.twin.realism`): log ratio of the robust std in
    every incidence bin with enough cells, the neighbour correlations along rows and columns,
    and the log ratio of the 99th percentile, by Nelder-Mead on log parameters with fixed
@@ -34,9 +38,10 @@ from scipy import optimize
 
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.sensor.stripe_noise import StripeNoise, detection_probability
+from rangesim.sensor.stripe_noise import StripeNoise, detection_probability, partial_stripe_fraction
+from rangesim.twin.compare import RANGE_AXIS
 from rangesim.twin.realism import MIN_BIN_CELLS, binned_robust_std, incidence_deg, neighbour_correlation
-from rangesim.twin.stage import TwinOptics, TwinStage
+from rangesim.twin.stage import Registration, TwinOptics, TwinStage
 
 __all__ = ["calibrate_views", "sensor_toml", "fit_dropout_curve", "fit_range_error"]
 
@@ -44,6 +49,9 @@ MIN_SIGNAL_GRID = np.concatenate([[0.0], np.geomspace(1e-3, 0.3, 31)])
 SIGNAL_CONTRAST_GRID = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
 #: weight of a neighbour-correlation difference against a log std ratio in the noise fit
 CORRELATION_WEIGHT = 4.0
+#: log std ratio a bin may miss by before the steep penalty starts (ratio 1.12), and its weight
+BAND_LOG = math.log(1.12)
+BAND_WEIGHT = 20.0
 #: seeds of the noise fit's simulated twins (common random numbers)
 FIT_SEED = 12345
 
@@ -55,8 +63,7 @@ def _views(stages: Sequence[TwinStage], geometry: dict[str, float]) -> list[dict
         quiet = st.scan(**geometry, quiet=True)
         rec = st.recorded
         truth = quiet.xyz_true
-        axis = np.broadcast_to(st.direction.reshape(*st.shape, 3), truth.shape)
-        incidence = incidence_deg(quiet.normal, axis)
+        incidence = incidence_deg(quiet.normal, RANGE_AXIS)  # as compare measures it
         residual = np.full(st.shape, np.nan)
         both = rec.valid & quiet.valid & np.isfinite(rec.xyz).all(axis=2)
         residual[both] = rec.xyz[both, 2].astype(np.float64) - truth[both, 2].astype(np.float64)
@@ -76,13 +83,11 @@ def fit_dropout_curve(views: list[dict[str, Any]], seed: int = FIT_SEED) -> dict
     prepared = []
     for v in views:
         st, quiet = v["stage"], v["quiet"]
-        geo = quiet.meta["twin"]
-        cos_l = st._on_grid(np.clip(st._reach("laser", geo["alpha_deg"])[1], 0, 1))
-        cos_c = st._on_grid(np.clip(st._reach("camera", geo["theta_deg"])[1], 0, 1))
-        cand = quiet.valid.reshape(-1)
-        row_mm, col_mm = st.cell_mm
-        corr = st.noise.correlation_mm
-        prepared.append((st, cos_l * cos_c, cand, st.recorded.valid.reshape(-1), (corr / row_mm, corr / col_mm)))
+        cells = st.stripe_cells(quiet.meta["twin"], quiet.status.reshape(-1), st.noise)
+        # the truncated stripe's share of light multiplies S, as in the scan itself
+        signal = cells["signal"] * partial_stripe_fraction(cells["border_mm"], cells["cos_laser"],
+                                                           st.noise.stripe_width_mm)
+        prepared.append((st, signal, cells["candidate"], st.recorded.valid.reshape(-1), cells["corr_px"]))
     best = (-1.0, 0.0, 0.0)
     for c in SIGNAL_CONTRAST_GRID:
         for smin in MIN_SIGNAL_GRID:
@@ -109,11 +114,13 @@ def _noise_objective(views, base: StripeNoise, names, log_values) -> float:
     for v in views:
         st = v["stage"]
         noise, optics = _with_values(base, st.optics, values)
+        reg = replace(st.registration, std_mm=float(values.get("registration_mm", st.registration.std_mm)))
         st_optics = st.optics
         st.optics = optics
         try:
             geo = v["quiet"].meta["twin"]
-            _, error, _ = st.draw({**geo, "sigma_mm": None}, seed=FIT_SEED, noise=replace(noise, signal_contrast=0.0))
+            _, error, _ = st.draw({**geo, "sigma_mm": None}, seed=FIT_SEED, noise=replace(noise, signal_contrast=0.0),
+                                  registration=reg)
         finally:
             st.optics = st_optics
         sim = np.where(v["cells"], error.reshape(st.shape), np.nan)
@@ -129,7 +136,9 @@ def _mismatch(view: dict[str, Any], simulated: np.ndarray) -> float:
     cost = 0.0
     for key, rec in rec_bins.items():
         if rec["count"] >= MIN_BIN_CELLS and sim_bins[key]["robust_std"] > 0:
-            cost += math.log(sim_bins[key]["robust_std"] / rec["robust_std"]) ** 2
+            miss = abs(math.log(sim_bins[key]["robust_std"] / rec["robust_std"]))
+            # squared log ratio, and a steep penalty beyond the tolerance so no bin is given up
+            cost += miss**2 + BAND_WEIGHT * max(0.0, miss - BAND_LOG) ** 2
     sim_corr = neighbour_correlation(simulated)
     for axis in ("row", "column"):
         if np.isfinite(sim_corr[axis]) and np.isfinite(rec_corr[axis]):
@@ -140,12 +149,14 @@ def _mismatch(view: dict[str, Any], simulated: np.ndarray) -> float:
     return cost
 
 
-NOISE_PARAMS = ("sigma_px", "signal_px", "aperture_mm", "correlation_mm", "edge_gain")
+NOISE_PARAMS = ("sigma_px", "signal_px", "aperture_mm", "psf_px", "correlation_mm", "edge_gain", "registration_mm")
+#: where each fitted value lives in the sensor file (others: [noise])
+PARAM_TABLE = {"aperture_mm": "camera", "psf_px": "camera", "registration_mm": "twin"}
 
 
 def _with_values(base: StripeNoise, optics: TwinOptics, values: dict[str, float]) -> tuple[StripeNoise, TwinOptics]:
     """The noise model and the twin optics with fitted values (the aperture moves the speckle term)."""
-    noise = replace(base, **{k: float(v) for k, v in values.items() if k != "aperture_mm"})
+    noise = replace(base, **{k: float(v) for k, v in values.items() if k not in PARAM_TABLE or k == "psf_px"})
     if "aperture_mm" in values:
         noise = replace(noise, aperture_mm=float(values["aperture_mm"]))
         scale = base.aperture_mm / noise.aperture_mm  # sigma ~ 1 / sin u ~ 1 / D for D << distance
@@ -153,18 +164,22 @@ def _with_values(base: StripeNoise, optics: TwinOptics, values: dict[str, float]
     return noise, optics
 
 
-def fit_range_error(views: list[dict[str, Any]], base: StripeNoise, *, max_evaluations: int = 300
-                    ) -> dict[str, float]:
+def fit_range_error(views: list[dict[str, Any]], base: StripeNoise, *, max_evaluations: int = 300,
+                    registration: bool = True) -> dict[str, float]:
     """Nelder-Mead over the log of :data:`NOISE_PARAMS`; returns the fitted values and the cost."""
     start = {
         "sigma_px": max(base.sigma_px, 0.01), "signal_px": max(base.signal_px, 0.02),
-        "aperture_mm": base.aperture_mm, "correlation_mm": max(base.correlation_mm, 0.5),
+        "aperture_mm": base.aperture_mm, "psf_px": max(base.psf_px, 0.5), "correlation_mm": max(base.correlation_mm, 0.5),
         "edge_gain": max(base.edge_gain, 0.1),
+        "registration_mm": max(views[0]["stage"].registration.std_mm, 0.05),
     }
+    if not registration:
+        start.pop("registration_mm")
     if base.speckle_contrast <= 0:  # no speckle to scale: the aperture is not identifiable
         start.pop("aperture_mm")
-    if base.stripe_width_mm <= 0:
+    if base.stripe_width_mm <= 0:  # no footprint: neither the partial stripes nor the blur's share matter
         start.pop("edge_gain")
+        start.pop("psf_px")
     names = tuple(start)
     x0 = np.log([start[k] for k in names])
     result = optimize.minimize(lambda x: _noise_objective(views, base, names, x), x0, method="Nelder-Mead",
@@ -178,7 +193,7 @@ def fit_range_error(views: list[dict[str, Any]], base: StripeNoise, *, max_evalu
 
 def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
                     stages: Sequence[TwinStage] | None = None, names: Sequence[str] | None = None,
-                    fit_noise: bool = True, max_evaluations: int = 300) -> dict[str, Any]:
+                    fit_noise: bool = True, max_evaluations: int = 300, registration: bool = True) -> dict[str, Any]:
     """Fit one twin geometry, dropout curve and range-error model to several recordings.
 
     Parameters
@@ -197,6 +212,9 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
         Fit the range-error terms (stage 3); else keep the sensor's.
     max_evaluations : int
         Budget of the noise fit.
+    registration : bool
+        Also fit ``twin.registration_mm``, the recordings' misregistration against the mesh
+        (:class:`rangesim.twin.stage.Registration`), which is not a scanner effect.
 
     Returns
     -------
@@ -215,25 +233,25 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
         stages = [TwinStage(rec, mesh, base_sensor) for rec in recordings]
     names = list(names) if names is not None else [str(r.meta.get("source", f"view {k}")) for k, r in
                                                     enumerate(recordings)]
-    iou, (theta, alpha, min_cos) = search_geometry(stages)
-    geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos}
+    iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
+    geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos, "camera_views": views}
     views = _views(stages, geometry)
     dropout = fit_dropout_curve(views)
     base = replace(stages[0].noise, min_signal=dropout["min_signal"], signal_contrast=dropout["signal_contrast"])
     fitted: dict[str, float] = {}
     if fit_noise:
-        fitted = fit_range_error(views, base, max_evaluations=max_evaluations)
-    changes: dict[str, Any] = {f"twin.{k}": float(v) for k, v in geometry.items()}
+        fitted = fit_range_error(views, base, max_evaluations=max_evaluations, registration=registration)
+    changes: dict[str, Any] = {f"twin.{k}": (int(v) if k == "camera_views" else float(v)) for k, v in geometry.items()}
     changes.update({"noise.min_signal": dropout["min_signal"], "noise.signal_contrast": dropout["signal_contrast"]})
     for key in NOISE_PARAMS:
         if key in fitted:
-            table = "camera" if key == "aperture_mm" else "noise"
-            changes[f"{table}.{key}"] = round(fitted[key], 6)
+            changes[f"{PARAM_TABLE.get(key, 'noise')}.{key}"] = round(fitted[key], 6)
     calibrated = base_sensor.with_params(changes)
     calibrated = replace(calibrated, source=f"calibrated from {base_sensor.name}")
     for st in stages:  # the stages now stand for the calibrated sensor
         st.sensor, st.noise = calibrated, StripeNoise.from_params(calibrated.params)
         st.optics = TwinOptics.from_sensor(calibrated, st.noise)
+        st.registration = Registration.from_sensor(calibrated)
         st.defaults.update({k: v for k, v in geometry.items()}, sigma_mm=None)
     report = {"geometry": geometry, "iou": float(iou), "dropout": dropout, "noise": fitted, "views": names}
     return {**report, "sensor": calibrated, "toml": sensor_toml(calibrated, report), "stages": list(stages)}

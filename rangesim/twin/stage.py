@@ -15,7 +15,9 @@ recorded points nearest to the hits). A hit is measured when
 * the laser reaches it: one ``ray_test`` towards the laser direction, in the sheet (y-z
   plane), tilted by ``alpha_deg`` from the range axis (else status SHADOW);
 * the camera sees it: one ``ray_test`` towards the camera direction, in the x-z plane,
-  ``theta_deg`` from the range axis, either sign (else status SHADOW);
+  ``theta_deg`` from the range axis, either sign (else status SHADOW); with
+  ``camera_views = 2`` the stripe is watched from both sides (+-theta, the mirror pair of a
+  Cyberware head) and a cell is seen when either view sees it;
 * the return is strong enough: the cosines of incidence of laser and camera both exceed
   ``min_cos`` (else status DROPOUT, a grazing dropout).
 
@@ -54,9 +56,10 @@ from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_si
 __all__ = ["TwinStage", "twin", "DEFAULT_PARAMS", "load_mesh_mm"]
 
 #: parameters of the twin when neither the caller nor the sensor sets them
-DEFAULT_PARAMS: dict[str, float] = {"theta_deg": 20.0, "alpha_deg": 0.0, "sigma_mm": 0.1, "min_cos": 0.1}
+DEFAULT_PARAMS: dict[str, float] = {"theta_deg": 20.0, "alpha_deg": 0.0, "sigma_mm": 0.1, "min_cos": 0.1,
+                                    "camera_views": 1}
 #: the geometry parameters (sensor table ``[twin]``)
-GEOMETRY = ("theta_deg", "alpha_deg", "min_cos")
+GEOMETRY = ("theta_deg", "alpha_deg", "min_cos", "camera_views")
 
 
 def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray | None = None):
@@ -113,6 +116,8 @@ def _sensor_defaults(sensor: Any) -> dict[str, float]:
         params["theta_deg"] = float(tilt)
     if twin_table.get("alpha_deg") is not None:
         params["alpha_deg"] = float(twin_table["alpha_deg"])
+    if twin_table.get("camera_views") is not None:
+        params["camera_views"] = int(twin_table["camera_views"])
     min_signal = p.get("noise", {}).get("min_signal")
     if twin_table.get("min_cos") is not None:
         params["min_cos"] = float(twin_table["min_cos"])
@@ -120,6 +125,33 @@ def _sensor_defaults(sensor: Any) -> dict[str, float]:
         params["min_cos"] = float(min_signal)
     params["sigma_mm"] = None
     return params
+
+
+#: the misregistration's range effect is capped at this incidence (the gradient grows without bound)
+REGISTRATION_MAX_INCIDENCE_DEG = 85.0
+
+
+@dataclass(frozen=True)
+class Registration:
+    """Lateral misregistration between a recording and its reference mesh (not a scanner effect).
+
+    A recording's residuals to a mesh merged from registered scans (the Stanford bunny's
+    ``bun_zipper.ply``) hold the registration error of its ``.conf`` pose and of the merge
+    (``shared/notes/measuring-realism.md``). A lateral error delta moves the surface along the
+    range axis by grad z . delta, std ``std_mm * tan(incidence)``: it grows steeply at grazing
+    angles and is smooth over ``length_mm``. The twin adds it so that both sides of a
+    comparison hold it (``[twin] registration_mm``, ``registration_length_mm``); 0 gives the
+    scanner alone.
+    """
+
+    std_mm: float = 0.0
+    length_mm: float = 3.0
+
+    @classmethod
+    def from_sensor(cls, sensor: Any) -> "Registration":
+        table = (getattr(sensor, "params", {}) or {}).get("twin", {}) if sensor is not None else {}
+        return cls(std_mm=float(table.get("registration_mm", 0.0) or 0.0),
+                   length_mm=float(table.get("registration_length_mm", 3.0) or 3.0))
 
 
 @dataclass(frozen=True)
@@ -239,6 +271,7 @@ class TwinStage:
         self.defaults = _sensor_defaults(sensor)
         self.noise = StripeNoise.from_params(sensor.params) if sensor is not None else StripeNoise()
         self.optics = TwinOptics.from_sensor(sensor, self.noise)
+        self.registration = Registration.from_sensor(sensor)
         h, w = recorded.shape
         self.shape = (h, w)
         pose = np.asarray(recorded.pose, dtype=np.float64)
@@ -340,21 +373,35 @@ class TwinStage:
             self._cache[key] = (facing & ~blocked, cos)
         return self._cache[key]
 
-    def status_codes(self, theta_deg: float, alpha_deg: float, min_cos: float) -> np.ndarray:
+    def camera_reach(self, theta_deg: float, views: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """(seen, cos of the best view) over the hit cells, for one camera view or two.
+
+        ``views=2``: the stripe is watched from both sides of the sheet (at +theta and -theta,
+        the mirror pair of a Cyberware head); a cell is seen when either view sees it, and
+        its return is the brighter view's.
+        """
+        seen, cos = self._reach("camera", theta_deg)
+        if int(views) == 2 and theta_deg != 0:
+            seen_b, cos_b = self._reach("camera", -theta_deg)
+            cos = np.where(seen & seen_b, np.maximum(cos, cos_b), np.where(seen_b, cos_b, cos))
+            seen = seen | seen_b
+        return seen, cos
+
+    def status_codes(self, theta_deg: float, alpha_deg: float, min_cos: float, views: int = 1) -> np.ndarray:
         """(H * W,) uint8 status of every cell under the given geometry."""
         status = np.full(self.hit.size, np.uint8(Status.MISS))
         lit, cos_l = self._reach("laser", alpha_deg)
-        seen, cos_c = self._reach("camera", theta_deg)
+        seen, cos_c = self.camera_reach(theta_deg, views)
         code = np.full(self.hit_index.size, np.uint8(Status.VALID))
         code[(cos_l < min_cos) | (cos_c < min_cos)] = Status.DROPOUT
         code[~lit | ~seen] = Status.SHADOW
         status[self.hit_index] = code
         return status
 
-    def valid_hit_mask(self, theta_deg: float, alpha_deg: float, min_cos: float) -> np.ndarray:
+    def valid_hit_mask(self, theta_deg: float, alpha_deg: float, min_cos: float, views: int = 1) -> np.ndarray:
         """Validity over the hit cells only (for fast IoU during calibration)."""
         lit, cos_l = self._reach("laser", alpha_deg)
-        seen, cos_c = self._reach("camera", theta_deg)
+        seen, cos_c = self.camera_reach(theta_deg, views)
         return lit & seen & (cos_l >= min_cos) & (cos_c >= min_cos)
 
     # -- the twin ------------------------------------------------------------------------
@@ -375,13 +422,15 @@ class TwinStage:
         return out
 
     def draw(self, params: dict[str, Any], *, seed: int = 0, noise: StripeNoise | None = None,
-             quiet: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             quiet: bool = False, registration: "Registration | None" = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Status, range error (mm) and predicted std (mm) of every cell, flat (H * W,).
 
-        ``noise`` replaces the sensor's model (a calibration tries many); ``quiet`` draws
-        nothing: the geometry's status, zero error.
+        ``noise`` and ``registration`` replace the sensor's (a calibration tries many);
+        ``quiet`` draws nothing: the geometry's status, zero error.
         """
-        status = self.status_codes(params["theta_deg"], params["alpha_deg"], params["min_cos"])
+        status = self.status_codes(params["theta_deg"], params["alpha_deg"], params["min_cos"],
+                                   int(params.get("camera_views", 1)))
         n = status.size
         if quiet:
             return status, np.zeros(n), np.where(status == Status.VALID, 0.0, np.nan)
@@ -389,31 +438,79 @@ class TwinStage:
         optics = self.optics
         if params.get("sigma_mm") is not None:  # the legacy twin: white range noise of that std alone
             noise = StripeNoise(sigma_px=float(params["sigma_mm"]) / optics.dz_du, min_signal=noise.min_signal,
-                                signal_contrast=noise.signal_contrast)
+                                signal_contrast=noise.signal_contrast, stripe_width_mm=noise.stripe_width_mm)
+        cells = self.stripe_cells(params, status, noise)
+        m = optics.magnification
+        result = simulate(noise, np.random.default_rng(seed), self.shape, candidate=cells["candidate"],
+                          signal=cells["signal"], cos_incidence=cells["cos_laser"], amplitude=cells["cos_laser"],
+                          magnification=np.full(n, m), reference_magnification=m,
+                          speckle_px=np.full(n, optics.speckle_px), border_mm=cells["border_mm"],
+                          corr_px=cells["corr_px"])
+        candidate = cells["candidate"]
+        status = status.copy()
+        status[candidate & ~result.detected] = Status.DROPOUT
+        error, sigma = result.error_px * optics.dz_du, result.sigma_px * optics.dz_du
+        reg = self.registration if registration is None else registration
+        if reg.std_mm > 0 and params.get("sigma_mm") is None:  # the legacy white noise stands alone
+            reg_error, reg_sigma = self._registration_error(reg, seed)
+            detected = result.detected
+            error = np.where(detected, error + reg_error, 0.0)
+            sigma = np.where(detected, np.hypot(sigma, reg_sigma), np.nan)
+        return status, error, sigma
+
+    def stripe_cells(self, params: dict[str, Any], status: np.ndarray, noise: StripeNoise) -> dict[str, Any]:
+        """What the stripe model needs of every cell (flat): candidates, S, laser cosine, border, correlation.
+
+        ``status``: the geometry's codes (:meth:`status_codes`). The border is the distance
+        (mm on the grid) to the nearest cell the stripe cannot reach (no surface, shadow).
+        """
         cos_l = self._on_grid(np.clip(self._reach("laser", params["alpha_deg"])[1], 0.0, 1.0))
-        cos_c = self._on_grid(np.clip(self._reach("camera", params["theta_deg"])[1], 0.0, 1.0))
+        cos_c = self._on_grid(np.clip(self.camera_reach(params["theta_deg"], int(params.get("camera_views", 1)))[1],
+                                      0.0, 1.0))
         candidate = status == Status.VALID
         reached = candidate | (status == Status.DROPOUT)
         row_mm, col_mm = self.cell_mm
-        border = border_distance(reached.reshape(self.shape), sampling=(row_mm, col_mm))
-        corr = (noise.correlation_mm / row_mm, noise.correlation_mm / col_mm)
-        m = optics.magnification
-        result = simulate(noise, np.random.default_rng(seed), self.shape, candidate=candidate, signal=cos_l * cos_c,
-                          cos_incidence=cos_l, amplitude=cos_l, magnification=np.full(n, m), reference_magnification=m,
-                          speckle_px=np.full(n, optics.speckle_px), border_mm=border, corr_px=corr)
-        status = status.copy()
-        status[candidate & ~result.detected] = Status.DROPOUT
-        return status, result.error_px * optics.dz_du, result.sigma_px * optics.dz_du
+        return {
+            "candidate": candidate, "signal": cos_l * cos_c, "cos_laser": cos_l,
+            "border_mm": border_distance(reached.reshape(self.shape), sampling=(row_mm, col_mm)),
+            "corr_px": (noise.correlation_mm / row_mm, noise.correlation_mm / col_mm),
+        }
+
+    def _registration_error(self, reg: "Registration", seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """Range error (mm) of a lateral misregistration field, and its std: grad z . delta.
+
+        delta (mm, x and y) is a correlated Gaussian field of std ``reg.std_mm`` and
+        correlation length ``reg.length_mm``; a surface of gradient g = -(n_x, n_y) / n_z
+        moves by g . delta along the range axis, std ``std_mm |g|``.
+        """
+        from rangesim.sensor.stripe_noise import correlated_field
+
+        n = self.normal
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nz = np.where(np.abs(n[:, 2]) > 1e-9, n[:, 2], np.nan)
+            grad = -n[:, :2] / nz[:, None]
+        norm = np.linalg.norm(grad, axis=1)
+        cap = math.tan(math.radians(REGISTRATION_MAX_INCIDENCE_DEG))
+        grad = np.where((norm > cap)[:, None], grad * (cap / np.maximum(norm, 1e-12))[:, None], grad)
+        grad = np.nan_to_num(grad)
+        row_mm, col_mm = self.cell_mm
+        corr = (reg.length_mm / row_mm, reg.length_mm / col_mm)
+        rng = np.random.default_rng([int(seed), 0x5EED])  # its own stream: the scanner's draws stay as they are
+        dx = correlated_field(rng, self.shape, corr).reshape(-1) * reg.std_mm
+        dy = correlated_field(rng, self.shape, corr).reshape(-1) * reg.std_mm
+        return grad[:, 0] * dx + grad[:, 1] * dy, reg.std_mm * np.linalg.norm(grad, axis=1)
 
     def scan(self, *, theta_deg: float | None = None, alpha_deg: float | None = None,
              sigma_mm: float | None = None, min_cos: float | None = None, seed: int = 0,
-             noise: StripeNoise | None = None, quiet: bool = False) -> RangeScan:
+             noise: StripeNoise | None = None, quiet: bool = False, camera_views: int | None = None) -> RangeScan:
         """The twin RangeScan under the given parameters (defaults: the sensor's).
 
         ``noise`` replaces the sensor's noise model; ``quiet=True`` gives the noise-free
         geometry (no range error, no drawn dropouts).
         """
-        p = self.params(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos)
+        p = self.params(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos,
+                        camera_views=camera_views)
+        p["camera_views"] = int(p["camera_views"])
         h, w = self.shape
         status, error, sigma = self.draw(p, seed=seed, noise=noise, quiet=quiet)
         valid = status == Status.VALID
@@ -429,7 +526,7 @@ class TwinStage:
         part = np.where(self.hit, 0, -1).astype(np.int32)
         counts = {
             "laser_blocked": int(np.count_nonzero(~lit)),
-            "camera_blocked": int(np.count_nonzero(~self._reach("camera", p["theta_deg"])[0])),
+            "camera_blocked": int(np.count_nonzero(~self.camera_reach(p["theta_deg"], int(p["camera_views"]))[0])),
         }
         noise_used = self.noise if noise is None else noise
         meta = {
@@ -452,7 +549,8 @@ class TwinStage:
 
 def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: float | None = None,
          alpha_deg: float | None = None, sigma_mm: float | None = None, min_cos: float | None = None,
-         seed: int = 0, stage: TwinStage | None = None, quiet: bool = False) -> RangeScan:
+         seed: int = 0, stage: TwinStage | None = None, quiet: bool = False,
+         camera_views: int | None = None) -> RangeScan:
     """Scan ``mesh`` from the recorded scan's viewpoint on the same grid (see module docs).
 
     Parameters
@@ -470,6 +568,8 @@ def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: 
         A white range noise (mm) in place of the sensor's range-error model (legacy).
     quiet : bool
         The noise-free geometry (no range error, no drawn dropouts).
+    camera_views : {1, 2}, optional
+        Camera views watching the stripe (2: one on either side of the sheet).
     seed : int
         Noise seed.
     stage : TwinStage, optional
@@ -478,4 +578,4 @@ def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: 
     if stage is None:
         stage = TwinStage(recorded_scan, mesh, sensor)
     return stage.scan(theta_deg=theta_deg, alpha_deg=alpha_deg, sigma_mm=sigma_mm, min_cos=min_cos, seed=seed,
-                      quiet=quiet)
+                      quiet=quiet, camera_views=camera_views)
