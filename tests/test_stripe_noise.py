@@ -132,3 +132,17 @@ def test_sigma_round_trips_and_info_shows_it(tmp_path, suffix, capsys):
     np.testing.assert_array_equal(back.sigma, scan.sigma)
     assert main(["info", str(path)]) == 0
     assert "predicted depth std (sigma)" in capsys.readouterr().out
+
+
+def test_detectors_take_the_predicted_noise_where_the_data_underestimates_it():
+    from dataclasses import replace
+
+    from rangesim.edges.common import estimate_depth_noise, pixel_geometry
+
+    sensor = make_sensor(**{"noise.speckle_contrast": 1.0, "noise.correlation_mm": 6.0})
+    scan = rs.scan([plane()], sensor, pose=top_down_pose(400.0), seed=4)
+    fp = float(np.median(pixel_geometry(scan).footprint[scan.valid]))
+    true = float(np.std(scan.depth[scan.valid] - 400.0)) / fp
+    assert estimate_depth_noise(scan) == pytest.approx(true, rel=0.1)
+    # without the prediction the second differences of a correlated error see only a fraction of it
+    assert estimate_depth_noise(replace(scan, sigma=None)) < 0.5 * true

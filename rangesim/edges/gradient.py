@@ -322,7 +322,7 @@ def gradient(
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     noise = None
     if sigma is None or threshold is None:
-        noise = estimate_depth_noise(z=z, fp=geo.footprint)
+        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
     if sigma is None:
         sigma = float(np.clip(4 * noise, 1.0, 3.0)) if noisy else 0.0

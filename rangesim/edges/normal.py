@@ -103,7 +103,7 @@ def normal(
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     noise = None
     if window is None or threshold_deg is None:
-        noise = estimate_depth_noise(z=z, fp=geo.footprint)
+        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
     if window is None:
         window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3

@@ -162,7 +162,7 @@ def pcl_organized(
     z, valid = scan_depth(scan)
     noise = None
     if normal_window is None or curvature_threshold is None:
-        noise = estimate_depth_noise(z=z, fp=pixel_geometry(scan, z).footprint)
+        noise = estimate_depth_noise(scan, z=z, fp=pixel_geometry(scan, z).footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
     if normal_window is None:
         normal_window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3
