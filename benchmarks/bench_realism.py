@@ -19,8 +19,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -70,7 +68,7 @@ def main() -> int:
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results_realism.json"))
     args = parser.parse_args()
     import rangesim as rs
-    from rangesim.twin.compare import compare
+    from rangesim.twin.comparison import compare
     from rangesim.twin.joint import calibrate_views
 
     root = Path(args.data) / "stanford-bunny"

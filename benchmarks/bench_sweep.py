@@ -127,13 +127,12 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, help="write the figures to this JSON file")
     args = ap.parse_args(argv)
 
-    from rangesim.core.backend import mitsuba as mitsuba_module
-
     import drjit
     import mitsuba
     import numpy
 
     import rangesim
+    from rangesim.core.backend import mitsuba as mitsuba_module
 
     seed = args.seed if args.seed is not None else int(time.time()) % 2**31
     results: dict = {}

@@ -5,16 +5,23 @@
 >>> sensor = rs.load_sensor("white_scanner")
 >>> scan = rs.scan(scene, sensor, seed=0)
 """
-__version__ = "0.1.0"
-
+from rangesim import (  # noqa: E402  (subpackages as rs.*)
+    cad,
+    curvature,
+    edges,
+    evaluate,
+    features,
+    recorded,  # noqa: E402,F401  (registers the readers of recorded formats with load_scan)
+    twin,  # noqa: E402  (the package, callable as twin(); rs.twin.compare works)
+    volumes,
+)
 from rangesim.core import RangeScan, RangesimError, Status
-from rangesim.io import load_scan, save_scan
+from rangesim.core.version import __version__
+from rangesim.evaluate import ground_truth_edges  # noqa: E402
+from rangesim.io import load_scan, save_scan  # also registers the scan writers RangeScan.save uses
 from rangesim.scene import Scene, SceneObject, load_scene
 from rangesim.sensor import Sensor, default_pose, intensity_image, load_sensor, scan
-from rangesim import cad, curvature, edges, evaluate, features, volumes  # noqa: E402  (subpackages as rs.*)
-from rangesim.evaluate import ground_truth_edges  # noqa: E402
-from rangesim.twin import calibrate, twin  # noqa: E402
-from rangesim import recorded  # noqa: E402,F401  (registers the readers of recorded formats with load_scan)
+from rangesim.twin import calibrate  # noqa: E402
 
 __all__ = [
     "RangeScan", "RangesimError", "Status", "Scene", "SceneObject", "Sensor",

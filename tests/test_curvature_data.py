@@ -8,18 +8,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import box, make_sensor, plane, top_down_pose
 from scipy.ndimage import binary_erosion
 from scipy.spatial.transform import Rotation
 
 import rangesim as rs
 from rangesim.core.geometry import look_at
 from rangesim.curvature import (
-    SURFACE_TYPE_NAMES, SurfaceType, curvature_edges, curvature_mesh, curvature_scan,
-    fit_quadric, hk_sign_map, surface_type_name,
+    SURFACE_TYPE_NAMES,
+    SurfaceType,
+    curvature_edges,
+    curvature_mesh,
+    curvature_scan,
+    fit_quadric,
+    hk_sign_map,
+    surface_type_name,
 )
 from rangesim.curvature.quadric import monge_curvature
-
-from conftest import box, make_sensor, plane, top_down_pose
 
 
 # --------------------------------------------------------------------------- helpers
@@ -195,7 +200,7 @@ def test_mesh_plane_and_saddles():
     for (a, c), kind in (((0.02, -0.01), SurfaceType.SADDLE_VALLEY),
                          ((-0.02, 0.01), SurfaceType.SADDLE_RIDGE),
                          ((0.01, -0.01), SurfaceType.MINIMAL)):
-        mesh = grid_mesh(lambda x, y: a * x ** 2 + c * y ** 2)
+        mesh = grid_mesh(lambda x, y, a=a, c=c: a * x ** 2 + c * y ** 2)
         cur = curvature_mesh(mesh)
         centre = np.argmin(np.linalg.norm(mesh.vertices[:, :2], axis=1))
         assert cur["K"][centre] == pytest.approx(4 * a * c, rel=1e-6)

@@ -16,13 +16,8 @@ import rangesim as rs
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.geometry import look_at
 from rangesim.core.rangescan import RangeScan
-from rangesim.edges.common import pixel_geometry
-from rangesim.edges.curvature import curvature
-from rangesim.edges.edgemap import EdgeMap
-from rangesim.edges.gradient import gradient
-from rangesim.edges.line_fit import line_fit
-from rangesim.edges.normal import normal
-from rangesim.edges.pcl_organized import OrganizedEdgeMap, pcl_organized
+from rangesim.edges import EdgeMap, OrganizedEdgeMap, curvature, gradient, line_fit, normal, pcl_organized
+from rangesim.edges._scan_access import pixel_geometry
 from tests.conftest import box, make_sensor, plane, top_down_pose
 
 LO, HI = np.array([-40.0, -30.0, 0.0]), np.array([40.0, 30.0, 30.0])

@@ -4,9 +4,9 @@ Scans: ``scenes/green_piece.toml`` with the ``white_scanner`` preset (512 x 480 
 Noise-free: ``noise.sigma_px = noise.speckle_contrast = noise.quantization_px = 0`` (the
 stripe width stays: mixed pixels at jumps are physics, not noise). Preset noise: the
 preset as is (depth noise 0.24 pixel footprints, measured by
-``rangesim.edges.common.estimate_depth_noise``). Scores: ``edge_scores`` on jump + crease
+``rangesim.edges.estimate_depth_noise``). Scores: ``edge_scores`` on jump + crease
 edges together, tolerance 2 px, default detector settings (noise-adaptive: see
-``rangesim.edges.common``). Truth is kept on measured pixels only (``scan_truth``).
+``rangesim.edges._noise``). Truth is kept on measured pixels only (``scan_truth``).
 
 Documented F1 (measured; the floors asserted below are these minus a small margin):
 
@@ -38,8 +38,8 @@ from pathlib import Path
 import pytest
 
 import rangesim as rs
-from rangesim.edges import DETECTORS
-from rangesim.edges.common import NOISE_FLOOR, estimate_depth_noise
+from rangesim.edges import DETECTORS, estimate_depth_noise
+from rangesim.edges._noise import NOISE_FLOOR
 from rangesim.evaluate.edge_scores import edge_scores
 from rangesim.evaluate.runs import scan_truth
 

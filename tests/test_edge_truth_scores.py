@@ -6,15 +6,14 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from conftest import box, make_sensor, plane, top_down_pose
 from scipy import ndimage
 
 import rangesim as rs
-from conftest import box, make_sensor, plane, top_down_pose
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Segment3D
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.geometry import look_at
-from rangesim.edges.edgemap import EdgeMap
-from rangesim.edges.link import EdgeChain, link
+from rangesim.edges import EdgeChain, EdgeMap, link
 from rangesim.evaluate import edge_scores, ground_truth_edges, ground_truth_features, jump_edges
 from rangesim.scene.scene import Scene, SceneObject
 

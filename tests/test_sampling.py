@@ -19,10 +19,10 @@ import trimesh
 from scipy.spatial import cKDTree
 
 import rangesim.cli.main as cli
-from rangesim.cad.sampling import ENDS, MERGE_FRACTION, SurfacePoints, surface_points, visible_points
+from rangesim.cad.sampling import ENDS, MERGE_FRACTION, SurfacePoints, surface_points
 from rangesim.core.errors import RangesimError
 from rangesim.core.units import UNITS_MM, parse_length
-from rangesim.scene.visibility import visible_from
+from rangesim.scene.visibility import visible_from, visible_points, visible_surface_points
 
 SQRT3 = math.sqrt(3.0)
 
@@ -284,7 +284,7 @@ def test_single_view_keeps_the_front_half_of_a_sphere():
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=20.0)
     eye = np.array([0.0, 0.0, 400.0])
     every = surface_points(sphere, 1.5)
-    seen = surface_points(sphere, 1.5, view=eye)
+    seen = visible_surface_points(sphere, 1.5, eye)
     mask = visible_from(sphere, every.points, eye, normals=every.normals)
     assert np.array_equal(seen.points, every.points[mask])
     to_eye = eye - every.points
@@ -317,6 +317,19 @@ def test_single_view_drops_a_sphere_hidden_behind_a_box():
 def test_visible_from_checks_viewpoint():
     with pytest.raises(RangesimError, match="viewpoint"):
         visible_from(_box(), np.zeros((2, 3)), [0.0, 1.0])
+    with pytest.raises(RangesimError, match="viewpoint"):
+        visible_surface_points(_box(), 1.0, [0.0, 1.0])
+
+
+def test_sampling_is_pure_geometry():
+    """Visibility is the scene layer's: cad.surface_points names the replacement for ``view``."""
+    with pytest.raises(RangesimError, match="visible_surface_points"):
+        surface_points(_box(), 1.0, view=[0.0, 0.0, 100.0])
+    box, eye = _box(), [10.0, -20.0, 30.0]
+    seen = visible_surface_points(box, 1.0, eye, smooth=False, ends="surface")
+    every = surface_points(box, 1.0, smooth=False, ends="surface")
+    assert np.array_equal(seen.points, visible_points(every, box, eye).points)
+    assert 0 < len(seen) < len(every)
 
 
 # -- files and pictures -----------------------------------------------------------------------

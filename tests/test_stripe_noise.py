@@ -137,7 +137,8 @@ def test_sigma_round_trips_and_info_shows_it(tmp_path, suffix, capsys):
 def test_detectors_take_the_predicted_noise_where_the_data_underestimates_it():
     from dataclasses import replace
 
-    from rangesim.edges.common import estimate_depth_noise, pixel_geometry
+    from rangesim.edges import estimate_depth_noise
+    from rangesim.edges._scan_access import pixel_geometry
 
     sensor = make_sensor(**{"noise.speckle_contrast": 1.0, "noise.correlation_mm": 6.0})
     scan = rs.scan([plane()], sensor, pose=top_down_pose(400.0), seed=4)

@@ -11,8 +11,8 @@ import trimesh
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.twin import twin
-from rangesim.twin.calibrate import calibrate
-from rangesim.twin.compare import compare
+from rangesim.twin.calibration import calibrate
+from rangesim.twin.comparison import compare
 
 METRIC_KEYS = {"iou", "iou_no_physics", "realism", "hole_recall", "residuals", "noise_std_ratio", "edges", "params"}
 
@@ -94,7 +94,7 @@ def test_bun000_calibrated_iou(bun000_fit):
 
 def test_bun000_fitted_sigma_reproduces_noise(bun000_fit):
     scan, mesh, fit = bun000_fit
-    from rangesim.twin.compare import compare_scans
+    from rangesim.twin.comparison import compare_scans
 
     tw = twin(scan, mesh, stage=fit["stage"], seed=3,
               **{k: fit[k] for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")})
@@ -199,8 +199,8 @@ def test_compare_with_the_shipped_calibration_reports_realism(data_dir):
 
 
 def test_cli_calibrate_geometry_only(data_dir, tmp_path):
-    from rangesim.cli.main import main
     import rangesim as rs
+    from rangesim.cli.main import main
 
     root = data_dir / "stanford-bunny"
     out = tmp_path / "cw.toml"

@@ -1,6 +1,7 @@
 """Volumes and sweeps: the CSG-like model of a part tree and generalized cylinders."""
 from __future__ import annotations
 
+import argparse
 import json
 
 import numpy as np
@@ -8,8 +9,6 @@ import pytest
 import trimesh
 
 import rangesim as rs
-import argparse
-
 from rangesim.cli import volume_commands
 from rangesim.core.errors import RangesimError
 from rangesim.volumes import decompose, generalized_cylinders, sections_intersect

@@ -14,8 +14,10 @@ One mechanism serves every parametric surface in the package:
 * :func:`tessellate_surface` is the single tessellation.
 
 :class:`BSplineSurface` implements ``_partials`` with basis-function derivatives
-(vectorised de Boor / Cox recursion, Piegl & Tiller algorithm A2.3) and, for NURBS, the
-quotient rule in homogeneous coordinates; :class:`rangesim.cad.coons.CoonsPatch` with the
+(``scipy.interpolate.NdBSpline`` with derivative orders ``nu``; the vectorised
+de Boor / Cox recursion of Piegl & Tiller algorithm A2.3, :func:`basis_derivatives`, is
+kept as the reference and the fallback) and, for NURBS, the quotient rule in homogeneous
+coordinates; :class:`rangesim.cad.coons.CoonsPatch` with the
 Coons formula.
 
 Curvature sign convention (used everywhere in the package)
@@ -39,6 +41,11 @@ import trimesh
 from scipy.interpolate import make_interp_spline, make_lsq_spline
 
 from rangesim.core.errors import RangesimError
+
+try:  # scipy >= 1.12
+    from scipy.interpolate import NdBSpline
+except ImportError:  # pragma: no cover - older scipy: the hand-written evaluation only
+    NdBSpline = None
 
 Partials = dict[tuple[int, int], np.ndarray]
 
@@ -590,6 +597,8 @@ class BSplineSurface(ParametricSurface):
             a.setflags(write=False)  # the surface is a value: callers cannot change it under us
         # homogeneous control net (w P, w): the rational case is a polynomial one in 4-D
         self._net = ctrl if w is None else np.concatenate([ctrl * w[..., None], w[..., None]], axis=2)
+        self._spline = None if NdBSpline is None else NdBSpline(
+            (self.knots_u, self.knots_v), self._net, (self.degree_u, self.degree_v))
 
     # -- properties ---------------------------------------------------------------------------
     @property
@@ -616,7 +625,33 @@ class BSplineSurface(ParametricSurface):
     def _homogeneous_partials(
         self, u: np.ndarray, v: np.ndarray, orders: set[tuple[int, int]]
     ) -> Partials:
-        """Partials of the (homogeneous, if rational) surface at flat u, v: ``{(k, l): (N, D)}``."""
+        """Partials of the (homogeneous, if rational) surface at flat u, v: ``{(k, l): (N, D)}``.
+
+        Through ``scipy.interpolate.NdBSpline`` (one call per order, ``nu=(k, l)``): the
+        same values as :meth:`_homogeneous_partials_by_hand` to ~1e-15 relative (~1e-13
+        for high orders of a degree-5 patch), and faster in every case measured, although
+        each order recomputes the basis (``benchmarks/bench_bspline.py``, 2 CPU cores,
+        1e5 points, hand -> scipy: bicubic 12 x 10 points 60 -> 17 ms, S_u and S_v
+        143 -> 38 ms, curvatures 141 -> 104 ms; NURBS sphere points 37 -> 12 ms,
+        curvatures 141 -> 103 ms; 100 points 2-4x faster too). Without NdBSpline
+        (scipy < 1.12) the hand-written evaluation.
+        """
+        if self._spline is None:
+            return self._homogeneous_partials_by_hand(u, v, orders)
+        xi = np.stack([u, v], axis=-1)
+        # u, v are clipped to the domain, so extrapolation never happens; scipy returns
+        # zeros for orders above the degree and puts the domain's right end in the last
+        # non-empty span, as find_spans does
+        return {(k, l): self._spline(xi, nu=(k, l)) for k, l in orders}
+
+    def _homogeneous_partials_by_hand(
+        self, u: np.ndarray, v: np.ndarray, orders: set[tuple[int, int]]
+    ) -> Partials:
+        """:meth:`_homogeneous_partials` from :func:`basis_derivatives` (P&T A2.3), the reference.
+
+        Computes the basis derivatives once for every order; kept as the fallback for
+        scipy < 1.12 and as the reference the tests and the benchmark compare with.
+        """
         p, q = self.degree_u, self.degree_v
         su = find_spans(self.knots_u, p, u)
         sv = find_spans(self.knots_v, q, v)
@@ -738,7 +773,7 @@ class BSplineSurface(ParametricSurface):
         if not np.all(np.isfinite(pts)):
             raise RangesimError("from_grid: points must be finite")
         degrees = (int(degree_u), int(degree_v))
-        for axis, (m, k) in enumerate(zip(pts.shape[:2], degrees)):
+        for axis, (m, k) in enumerate(zip(pts.shape[:2], degrees, strict=True)):
             if k < 1 or m < k + 1:
                 raise RangesimError(
                     f"from_grid: degree {k} along {'uv'[axis]} must be >= 1 and needs at least "

@@ -6,6 +6,7 @@ from typing import Callable
 
 import trimesh
 
+from rangesim.cad.meshes import MESH_SUFFIXES, load_mesh
 from rangesim.core.errors import RangesimError
 
 #: name -> builder returning a built part (see ``rangesim.cad.part``); filled by the model modules
@@ -30,8 +31,6 @@ def load_model(name_or_path: str | Path, **params) -> trimesh.Trimesh:
     name = str(name_or_path)
     if name in MODELS:
         return MODELS[name](**params).mesh
-    from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh
-
     path = Path(name)
     if path.suffix.lower() in MESH_SUFFIXES:
         if params:

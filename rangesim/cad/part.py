@@ -181,7 +181,7 @@ def build_part(name: str, tree: PartNode, features: AnalyticFeatures, params: di
     run_index = np.asarray(mesh_gl.run_index, dtype=np.int64) // 3
     run_ids = np.asarray(mesh_gl.run_original_id, dtype=np.int64)
     face_labels = np.full(len(faces), -1, dtype=np.int32)
-    for start, stop, original in zip(run_index[:-1], run_index[1:], run_ids):
+    for start, stop, original in zip(run_index[:-1], run_index[1:], run_ids, strict=False):
         face_labels[start:stop] = label_of_id.get(int(original), -1)
     if (face_labels < 0).any():
         raise RuntimeError(f"{name}: {int((face_labels < 0).sum())} triangles lost their sub-part label")

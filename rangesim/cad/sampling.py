@@ -62,7 +62,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -70,9 +70,6 @@ from scipy.spatial import cKDTree
 
 from rangesim.core.errors import RangesimError
 from rangesim.core.units import parse_length
-
-if TYPE_CHECKING:
-    from rangesim.scene.scene import Scene
 
 #: file types :meth:`SurfacePoints.save` writes
 POINT_SUFFIXES = (".ply", ".npz")
@@ -206,10 +203,13 @@ def surface_points(
         those, less the ones within ``h / 2`` of a grid node and at most one per
         ``h / 2`` voxel, so the count follows the resolution also on surfaces folded
         finer than ``h`` (threads, knurls).
-    view : (3,) array_like, optional
-        A viewpoint, mm: keep only the points seen from it (normal facing it, not
-        hidden by the mesh itself), like one range view (the paper's Fig. 10). Use
-        :func:`visible_points` for other occluders.
+    view : None
+        No longer handled here: sampling is pure geometry, and what a viewpoint sees
+        takes ray casting in the scene layer. Passing a viewpoint raises
+        :class:`RangesimError` naming the replacement,
+        :func:`rangesim.scene.visibility.visible_surface_points` (one range view, the
+        paper's Fig. 10) or :func:`rangesim.scene.visibility.visible_points` (other
+        occluders).
 
     Returns
     -------
@@ -219,9 +219,15 @@ def surface_points(
     Raises
     ------
     RangesimError
-        A bad resolution, an empty mesh, or a resolution so fine the sample count would
-        exceed :data:`MAX_POINTS`.
+        A bad resolution, an empty mesh, a resolution so fine the sample count would
+        exceed :data:`MAX_POINTS`, or a ``view``.
     """
+    if view is not None:
+        raise RangesimError(
+            "surface_points(view=...) moved to the scene layer: use "
+            "rangesim.scene.visibility.visible_surface_points(mesh, resolution, view) "
+            "or visible_points(surface_points(mesh, resolution), mesh, view)"
+        )
     h = parse_length(resolution, positive=True, what="resolution")
     if ends not in ENDS:
         raise RangesimError(f"ends must be one of {', '.join(ENDS)}, got {ends!r}")
@@ -281,40 +287,7 @@ def surface_points(
     # vertex normals of opposite sign can cancel (a sheet folded onto itself): face normal
     flat = length[:, 0] < 1e-9
     normals[flat], length[flat] = cross[face_index[flat]], double_area[face_index[flat], None]
-    samples = SurfacePoints(points, normals / length, face_index.astype(np.int64), h)
-    if view is not None:
-        samples = visible_points(samples, mesh, view)
-    return samples
-
-
-def visible_points(
-    samples: SurfacePoints,
-    scene: "Scene | trimesh.Trimesh | list[trimesh.Trimesh]",
-    viewpoint: Any,
-    *,
-    tolerance: float | None = None,
-) -> SurfacePoints:
-    """The samples seen from a viewpoint: facing it and not hidden by the scene.
-
-    Parameters
-    ----------
-    samples : SurfacePoints
-    scene : Scene, trimesh.Trimesh or list of trimesh.Trimesh
-        The occluders, mm, including the sampled mesh itself.
-    viewpoint : (3,) array_like
-        The eye, mm.
-    tolerance : float, optional
-        See :func:`rangesim.scene.visibility.visible_from`.
-
-    Returns
-    -------
-    SurfacePoints
-        The visible subset, in the original order.
-    """
-    from rangesim.scene.visibility import visible_from
-
-    mask = visible_from(scene, samples.points, viewpoint, normals=samples.normals, tolerance=tolerance)
-    return samples.subset(mask)
+    return SurfacePoints(points, normals / length, face_index.astype(np.int64), h)
 
 
 # -- the sampler ----------------------------------------------------------------------------
@@ -354,7 +327,7 @@ def _chunks(coords: np.ndarray, max_rows: int) -> list[slice]:
     total = np.cumsum(rows)
     cuts = np.searchsorted(total, np.arange(max_rows, total[-1] if len(total) else 0, max_rows), side="right")
     bounds = [0, *cuts.tolist(), len(coords)]
-    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
 
 
 def _cut(

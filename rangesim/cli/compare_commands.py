@@ -70,7 +70,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         print(f"wrote {out}/metrics.json")
         return 0
 
-    from rangesim.twin.compare import compare
+    from rangesim.twin.comparison import compare
     from rangesim.viz.compare import save_comparison
 
     if not scan.valid.any():

@@ -30,6 +30,7 @@ def cmd_features(args: argparse.Namespace) -> int:
     import rangesim.features as F
     from rangesim.edges import DETECTORS
     from rangesim.io import load_scan
+    from rangesim.scene import load_scene
     from rangesim.viz.features import save_features_overlay
 
     out = Path(args.out)
@@ -47,7 +48,9 @@ def cmd_features(args: argparse.Namespace) -> int:
     segs = F.lines(edge_map, scan)
     circ = F.circles(edge_map, radii)
     arc = F.arcs(edge_map, radii)
-    ell = F.ellipses(edge_map, scan if scene else None, scene, explained=(*segs, *circ, *arc))
+    # the analysis layer takes a loaded scene (it does not read scene files itself)
+    model = load_scene(scene) if scene else None
+    ell = F.ellipses(edge_map, scan if scene else None, model, explained=(*segs, *circ, *arc))
     feats = {"segments": segs, "circles": circ, "arcs": arc, "ellipses": ell}
     rows = F.relations(segs, circ, ell)
     out.mkdir(parents=True, exist_ok=True)
@@ -56,13 +59,14 @@ def cmd_features(args: argparse.Namespace) -> int:
         from rangesim.evaluate.feature_scores import feature_scores
         from rangesim.evaluate.ground_truth import ground_truth_features
 
-        report["scores"] = _plain(feature_scores(feats, ground_truth_features(scan, scene), scan))
+        truth = ground_truth_features(scan, model if model is not None else scene)
+        report["scores"] = _plain(feature_scores(feats, truth, scan))
     target = out / "features.json"
     with writing(target), atomic_path(target) as tmp:
         Path(tmp).write_text(json.dumps(report, indent=1, default=float))
     target = out / "relations.csv"
-    with writing(target):
-        F.relations_to_csv(rows, target)
+    with writing(target), atomic_path(target) as tmp:
+        Path(tmp).write_text(F.relations_to_csv(rows))
     save_features_overlay(scan, edge_map, feats, out / "features.png")
     print(f"{args.scan}: {len(segs)} segments, {len(circ)} circles, {len(arc)} arcs, {len(ell)} ellipses, "
           f"{len(rows)} relations")

@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 
 from rangesim import __version__
+from rangesim.cli.common import check_suffix, writing
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.cli.common import check_suffix, writing
 from rangesim.io import atomic_path, load_scan, save_scan
 from rangesim.scene import load_scene
 from rangesim.sensor import intensity_image, load_sensor, preset_names, scan

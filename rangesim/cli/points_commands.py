@@ -37,6 +37,7 @@ def cmd_points(args: argparse.Namespace) -> int:
     """Sample the model's surface, write the points (and a preview), print a summary."""
     from rangesim.cad.models import load_model
     from rangesim.io.atomic import atomic_path
+    from rangesim.scene.visibility import visible_surface_points
 
     out = Path(args.out)
     preview = Path(args.preview) if args.preview else None
@@ -49,7 +50,10 @@ def cmd_points(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     mesh = load_model(args.model)
-    samples = surface_points(mesh, h, smooth=not args.flat, ends=args.ends, view=view)
+    if view is None:
+        samples = surface_points(mesh, h, smooth=not args.flat, ends=args.ends)
+    else:
+        samples = visible_surface_points(mesh, h, view, smooth=not args.flat, ends=args.ends)
     if preview is None:
         with writing(out):
             samples.save(out)

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import Status
+from rangesim.core.writers import save_scan
 
 #: (name, dtype, trailing shape) of the per-pixel arrays, in a fixed order used by the writers
 PIXEL_FIELDS: tuple[tuple[str, type, tuple[int, ...]], ...] = (
@@ -133,10 +134,9 @@ class RangeScan:
         """Write the scan; the format follows the extension (.exr, .npz, .ply).
 
         The file is written under a temporary name and renamed, so a failed write leaves
-        no partial file. Returns the path written.
+        no partial file. Returns the path written. The writers are those registered with
+        :func:`rangesim.core.writers.register_writer` (``rangesim.io`` registers its own).
         """
-        from rangesim.io import save_scan  # io sits beside core; imported late to keep core light
-
         return save_scan(self, path)
 
     def __repr__(self) -> str:

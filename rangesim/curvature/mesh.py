@@ -1,12 +1,16 @@
 """Per-vertex curvature of a triangle mesh by local quadric fits (:mod:`.quadric`)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
-import trimesh
 from scipy.spatial import cKDTree
 
 from rangesim.curvature.quadric import DEFAULT_CHUNK, fit_quadric
+
+if TYPE_CHECKING:  # annotations only: any mesh with trimesh's attributes will do
+    import trimesh
 
 __all__ = ["curvature_mesh", "ring_neighbourhoods", "radius_neighbourhoods"]
 

@@ -2,14 +2,22 @@
 
 Every detector takes a RangeScan (synthetic or recorded, NaN holes allowed) and returns an
 :class:`EdgeMap`; :data:`DETECTORS` names them for the CLI, sweeps and benchmarks.
+:func:`estimate_depth_noise` measures a scan's depth noise in pixel footprints, the level
+the detectors' noise-adaptive defaults key on.
+
+The detectors live in private modules (``_gradient``, ``_normal``, ``_curvature``,
+``_line_fit``, ``_pcl_organized``; chains in ``_link``), the pieces they share in
+``_scan_access``, ``_noise``, ``_discontinuities``, ``_differences``, ``_thinning`` and
+``_grid``; the public API is this package's namespace.
 """
-from rangesim.edges.curvature import curvature
+from rangesim.edges._curvature import curvature
+from rangesim.edges._gradient import gradient
+from rangesim.edges._line_fit import line_fit, line_fit_points
+from rangesim.edges._link import EdgeChain, link
+from rangesim.edges._noise import estimate_depth_noise
+from rangesim.edges._normal import normal
+from rangesim.edges._pcl_organized import OrganizedEdgeMap, pcl_organized
 from rangesim.edges.edgemap import EdgeMap
-from rangesim.edges.gradient import gradient
-from rangesim.edges.line_fit import line_fit, line_fit_points
-from rangesim.edges.link import EdgeChain, link
-from rangesim.edges.normal import normal
-from rangesim.edges.pcl_organized import OrganizedEdgeMap, pcl_organized
 
 #: name -> detector(scan, **params) -> EdgeMap
 DETECTORS = {
@@ -21,6 +29,6 @@ DETECTORS = {
 }
 
 __all__ = [
-    "DETECTORS", "EdgeChain", "EdgeMap", "OrganizedEdgeMap", "curvature", "gradient", "line_fit",
-    "line_fit_points", "link", "normal", "pcl_organized",
+    "DETECTORS", "EdgeChain", "EdgeMap", "OrganizedEdgeMap", "curvature", "estimate_depth_noise",
+    "gradient", "line_fit", "line_fit_points", "link", "normal", "pcl_organized",
 ]

@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.conics import ellipse_from_conic
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.geometry import circle_basis, project_circle
 from rangesim.core.rangescan import RangeScan
-from rangesim.features.common import ellipse_from_conic
 
 #: default jump rule: the 3D step between two neighbours within this angle of the viewing ray
 JUMP_ANGLE_DEG = 15.0

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.errors import RangesimError
+from rangesim.core.version import __version__
 from rangesim.experiments.executors import Executor, progress_bar
 from rangesim.experiments.grid import derive_seed, task_key
 from rangesim.experiments.poses import DEFAULT_CAP_DEG, check_pose_table, resolve_pose_table, sample_view
@@ -97,15 +98,16 @@ def run_dataset_view(payload: dict[str, Any]) -> dict[str, Any]:
         ``scan`` (RangeScan), ``truth`` ({edges, subpart, depth_true} arrays) and
         ``record`` (the manifest entry without file names).
     """
-    import rangesim as rs
     from rangesim.evaluate.ground_truth import ground_truth_edges, ground_truth_features
     from rangesim.experiments.scenes import load_task_scene
+    from rangesim.sensor import load_sensor
+    from rangesim.sensor import scan as make_scan
 
     scene = load_task_scene(payload["scene_path"])
-    sensor = rs.load_sensor(payload["sensor"])
+    sensor = load_sensor(payload["sensor"])
     resolved = resolve_pose_table(payload["pose"], scene, sensor)
     view = sample_view(resolved, np.random.default_rng(payload["pose_seed"]))
-    scan = rs.scan(scene, sensor, pose=view.pose, seed=payload["noise_seed"])
+    scan = make_scan(scene, sensor, pose=view.pose, seed=payload["noise_seed"])
     edges = ground_truth_edges(scan, scene, crease_deg=payload["crease_deg"])
     truth = {
         "edges": edges.astype(np.uint8),
@@ -168,7 +170,6 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     -------
     DatasetRun
     """
-    import rangesim
     from rangesim.experiments.scenes import load_task_scene
     from rangesim.sensor import load_sensor
 
@@ -241,7 +242,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     from rangesim.core.constants import EDGE_LABEL_NAMES, STATUS_NAMES
 
     manifest = {
-        "format": "rangesim-dataset", "format_version": DATASET_FORMAT, "rangesim_version": rangesim.__version__,
+        "format": "rangesim-dataset", "format_version": DATASET_FORMAT, "rangesim_version": __version__,
         "scene": {"file": str(scene_path), **scene_id, "objects": [o.name for o in scene_obj.objects],
                   "subpart_names": scene_obj.subpart_names},
         "sensor": sensor_data, "K": sensor_obj.K.tolist(), "width": sensor_obj.width, "height": sensor_obj.height,

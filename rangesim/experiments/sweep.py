@@ -7,10 +7,16 @@ from pathlib import Path
 from typing import Any
 
 from rangesim.core.errors import RangesimError
+from rangesim.core.version import __version__
 from rangesim.experiments.executors import Executor, progress_bar
 from rangesim.experiments.grid import SweepTask, plan_sweep
 from rangesim.experiments.results import (
-    build_table, scan_path, task_path, write_json, write_table, write_task_file,
+    build_table,
+    scan_path,
+    task_path,
+    write_json,
+    write_table,
+    write_task_file,
 )
 from rangesim.experiments.sweep_file import SweepSpec, load_sweep
 from rangesim.experiments.tasks import run_sweep_task
@@ -132,11 +138,9 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
 
 
 def _provenance(spec: SweepSpec, n_tasks: int) -> dict[str, Any]:
-    import rangesim
-
     return {
         "sweep": str(spec.path), "name": spec.name, "description": spec.description,
-        "rangesim_version": rangesim.__version__, "tasks": n_tasks,
+        "rangesim_version": __version__, "tasks": n_tasks,
         "scenes": [{"label": s.label, "path": s.path, "sha1": s.sha1} for s in spec.scenes],
         "sensors": [{"label": s.label, "sensor": s.data} for s in spec.sensors],
         "grid": spec.grid, "set": spec.fixed, "pose": spec.pose, "views": spec.views,

@@ -71,16 +71,17 @@ def run_sweep_task(payload: dict[str, Any]) -> dict[str, Any]:
         times ``scan_s``, ``truth_s``, ``detector_s`` (detection without scoring);
         ``scan``: the RangeScan if ``keep_scan``, else None.
     """
-    import rangesim as rs
     from rangesim.evaluate.runs import run_detectors, scan_truth
     from rangesim.experiments.scenes import load_task_scene
     from rangesim.experiments.snr import edge_snr
+    from rangesim.sensor import load_sensor
+    from rangesim.sensor import scan as make_scan
 
     scene = load_task_scene(payload["scene_path"], payload["objects"])
-    sensor = rs.load_sensor(payload["sensor"])
+    sensor = load_sensor(payload["sensor"])
     pose, pose_info = task_pose(payload, scene, sensor)
     t0 = time.perf_counter()
-    scan = rs.scan(scene, sensor, pose=pose, seed=payload["noise_seed"])
+    scan = make_scan(scene, sensor, pose=pose, seed=payload["noise_seed"])
     t1 = time.perf_counter()
     truth = scan_truth(scan, scene, crease_deg=payload["crease_deg"])
     t2 = time.perf_counter()

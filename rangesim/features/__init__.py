@@ -3,11 +3,11 @@ direction, arcs, model-guided ellipses, and the relations between them.
 
 Image positions are (x = column, y = row) in pixels, integers at pixel centres.
 """
-from rangesim.features.arcs import Arc, arcs
-from rangesim.features.circles import Circle, circle_hypotheses, circles
-from rangesim.features.ellipses import Ellipse, ellipses, mesh_circles, predict_ellipses
-from rangesim.features.lines import Segment, lines, segment_pairs
-from rangesim.features.relations import relations, relations_to_csv, relations_to_json
+from rangesim.features._arcs import Arc, arcs
+from rangesim.features._circles import Circle, circle_hypotheses, circles
+from rangesim.features._ellipses import Ellipse, ellipses, mesh_circles, predict_ellipses
+from rangesim.features._lines import Segment, lines, segment_pairs
+from rangesim.features._relations import relations, relations_to_csv, relations_to_json
 
 __all__ = [
     "Arc", "Circle", "Ellipse", "Segment", "arcs", "circle_hypotheses", "circles", "ellipses",

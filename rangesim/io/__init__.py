@@ -2,8 +2,12 @@
 
 Writers: ``.exr`` (the native format, exact), ``.npz`` (exact), ``.ply`` (valid points
 only, export). Readers: ``.exr`` and ``.npz``; other modules add readers for more
-formats with :func:`register_reader`. Every save goes through :func:`atomic_path`,
-so a failed write never leaves a partial file.
+formats with :func:`register_reader` (and writers with :func:`register_writer`). Every
+save goes through :func:`atomic_path`, so a failed write never leaves a partial file.
+
+The writer registry and :func:`save_scan` live in :mod:`rangesim.core.writers`, so that
+:meth:`RangeScan.save` works without core importing io; importing this module registers
+the writers above there.
 """
 from __future__ import annotations
 
@@ -11,9 +15,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+from rangesim.core.atomic import atomic_path
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.io.atomic import atomic_path
+from rangesim.core.writers import WRITERS, Writer, register_writer, save_scan
 from rangesim.io.exr import read_exr, write_exr
 from rangesim.io.npz import read_npz, write_npz
 from rangesim.io.ply import write_ply
@@ -24,6 +29,7 @@ __all__ = [
     "read_exr",
     "read_npz",
     "register_reader",
+    "register_writer",
     "save_scan",
     "write_exr",
     "write_npz",
@@ -31,16 +37,16 @@ __all__ = [
 ]
 
 Reader = Callable[..., RangeScan]
-Writer = Callable[[RangeScan, Path], None]
 
-#: lower-case suffix -> writer(scan, path); writers write directly, save_scan makes it atomic
-_WRITERS: dict[str, Writer] = {".exr": write_exr, ".npz": write_npz, ".ply": write_ply}
+#: lower-case suffix -> writer(scan, path): the registry in core that save_scan and
+#: RangeScan.save dispatch through (writers write directly, save_scan makes it atomic)
+_WRITERS: dict[str, Writer] = WRITERS
 #: lower-case suffix -> reader(path, **kwargs) -> RangeScan
 _READERS: dict[str, Reader] = {}
 
-
-def _suffix(path: Path) -> str:
-    return path.suffix.lower()
+register_writer(".exr", write_exr)
+register_writer(".npz", write_npz)
+register_writer(".ply", write_ply)
 
 
 def _describe_suffix(path: Path) -> str:
@@ -79,47 +85,6 @@ def register_reader(suffixes: str | Iterable[str], func: Reader) -> None:
 
 register_reader(".exr", read_exr)
 register_reader(".npz", read_npz)
-
-
-def save_scan(scan: RangeScan, path: str | Path) -> Path:
-    """Write ``scan`` atomically; the format follows the extension.
-
-    Parameters
-    ----------
-    scan : RangeScan
-    path : str or Path
-        ``.exr``, ``.npz`` or ``.ply`` (any case). Missing parent directories are created.
-
-    Returns
-    -------
-    Path
-        The path written.
-
-    Raises
-    ------
-    RangesimError
-        For an unsupported extension or data the format cannot store exactly.
-    """
-    path = Path(path)
-    writer = _WRITERS.get(_suffix(path))
-    if writer is None:
-        supported = ", ".join(sorted(_WRITERS))
-        raise RangesimError(
-            f"cannot write scans as {_describe_suffix(path)};"
-            f" supported: {supported}",
-            path,
-        )
-    with atomic_path(path) as tmp:
-        try:
-            writer(scan, tmp)
-        except RangesimError as exc:
-            if exc.source != str(tmp):
-                raise
-            # the writer only saw the temporary name; the user knows the final one
-            relabelled = RangesimError(str(exc).replace(str(tmp), str(path), 1))
-            relabelled.source = str(path)
-            raise relabelled from exc
-    return path
 
 
 def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:

@@ -33,23 +33,21 @@ import numpy as np
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.io import read_npz, register_reader
-from rangesim.recorded.cyberware import conf_pose, cyberware_from, read_conf, read_cyberware_ply
+from rangesim.io.npz import EMPTY_ZIP_MAGIC, ZIP_MAGIC
+from rangesim.io.ply_header import read_ply_header
+from rangesim.recorded.common import check_file, grid_scan, read_bytes
+from rangesim.recorded.conf import apply_conf, conf_pose, read_conf
+from rangesim.recorded.cyberware import cyberware_from, read_cyberware_ply
 from rangesim.recorded.lzf import LZFError, lzf_decompress, lzf_store
 from rangesim.recorded.msu import read_msu, write_msu
 from rangesim.recorded.pcd import load_pcd, read_pcd, write_pcd
 from rangesim.recorded.pointlist import (
     _point_ply_from,
     _points_npz_from,
-    apply_conf,
-    check_file,
-    grid_scan,
-    read_bytes,
-    read_ply_header,
     read_point_ply,
     read_points_npz,
     read_xyz,
 )
-from rangesim.io.npz import EMPTY_ZIP_MAGIC, ZIP_MAGIC
 
 __all__ = [
     "LZFError",

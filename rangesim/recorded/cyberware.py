@@ -1,4 +1,4 @@
-"""Cyberware range scans in Stanford's PLY layout (``range_grid``) and ``.conf`` poses.
+"""Cyberware range scans in Stanford's PLY layout (``range_grid``).
 
 The file is ASCII: ``obj_info num_cols`` / ``num_rows`` and scanner fields in the header,
 ``element vertex N`` (x y z, metres), then ``element range_grid R*C`` whose lines are
@@ -10,10 +10,7 @@ of synthetic scans: x is the sweep direction (steps of ``echo_lgincr``), y runs 
 columns, z is the range axis; ``depth`` is z in mm. There is no pinhole model, so
 ``meta["K"]`` is absent.
 
-Poses come from a Stanford ``.conf`` (``bmesh FILE tx ty tz qx qy qz qw``, metres): a
-scan point maps into the common frame as ``p_world = R(q)^T p + t`` (checked against
-``bun_zipper.ply`` in the data README), so the scan's pose (sensor-to-world, mm) is
-``[[R(q)^T, 1000 t], [0, 1]]``.
+Poses come from a Stanford ``.conf`` (see :mod:`rangesim.recorded.conf`).
 """
 from __future__ import annotations
 
@@ -22,24 +19,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.recorded.pointlist import (
-    PlyHeader,
-    apply_conf,
-    check_file,
-    grid_scan,
-    line_block,
-    line_ends,
-    parse_numbers,
-    read_bytes,
-    read_ply_header,
-    recorded_meta,
-)
+from rangesim.io.ply_header import PlyHeader, read_ply_header
+from rangesim.recorded.common import check_file, grid_scan, read_bytes, recorded_meta
+from rangesim.recorded.conf import apply_conf
+from rangesim.recorded.text import line_block, line_ends, parse_numbers
 
-__all__ = ["conf_pose", "read_conf", "read_cyberware_ply"]
+__all__ = ["cyberware_from", "read_cyberware_ply"]
 
 #: Cyberware files are in metres; scans are in millimetres
 METRES_TO_MM = 1000.0
@@ -192,72 +180,3 @@ def _grid_indices(text: bytes, cells: int, n_vertices: int, path: Path) -> np.nd
             f"range_grid line {bad[0] + 1}: vertex index {index[bad[0]]} out of range (0..{n_vertices - 1})", path
         )
     return index
-
-
-# -- .conf poses -----------------------------------------------------------------------------
-def read_conf(conf: str | Path) -> dict[str, np.ndarray]:
-    """All ``bmesh`` poses of a Stanford ``.conf`` file.
-
-    Parameters
-    ----------
-    conf : str or Path
-        Lines ``bmesh FILE tx ty tz qx qy qz qw`` (metres, scalar-last quaternion);
-        other lines (``camera ...``) are ignored.
-
-    Returns
-    -------
-    dict
-        Scan file name (as written) -> (4, 4) float64 sensor-to-world pose in mm:
-        ``p_world = R(q)^T p + t``.
-
-    Raises
-    ------
-    RangesimError
-        A missing file or a malformed ``bmesh`` line (wrong count, NaN, zero quaternion).
-    """
-    conf = check_file(conf)
-    try:
-        text = conf.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise RangesimError(f"cannot read file ({exc.strerror or exc})", conf) from exc
-    poses: dict[str, np.ndarray] = {}
-    for number, line in enumerate(text.splitlines(), start=1):
-        words = line.split()
-        if not words or words[0] != "bmesh":
-            continue
-        try:
-            values = np.array([float(w) for w in words[2:]], dtype=np.float64)
-        except ValueError:
-            values = np.empty(0)
-        if len(words) != 9 or values.size != 7 or not np.isfinite(values).all():
-            raise RangesimError(f"line {number}: expected 'bmesh FILE tx ty tz qx qy qz qw' (7 finite numbers)", conf)
-        t, q = values[:3], values[3:]
-        if np.linalg.norm(q) < 1e-12:
-            raise RangesimError(f"line {number}: the quaternion is zero", conf)
-        pose = np.eye(4)
-        pose[:3, :3] = Rotation.from_quat(q).inv().as_matrix()
-        pose[:3, 3] = t * METRES_TO_MM
-        poses[words[1]] = pose
-    return poses
-
-
-def conf_pose(conf: str | Path, name: str) -> np.ndarray:
-    """The pose of scan file ``name`` in a Stanford ``.conf`` (see :func:`read_conf`).
-
-    The ``bmesh`` FILE is matched by file name (directories ignored), exactly first, then
-    case-insensitively.
-
-    Raises
-    ------
-    RangesimError
-        If the conf has no line for ``name``.
-    """
-    poses = read_conf(conf)
-    by_name = {Path(key).name: pose for key, pose in poses.items()}
-    if name in by_name:
-        return by_name[name].copy()
-    folded = {key.lower(): pose for key, pose in by_name.items()}
-    if name.lower() in folded:
-        return folded[name.lower()].copy()
-    listed = ", ".join(sorted(by_name)) or "none"
-    raise RangesimError(f"no 'bmesh {name}' line (it has: {listed})", conf)

@@ -20,15 +20,9 @@ import numpy as np
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.io.atomic import atomic_path
-from rangesim.recorded.pointlist import (
-    apply_conf,
-    check_file,
-    grid_scan,
-    parse_numbers,
-    read_bytes,
-    recorded_meta,
-    unit_scale,
-)
+from rangesim.recorded.common import check_file, grid_scan, read_bytes, recorded_meta, unit_scale
+from rangesim.recorded.conf import apply_conf
+from rangesim.recorded.text import parse_numbers
 
 __all__ = ["read_msu", "write_msu"]
 

@@ -1,8 +1,14 @@
-"""Building the Mitsuba 3 scene from NumPy meshes (no temporary files)."""
+"""Building the Mitsuba 3 scene from NumPy meshes (no temporary files).
+
+This module does not import :mod:`rangesim.scene.scene` (which imports it to build and
+cache ``Scene.mitsuba_scene()``): :func:`build_mitsuba_scene` takes anything shaped like
+a :class:`~rangesim.scene.scene.Scene` (see :class:`SceneLike`).
+"""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -10,8 +16,19 @@ from rangesim.core.backend import mitsuba
 from rangesim.core.errors import RangesimError
 from rangesim.scene.materials import bsdf_dict
 
-if TYPE_CHECKING:
-    from rangesim.scene.scene import Scene
+
+class SceneLike(Protocol):
+    """What :func:`build_mitsuba_scene` reads of a Scene.
+
+    ``objects``: each with ``name``, ``material``, ``albedo`` and ``mesh`` (``vertices``
+    (N, 3), ``faces`` (M, 3)); ``source``: the scene file, for error messages.
+    """
+
+    @property
+    def objects(self) -> Sequence[Any]: ...
+
+    @property
+    def source(self) -> str: ...
 
 
 @dataclass
@@ -59,7 +76,7 @@ def numpy_to_mitsuba_mesh(name: str, vertices: np.ndarray, faces: np.ndarray, bs
     return mesh
 
 
-def build_mitsuba_scene(scene: "Scene") -> MitsubaScene:
+def build_mitsuba_scene(scene: SceneLike) -> MitsubaScene:
     """Build the Mitsuba scene of ``scene``'s objects: one ``mi.Mesh`` per object.
 
     Each mesh carries its object's BSDF (see :mod:`rangesim.scene.materials`): the

@@ -20,7 +20,6 @@ from rangesim.scene.materials import check_material
 from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh, validate_mesh
 from rangesim.scene.primitives import make_primitive
 
-
 OBJECT_KEYS = {
     "name", "mesh", "model", "primitive", "params", "translate", "rotate_deg", "scale",
     "albedo", "units", "material", "size", "radius", "height", "sections", "subdivisions",

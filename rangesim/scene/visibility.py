@@ -1,12 +1,89 @@
-"""Which surface points a viewpoint sees: one vectorised Mitsuba ray per point."""
+"""Which surface points a viewpoint sees: one vectorised Mitsuba ray per point.
+
+:func:`visible_from` is the ray test on bare points; :func:`visible_points` applies it to
+samples of :func:`rangesim.cad.surface_points` (pure geometry, in the CAD layer below),
+and :func:`visible_surface_points` samples a mesh and keeps what one range view sees
+(the paper's Fig. 10).
+"""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import trimesh
 
+from rangesim.cad.sampling import SurfacePoints, surface_points
 from rangesim.core.backend import mitsuba
 from rangesim.core.errors import RangesimError
+
+if TYPE_CHECKING:
+    from rangesim.scene.scene import Scene
+
+__all__ = ["visible_from", "visible_points", "visible_surface_points"]
+
+
+def visible_points(
+    samples: SurfacePoints,
+    scene: "Scene | trimesh.Trimesh | list[trimesh.Trimesh]",
+    viewpoint: Any,
+    *,
+    tolerance: float | None = None,
+) -> SurfacePoints:
+    """The samples seen from a viewpoint: facing it and not hidden by the scene.
+
+    Parameters
+    ----------
+    samples : SurfacePoints
+    scene : Scene, trimesh.Trimesh or list of trimesh.Trimesh
+        The occluders, mm, including the sampled mesh itself.
+    viewpoint : (3,) array_like
+        The eye, mm.
+    tolerance : float, optional
+        See :func:`visible_from`.
+
+    Returns
+    -------
+    SurfacePoints
+        The visible subset, in the original order.
+    """
+    mask = visible_from(scene, samples.points, viewpoint, normals=samples.normals, tolerance=tolerance)
+    return samples.subset(mask)
+
+
+def visible_surface_points(
+    mesh: trimesh.Trimesh,
+    resolution: float | str,
+    viewpoint: Any,
+    *,
+    smooth: bool = True,
+    ends: str = "triangle",
+    tolerance: float | None = None,
+) -> SurfacePoints:
+    """Sample a mesh at a resolution and keep the points one viewpoint sees, like one range view.
+
+    :func:`rangesim.cad.surface_points` followed by :func:`visible_points` with the mesh
+    itself as the only occluder (normal facing the eye, not hidden by the mesh).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The surface, mm.
+    resolution : float or str
+        Grid spacing, mm or a length string (``"0.2in"``).
+    viewpoint : (3,) array_like
+        The eye, mm.
+    smooth, ends
+        As for :func:`rangesim.cad.surface_points`.
+    tolerance : float, optional
+        See :func:`visible_from`.
+
+    Returns
+    -------
+    SurfacePoints
+        The visible samples, in sampling order.
+    """
+    samples = surface_points(mesh, resolution, smooth=smooth, ends=ends)
+    return visible_points(samples, mesh, viewpoint, tolerance=tolerance)
 
 
 def visible_from(

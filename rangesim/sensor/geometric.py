@@ -30,12 +30,12 @@ from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.laser import sheet_through
-from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
-from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
 from rangesim.sensor.metadata import scan_meta
+from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
+from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
 from rangesim.sensor.triangulation import triangulate
 
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined

@@ -5,6 +5,8 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.version import __version__
+
 
 def scan_meta(scene, sensor, seed: int, mode: str, **extra: Any) -> dict[str, Any]:
     """``RangeScan.meta`` of a simulated scan.
@@ -25,7 +27,6 @@ def scan_meta(scene, sensor, seed: int, mode: str, **extra: Any) -> dict[str, An
     ``rangesim_version``, ``K`` (3x3 as nested lists), ``laser_origin``, ``scene``,
     ``objects``, ``variant`` (Mitsuba), ``units`` and ``extra``.
     """
-    import rangesim
     from rangesim.core.backend import mitsuba
 
     meta = {
@@ -33,7 +34,7 @@ def scan_meta(scene, sensor, seed: int, mode: str, **extra: Any) -> dict[str, An
         "sensor_source": sensor.source,
         "mode": mode,
         "seed": int(seed),
-        "rangesim_version": rangesim.__version__,
+        "rangesim_version": __version__,
         "K": np.asarray(sensor.K).tolist(),
         "laser_origin": sensor.laser_origin.tolist(),
         "scene": scene.source,

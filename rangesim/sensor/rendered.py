@@ -44,8 +44,8 @@ from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.frames import FWHM_PER_SIGMA, PROFILE_CUTOFF, expose, pixel_speckle_contrast, splat_frames
 from rangesim.sensor.laser import intersect_sheet, sheet_coordinate, sheet_through
-from rangesim.sensor.peaks import find_peaks
 from rangesim.sensor.metadata import scan_meta
+from rangesim.sensor.peaks import find_peaks
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.stripe_paths import trace_stripe_paths

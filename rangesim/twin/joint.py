@@ -9,7 +9,7 @@ maximising an objective summed over the views:
    the valid-mask IoU of the noise-free twins, summed over views (intersections and unions
    added up), by a coarse grid and a 1-degree refinement, with the stripe watched by one
    camera view or by two, one on either side of the sheet
-   (:func:`rangesim.twin.calibrate.search_geometry`).
+   (:func:`rangesim.twin.calibration.search_geometry`).
 2. **Dropout curve** (``noise.min_signal``, ``noise.signal_contrast``): the joint valid-mask
    IoU of twins whose dropouts are drawn with P(valid) from
    :func:`rangesim.sensor.stripe_noise.detection_probability` (fixed seeds), over a grid
@@ -39,7 +39,7 @@ from scipy import optimize
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.stripe_noise import StripeNoise, detection_probability, partial_stripe_fraction
-from rangesim.twin.compare import RANGE_AXIS
+from rangesim.twin.comparison import RANGE_AXIS
 from rangesim.twin.realism import MIN_BIN_CELLS, binned_robust_std, incidence_deg, neighbour_correlation
 from rangesim.twin.stage import Registration, TwinOptics, TwinStage
 
@@ -224,7 +224,7 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
         ``views`` (names) and ``stages``.
     """
     from rangesim.sensor import load_sensor
-    from rangesim.twin.calibrate import search_geometry
+    from rangesim.twin.calibration import search_geometry
 
     if isinstance(recordings, RangeScan) or len(recordings) == 0:
         raise RangesimError("calibrate_views needs a list of one or more recorded scans")

@@ -1,7 +1,7 @@
 """Realism statistics of a range scan against the noise-free surface behind its cells.
 
 One set of measurements serves the comparison of a twin with its recording
-(:func:`rangesim.twin.compare.compare_scans`) and the joint calibration
+(:func:`rangesim.twin.comparison.compare_scans`) and the joint calibration
 (:func:`rangesim.twin.joint.calibrate_views`), so both sides are always measured the same
 way (the pitfalls in ``shared/notes/measuring-realism.md``):
 

@@ -41,9 +41,9 @@ parameter sets at the cost of one ``ray_test`` per angle.
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np

@@ -74,7 +74,7 @@ def save_comparison(recorded: RangeScan, twin: RangeScan, metrics: dict[str, Any
     ax = axes[1, 2]
     truth = twin.xyz_true
     if truth is not None:
-        from rangesim.twin.calibrate import range_residuals
+        from rangesim.twin.calibration import range_residuals
 
         rec_res, twin_res = range_residuals(recorded, truth), range_residuals(twin, truth)
         both = np.concatenate([rec_res, twin_res])

@@ -12,7 +12,6 @@ worker threads and the caller's interactive backend is left alone.
 from __future__ import annotations
 
 import math
-
 from pathlib import Path
 
 import numpy as np

@@ -237,7 +237,7 @@ def plot_snr_definition(path: str | Path, *, dpi: int = 150, seed: int = 3) -> P
     uu = np.linspace(-6, 6, 200)
     ax.plot(uu, 5.0 + np.where(uu < 0, g1 * uu, g2 * uu), color="tab:blue", linewidth=2, label="true surface")
     ax.plot(u, z, "o", color="k", markersize=3.5, label="measured depth")
-    for side, g, colour in ((-1, g1, "tab:orange"), (1, g2, "tab:green")):
+    for side, colour in ((-1, "tab:orange"), (1, "tab:green")):
         sel = (u * side > 0) & (np.abs(u) < k)
         fit = np.polyfit(u[sel], z[sel], 1)
         line = np.linspace(0, side * (k + 0.6), 20)

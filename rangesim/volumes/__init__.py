@@ -2,8 +2,13 @@
 (:func:`volumetric_model`, :func:`boolean_expression`) and generalized-cylinder models of surfaces
 (:func:`generalized_cylinders`), with the concave-crease decomposition they start from."""
 from rangesim.volumes.decompose import capped_submesh, concave_creases, decompose
-from rangesim.volumes.gc import (GeneralizedCylinder, Junction, axis_and_sections, generalized_cylinders,
-                                 least_inertia_axis)
+from rangesim.volumes.gc import (
+                                 GeneralizedCylinder,
+                                 Junction,
+                                 axis_and_sections,
+                                 generalized_cylinders,
+                                 least_inertia_axis,
+)
 from rangesim.volumes.sections import Section, cut_section, sections_intersect
 
 __all__ = [

@@ -8,15 +8,16 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from rangesim.features.common import (
+from rangesim.core.conics import (
     conic_normal_angle,
-    edge_points,
     ellipse_from_conic,
+    fit_circle,
     fit_conic,
     fit_conics_batched,
     sampson_distance,
     sampson_distance_batched,
 )
+from rangesim.features._edge_points import edge_points
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,6 @@ def mesh_circles(mesh: Any, crease_deg: float = 30.0, max_rel_residual: float = 
     from scipy.sparse.csgraph import connected_components
 
     from rangesim.cad.features import Circle3D
-    from rangesim.features.common import fit_circle
 
     angles = np.asarray(mesh.face_adjacency_angles)
     edges = np.asarray(mesh.face_adjacency_edges)[angles > np.deg2rad(crease_deg)]
@@ -120,9 +120,18 @@ def predict_ellipses(scan: Any, circles3d: list, world: bool = True) -> list[tup
 
 
 def _scene_circles(scene: Any) -> list:
-    from rangesim.scene.scene import load_scene
+    """3D circles of a scene's objects (world mm): each object's analytic circles
+    (``features.circles``) where it has them, else circles of its mesh's closed crease loops
+    (:func:`mesh_circles`; not for planes, boxes or meshes of up to 12 faces).
 
-    scene = load_scene(scene)
+    ``scene`` is duck-typed so that this layer does not depend on :mod:`rangesim.scene`: a
+    :class:`~rangesim.scene.Scene` or anything with ``objects``, each with ``features``
+    (or None), ``source`` and ``mesh`` (a trimesh). Scene or mesh files are loaded by the
+    caller (:func:`rangesim.load_scene`).
+    """
+    if not hasattr(scene, "objects"):
+        raise TypeError(f"scene must be a loaded scene (with .objects), not {type(scene).__name__}; "
+                        "load files and meshes with rangesim.load_scene first")
     circles3d = []
     for obj in scene.objects:
         feats = obj.features
@@ -234,9 +243,11 @@ def ellipses(
     :func:`~rangesim.features.circles` and :func:`~rangesim.features.arcs`) are removed,
     except where they lie in a model-predicted ellipse's band (the model has priority).
 
-    With ``scene`` and ``scan`` (pose and intrinsics): the model's 3D circles (analytic
-    features of built-in parts; for other meshes circles fitted to closed crease loops,
-    :func:`mesh_circles`) are projected to predicted image ellipses; each is refined by a
+    With ``scene`` (a loaded :class:`~rangesim.scene.Scene` or any object with its
+    ``objects``, see :func:`_scene_circles`; not a file name, load it with
+    :func:`rangesim.load_scene`) and ``scan`` (pose and intrinsics): the model's 3D circles
+    (analytic features of built-in parts; for other meshes circles fitted to closed crease
+    loops, :func:`mesh_circles`) are projected to predicted image ellipses; each is refined by a
     direct least-squares conic fit (Fitzgibbon) on the remaining edge points within a band
     of ``band_px`` (default ``max(3, 0.15 b)``) px whose edge direction agrees, narrowing the
     band over three passes. Kept when its supporting points cover at least ``min_support``
@@ -264,9 +275,9 @@ def ellipses(
     remove = np.zeros(len(xy), bool)
     if remove_explained:
         if not explained:
-            from rangesim.features.arcs import arcs as find_arcs
-            from rangesim.features.circles import circles as find_circles
-            from rangesim.features.lines import lines as find_lines
+            from rangesim.features._arcs import arcs as find_arcs
+            from rangesim.features._circles import circles as find_circles
+            from rangesim.features._lines import lines as find_lines
 
             explained = (*find_lines(edge_map), *find_circles(edge_map), *find_arcs(edge_map))
         for f in explained:

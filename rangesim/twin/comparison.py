@@ -26,7 +26,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from rangesim.core.rangescan import RangeScan
-from rangesim.twin.calibrate import calibrate, mask_iou, range_residuals
+from rangesim.twin.calibration import calibrate, mask_iou, range_residuals
 from rangesim.twin.realism import dropout_by_bin, incidence_deg, realism_stats, residual_grid, robust_std
 from rangesim.twin.stage import TwinStage, twin
 

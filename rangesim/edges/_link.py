@@ -5,9 +5,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.draw import line as draw_line
-from scipy import ndimage
 from skimage.morphology import thin as thin_mask
 
 from rangesim.core.constants import EdgeLabel

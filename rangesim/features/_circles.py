@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rangesim.features.common import angular_coverage, edge_points, fit_circle
+from rangesim.core.conics import fit_circle
+from rangesim.features._edge_points import angular_coverage, edge_points
 
 
 @dataclass(frozen=True)

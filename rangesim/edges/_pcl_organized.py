@@ -8,11 +8,12 @@ import numpy as np
 from scipy import ndimage
 
 from rangesim.core.constants import EdgeLabel
-from rangesim.edges.common import (
-    AXES, NOISE_FLOOR, NOISE_K_PCL, central_difference, dot3, estimate_depth_noise,
-    find_discontinuities, measured_normals, nearest_axis, noise_threshold, nonmax_suppress,
-    pad_last2, padded_view, pixel_geometry, scan_depth, scan_points,
-)
+from rangesim.edges._differences import central_difference, dot3, measured_normals
+from rangesim.edges._discontinuities import find_discontinuities
+from rangesim.edges._grid import AXES, pad_last2, padded_view
+from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold
+from rangesim.edges._scan_access import pixel_geometry, scan_depth, scan_points
+from rangesim.edges._thinning import nearest_axis, nonmax_suppress
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["pcl_organized", "OrganizedEdgeMap", "EDGE_TYPES"]
@@ -99,7 +100,7 @@ def pcl_organized(
     ``depth_discontinuity * z``: *occluding*; nearer: *occluded*); where some are NaN, the
     first valid pixel along the mean direction of the NaN neighbours, up to ``max_search``
     pixels away, is compared instead, and a pixel with none is a *NaN boundary* (see
-    :func:`~rangesim.edges.common.find_discontinuities` with ``rule="dominant"``; that
+    :func:`~rangesim.edges._discontinuities.find_discontinuities` with ``rule="dominant"``; that
     function documents the small deviations from PCL: every search step moves, the
     threshold scales with the nearer of the two depths, and the depth across a gap is
     compared with the pixel's own surface extrapolated, so holes in tilted planes are not
@@ -111,7 +112,7 @@ def pcl_organized(
     differences never cross a depth jump or a NaN), non-maximum suppression across its
     dominant direction, and hysteresis between ``curvature_threshold`` (8-connected).
     Normals are estimated from the measured points
-    (:func:`~rangesim.edges.common.measured_normals`; PCL uses integral-image normals). A
+    (:func:`~rangesim.edges._differences.measured_normals`; PCL uses integral-image normals). A
     crease bending the normal by beta radians peaks at about 2.9 beta (raw Sobel units), so
     PCL's defaults (0.4, 1.1) start an edge at creases of ~22 degrees and continue it down
     to ~8.
@@ -119,7 +120,7 @@ def pcl_organized(
     Labels: occluding and occluded pixels are both JUMP (which is which is kept in the
     returned map's ``occluding`` / ``occluded`` masks); NaN boundaries 0; high-curvature
     pixels CONVEX or CONCAVE from the sign of ``(P_B - P_A) . (n_A - n_B)`` across the edge
-    (as in :func:`~rangesim.edges.normal.normal`), 0 where that is too weak to tell.
+    (as in :func:`~rangesim.edges.normal`), 0 where that is too weak to tell.
 
     Parameters
     ----------
@@ -135,15 +136,15 @@ def pcl_organized(
         Canny hysteresis (low, high) on the Sobel magnitude of the normal field, raw Sobel
         units as in PCL (``th_hc_canny_low``/``high``, 0.4 and 1.1, the noise-free
         default). Default (None) on noisy scans (depth noise from
-        :func:`~rangesim.edges.common.estimate_depth_noise` above
-        :data:`~rangesim.edges.common.NOISE_FLOOR` footprints): low =
+        :func:`~rangesim.edges._noise.estimate_depth_noise` above
+        :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): low =
         ``max(0.4, k * median)`` of the magnitude over valid pixels, ``k`` =
-        :data:`~rangesim.edges.common.NOISE_K_PCL` = 4, and high = low * 1.1 / 0.4.
+        :data:`~rangesim.edges._noise.NOISE_K_PCL` = 4, and high = low * 1.1 / 0.4.
     edge_types : tuple of str
         Classes that enter ``mask`` (PCL's ``setEdgeType``): any of :data:`EDGE_TYPES`.
     normal_window : int, optional
         Odd stencil size of the normal estimate, pixels (>= 3). Default (None): 3 on
-        noise-free scans, else as :func:`~rangesim.edges.normal.normal`'s window
+        noise-free scans, else as :func:`~rangesim.edges.normal`'s window
         (``2 ceil(12 noise) + 1`` clipped to 3..9).
 
     Returns

@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.features.circles import _dedupe, _support, circle_hypotheses
-from rangesim.features.common import edge_points
+from rangesim.features._circles import _dedupe, _support, circle_hypotheses
+from rangesim.features._edge_points import edge_points
 
 
 @dataclass(frozen=True)

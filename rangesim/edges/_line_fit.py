@@ -8,10 +8,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangesim.core.constants import EdgeLabel
-from rangesim.edges.common import (
-    JUMP_THRESHOLD, NEIGHBOURS, NOISE_FLOOR, discontinuities, estimate_depth_noise,
-    scan_depth, scan_points,
-)
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._grid import NEIGHBOURS
+from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise
+from rangesim.edges._scan_access import scan_depth, scan_points
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["line_fit", "line_fit_points"]
@@ -111,7 +111,7 @@ def line_fit(
     pixels. Pixels whose neighbourhood is one-sided only because of the image, not the
     surface (next to invalid pixels, at the image border, or either side of a depth
     jump) are decided by the jump rule instead
-    (:func:`~rangesim.edges.common.find_discontinuities`, steps deeper than
+    (:func:`~rangesim.edges._discontinuities.find_discontinuities`, steps deeper than
     ``jump_threshold`` pixel footprints, searched across NaN gaps): an edge, labelled JUMP,
     on the near side of a jump, else none, so a hole in a flat face or the image border is
     not an edge. Line-fit edges get label 0
@@ -126,8 +126,8 @@ def line_fit(
     angle_tol_deg : float, optional
         Two neighbours are opposite if the angle between their directions is within this
         many degrees of 180; hence the least crease bend detected. Default (None): 15;
-        for a scan whose depth noise (:func:`~rangesim.edges.common.estimate_depth_noise`,
-        ``noise`` footprints) is above :data:`~rangesim.edges.common.NOISE_FLOOR`,
+        for a scan whose depth noise (:func:`~rangesim.edges._noise.estimate_depth_noise`,
+        ``noise`` footprints) is above :data:`~rangesim.edges._noise.NOISE_FLOOR`,
         ``atan(3 sqrt(2) noise)`` clipped to 15..60 degrees (46 at the White Scanner
         preset's 0.25: creases below that are not found, but noise is not an edge).
     line_sep_deg : float
@@ -135,7 +135,7 @@ def line_fit(
         a square grid are 45 degrees apart).
     jump_threshold : float
         The jump rule for scans, in pixel footprints (default
-        :data:`~rangesim.edges.common.JUMP_THRESHOLD` = 3.73, as the ground truth).
+        :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = 3.73, as the ground truth).
     max_search : int
         Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
     workers : int

@@ -6,11 +6,12 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
-from rangesim.edges.common import (
-    JUMP_CLEARANCE, JUMP_THRESHOLD, NOISE_FLOOR, NOISE_K_GRADIENT, central_difference, discontinuities,
-    estimate_depth_noise, near_mask, nonmax_suppress, noise_threshold, scan_depth, shift,
-    thin_staircases,
-)
+from rangesim.edges._differences import central_difference
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._grid import shift
+from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_GRADIENT, estimate_depth_noise, noise_threshold
+from rangesim.edges._scan_access import scan_depth
+from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["gradient", "OPERATORS"]
@@ -147,7 +148,7 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None) -> list[n
     z : (H, W) float32
         Depth, NaN where invalid.
     pairs : (4, H, W) bool, optional
-        Discontinuity pairs (:class:`~rangesim.edges.common.Discontinuities`).
+        Discontinuity pairs (:class:`~rangesim.edges._discontinuities.Discontinuities`).
 
     Returns
     -------
@@ -263,7 +264,7 @@ def gradient(
     (equivalently, the height towards the camera, -z, has a negative second derivative, as
     the mean curvature H < 0 of :mod:`rangesim.curvature`); concave creases are negative.
 
-    Jump edges: depth discontinuities by :func:`~rangesim.edges.common.find_discontinuities`
+    Jump edges: depth discontinuities by :func:`~rangesim.edges._discontinuities.find_discontinuities`
     (neighbours more than ``jump_threshold`` pixel footprints apart, PCL's rule scaled to
     the footprint, also searched across NaN gaps up to ``max_search`` pixels), labelled
     JUMP on the near (occluding) side. A step is not a roof: stencil parts that cross a
@@ -275,26 +276,26 @@ def gradient(
     scan : RangeScan
         Uses ``depth``, ``valid`` and ``meta["K"]`` for the footprint (without it the
         footprint is estimated from the points, see
-        :func:`~rangesim.edges.common.pixel_geometry`).
+        :func:`~rangesim.edges._scan_access.pixel_geometry`).
     threshold : float, optional
         Least bend of a crease pixel, degrees (estimated as above). Noise-free default 15:
         finds creases of 20 degrees and more (the ground truth's ``crease_deg``) at any
         orientation and sub-pixel position. Default (None) on noisy scans (depth noise
-        from :func:`~rangesim.edges.common.estimate_depth_noise` above
-        :data:`~rangesim.edges.common.NOISE_FLOOR` footprints): ``max(15, k * median)`` of
+        from :func:`~rangesim.edges._noise.estimate_depth_noise` above
+        :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): ``max(15, k * median)`` of
         ``2 atan(response)`` over valid pixels (the noise's bend, as if the neighbour
-        across responded as much), ``k`` = :data:`~rangesim.edges.common.NOISE_K_GRADIENT`
+        across responded as much), ``k`` = :data:`~rangesim.edges._noise.NOISE_K_GRADIENT`
         = 3 (~4 sigma of the bend estimate; 20 degrees at the preset noise).
     jump_threshold : float
         Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
-        :data:`~rangesim.edges.common.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
+        :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
         truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     nms : bool
         Thin creases by non-maximum suppression across the edge direction (1 px wide),
         then drop the inner corners of the staircases it leaves on diagonal edges
-        (:func:`~rangesim.edges.common.thin_staircases`: 8-connected, 1 px diagonals).
+        (:func:`~rangesim.edges._thinning.thin_staircases`: 8-connected, 1 px diagonals).
         Either way no crease is kept within :data:`JUMP_CLEARANCE` (2) px of a jump
         (occluding or occluded side): the crest beside a jump is the jump itself.
     sigma : float, optional

@@ -7,9 +7,9 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
-from rangesim.edges.common import (
-    JUMP_THRESHOLD, discontinuities, pad_last2, padded_view, scan_depth,
-)
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._grid import pad_last2, padded_view
+from rangesim.edges._scan_access import scan_depth
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["curvature"]
@@ -38,7 +38,7 @@ def curvature(
 
     Type from the mean curvature, in :mod:`rangesim.curvature`'s convention (normal towards
     the camera, positive where the surface bends towards it): H < 0 convex, H > 0 concave.
-    Jumps: :func:`~rangesim.edges.common.find_discontinuities` (steps deeper than
+    Jumps: :func:`~rangesim.edges._discontinuities.find_discontinuities` (steps deeper than
     ``jump_threshold`` pixel footprints, searched across NaN gaps), JUMP on the near side;
     curvature points whose fit window contains a discontinuity are dropped (a fit across a
     step is not a surface).
@@ -47,7 +47,7 @@ def curvature(
     ----------
     scan : RangeScan
         Uses ``xyz``, ``depth``, ``valid`` (mm, camera frame) and ``meta["K"]`` for the
-        footprint (without it, see :func:`~rangesim.edges.common.pixel_geometry`).
+        footprint (without it, see :func:`~rangesim.edges._scan_access.pixel_geometry`).
     threshold : float, optional
         Curvature threshold, 1/mm. Default (None): range-adaptive, ``0.5 / (window // 2 *
         footprint)`` per pixel (``footprint = z / f`` mm per pixel): a fit over a block of
@@ -58,7 +58,7 @@ def curvature(
     jump_threshold : float
         Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
-        :data:`~rangesim.edges.common.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
+        :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
         truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     max_search : int

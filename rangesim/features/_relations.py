@@ -4,11 +4,13 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
+import secrets
 from pathlib import Path
 
 import numpy as np
 
-from rangesim.features.lines import segment_pairs
+from rangesim.features._lines import segment_pairs
 
 FIELDS = ("relation", "a", "b", "value", "unit")
 
@@ -75,19 +77,32 @@ def relations_to_csv(rows: list[dict], path: str | Path | None = None) -> str:
     w.writerows(rows)
     text = buf.getvalue()
     if path is not None:
-        from rangesim.io.atomic import atomic_path
-
-        with atomic_path(Path(path)) as tmp:
-            Path(tmp).write_text(text)
+        _write_text(path, text)
     return text
 
 
 def relations_to_json(rows: list[dict], path: str | Path | None = None) -> str:
-    """The table as JSON text (a list of objects), written to ``path`` when given."""
+    """The table as JSON text (a list of objects), written to ``path`` when given, atomically."""
     text = json.dumps(rows, indent=1)
     if path is not None:
-        from rangesim.io.atomic import atomic_path
-
-        with atomic_path(Path(path)) as tmp:
-            Path(tmp).write_text(text)
+        _write_text(path, text)
     return text
+
+
+def _write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: to a fresh hidden name beside it, then
+    ``os.replace`` onto it (the temporary file is removed on failure); parent directories
+    are created. Plain Python, so that this analysis layer does not depend on
+    :mod:`rangesim.io` (same scheme as :func:`rangesim.io.atomic.atomic_path`)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        tmp = path.with_name(f".{path.stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
+        if not tmp.exists():
+            break
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

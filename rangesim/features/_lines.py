@@ -8,7 +8,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.transform import hough_line, hough_line_peaks
 
-from rangesim.features.common import edge_points
+from rangesim.features._edge_points import edge_points
 
 
 @dataclass(frozen=True)

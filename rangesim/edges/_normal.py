@@ -6,11 +6,12 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
-from rangesim.edges.common import (
-    AXES, JUMP_CLEARANCE, JUMP_THRESHOLD, NOISE_FLOOR, NOISE_K_NORMAL, discontinuities, dot3,
-    estimate_depth_noise, measured_normals, near_mask, noise_threshold, nonmax_suppress, pad_last2,
-    padded_view, scan_depth, scan_points, thin_staircases,
-)
+from rangesim.edges._differences import dot3, measured_normals
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._grid import AXES, pad_last2, padded_view
+from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_NORMAL, estimate_depth_noise, noise_threshold
+from rangesim.edges._scan_access import scan_depth, scan_points
+from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["normal"]
@@ -40,7 +41,7 @@ def normal(
     Technique 3 of the founding paper: points of a plane share one normal, so a large
     change of the unit normal among the 8 neighbours of a point marks an edge. Normals
     are estimated from the MEASURED points (``scan.xyz``; ``scan.normal`` is the
-    simulator's truth and is not used) by :func:`~rangesim.edges.common.measured_normals`:
+    simulator's truth and is not used) by :func:`~rangesim.edges._differences.measured_normals`:
     cross products of edge-preserving (WENO-weighted one-sided / central) differences over
     ``window // 2`` pixels, NaN-aware and never across a depth jump, so each pixel next to a
     crease keeps the normal of its own face. The 8 neighbours form 4 opposite pairs
@@ -53,7 +54,7 @@ def normal(
     Convex vs concave: for the compared pair A = p - d, B = p + d, the sign of
     ``(P_B - P_A) . (n_A - n_B)`` (normals facing the camera): negative where the faces turn
     away from the camera on both sides (a roof, convex), positive in a valley (concave).
-    Jumps: :func:`~rangesim.edges.common.find_discontinuities` (steps deeper than
+    Jumps: :func:`~rangesim.edges._discontinuities.find_discontinuities` (steps deeper than
     ``jump_threshold`` pixel footprints, searched across NaN gaps), JUMP on the near side;
     pairs that straddle a jump are skipped (as are those across NaN gaps, which may hide
     one), so jumps do not also show up as creases.
@@ -67,9 +68,9 @@ def normal(
         ground truth's crease angle). Noise: the angle noise of a normal is about
         ``sigma_z / (window // 2 * footprint)`` radians, so noisy scans need a larger window.
         Default (None) on noisy scans (depth noise from
-        :func:`~rangesim.edges.common.estimate_depth_noise` above
-        :data:`~rangesim.edges.common.NOISE_FLOOR` footprints): ``max(20, k * median)`` of
-        the strength over valid pixels, ``k`` = :data:`~rangesim.edges.common.NOISE_K_NORMAL`
+        :func:`~rangesim.edges._noise.estimate_depth_noise` above
+        :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): ``max(20, k * median)`` of
+        the strength over valid pixels, ``k`` = :data:`~rangesim.edges._noise.NOISE_K_NORMAL`
         = 4.5 (~37 degrees at the White Scanner preset's noise with window 7).
     window : int, optional
         Odd stencil size of the normal estimate, pixels (>= 3): differences over
@@ -79,7 +80,7 @@ def normal(
     jump_threshold : float
         Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
-        :data:`~rangesim.edges.common.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
+        :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
         truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     nms : bool

@@ -1,0 +1,151 @@
+"""Scan access for the edge detectors: a scan's points, depth and validity as arrays (NaN
+wherever a pixel is unusable), its focal length and the pixel footprint.
+
+Analysis layer: pure NumPy over arrays. Conventions used by every detector (image axes:
+:mod:`rangesim.edges._grid`):
+
+* depth ``z`` is the camera-frame z of the measured point, mm, NaN where invalid; the camera
+  looks along +z, so "near" means smaller z (recorded grids without a camera model: the
+  scanner's z, see :func:`pixel_geometry`);
+* thresholds are relative: in pixel footprints (the lateral size of a pixel on the surface,
+  ``z / f`` mm, :func:`footprint`) or angles, so they hold at every range.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "PixelGeometry", "scan_arrays", "scan_depth", "scan_points", "focal_length_px",
+    "pixel_geometry", "footprint",
+]
+
+
+def scan_arrays(scan: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measured points, depth and validity of a scan, NaN wherever a pixel is unusable.
+
+    Parameters
+    ----------
+    scan : RangeScan
+        ``scan.xyz`` (mm, camera frame), ``scan.depth`` and ``scan.valid`` are used.
+
+    Returns
+    -------
+    xyz : (H, W, 3) float32
+        Points, NaN at invalid pixels.
+    z : (H, W) float32
+        Depth (mm), NaN at invalid pixels.
+    valid : (H, W) bool
+        ``scan.valid`` and a finite depth.
+    """
+    z, valid = scan_depth(scan)
+    return scan_points(scan, valid), z, valid
+
+
+def scan_depth(scan: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (H, W) float32 with NaN at unusable pixels, and validity; see :func:`scan_arrays`."""
+    z = np.asarray(scan.depth, dtype=np.float32)
+    valid = np.asarray(scan.valid, dtype=bool) & np.isfinite(z)
+    return np.where(valid, z, np.float32(np.nan)), valid
+
+
+def scan_points(scan: Any, valid: np.ndarray, component_major: bool = False) -> np.ndarray:
+    """Points with NaN where ``valid`` is False; see :func:`scan_arrays`.
+
+    (H, W, 3) float32, or (3, H, W) contiguous with ``component_major``.
+    """
+    xyz = np.asarray(scan.xyz, dtype=np.float32)
+    if component_major:
+        xyz = np.ascontiguousarray(xyz.transpose(2, 0, 1))
+        xyz[:, ~valid] = np.nan
+        return xyz
+    xyz = xyz.copy()
+    np.copyto(xyz, np.nan, where=~valid[..., None])
+    return xyz
+
+
+def focal_length_px(scan: Any) -> float | None:
+    """Focal length in pixels, sqrt(fx fy) of ``scan.meta["K"]``; None without intrinsics."""
+    meta = getattr(scan, "meta", None) or {}
+    K = meta.get("K")
+    if K is None:
+        return None
+    K = np.asarray(K, dtype=np.float64)
+    f = float(np.sqrt(abs(K[0, 0] * K[1, 1])))
+    return f if np.isfinite(f) and f > 0 else None
+
+
+@dataclass
+class PixelGeometry:
+    """How big a pixel is on the surface; see :func:`pixel_geometry`.
+
+    Attributes
+    ----------
+    footprint : (H, W) float32
+        Lateral size of one pixel on the surface, mm (NaN where the depth is NaN).
+    perspective : bool
+        True for a pinhole camera at the origin (footprint ``z / f``, inverse depth linear
+        on planes); False for grids of constant spacing (translating-sweep scanners).
+    focal_length : float or None
+        f in pixels when perspective.
+    """
+
+    footprint: np.ndarray
+    perspective: bool
+    focal_length: float | None
+
+
+def _spread(v: np.ndarray) -> float:
+    """Relative spread (interquartile range over median) of positive samples."""
+    q1, q2, q3 = np.percentile(v, [25, 50, 75])
+    return float((q3 - q1) / q2) if q2 > 0 else np.inf
+
+
+def pixel_geometry(scan: Any, z: np.ndarray | None = None) -> PixelGeometry:
+    """Pixel footprint of a scan: ``z / f`` from ``meta["K"]``, or estimated from the points.
+
+    Synthetic scans carry ``K``. Recorded ones may not: then the lateral spacing ``d`` of
+    horizontal and vertical neighbours (``|(dx, dy)|``) decides between a pinhole camera
+    (``d / z`` nearly constant: f = 1 / median(d / z); Kinect-class PCD files) and a grid of
+    constant spacing (``d`` nearly constant, or depths not all positive: footprint =
+    median(d); the Cyberware's translating sweep), whichever has the smaller relative spread.
+
+    Parameters
+    ----------
+    scan : RangeScan
+    z : (H, W) float array, optional
+        Depth with NaN where invalid (default: from the scan).
+
+    Returns
+    -------
+    PixelGeometry
+    """
+    if z is None:
+        z, _ = scan_depth(scan)
+    f = focal_length_px(scan)
+    if f is not None:
+        return PixelGeometry((z / np.float32(f)).astype(np.float32), True, f)
+    xyz, _, _ = scan_arrays(scan)
+    xyz = xyz.astype(np.float64)
+    d_all, z_all = [], []
+    for a, b in ((xyz[:, 1:], xyz[:, :-1]), (xyz[1:], xyz[:-1])):
+        d = np.hypot(a[..., 0] - b[..., 0], a[..., 1] - b[..., 1])
+        zz = np.fmin(a[..., 2], b[..., 2])
+        ok = np.isfinite(d) & np.isfinite(zz) & (d > 0)
+        d_all.append(d[ok])
+        z_all.append(zz[ok])
+    d, zz = np.concatenate(d_all), np.concatenate(z_all)
+    if d.size == 0:
+        return PixelGeometry(np.where(np.isfinite(z), 1.0, np.nan).astype(np.float32), False, None)
+    if np.all(zz > 0) and _spread(d / zz) < _spread(d):
+        f = 1.0 / float(np.median(d / zz))
+        return PixelGeometry((z / np.float32(f)).astype(np.float32), True, f)
+    fp = np.float32(np.median(d))
+    return PixelGeometry(np.where(np.isfinite(z), fp, np.nan).astype(np.float32), False, None)
+
+
+def footprint(scan: Any, z: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) float32 lateral size of a pixel on the surface, mm (see :func:`pixel_geometry`)."""
+    return pixel_geometry(scan, z).footprint

@@ -1,0 +1,157 @@
+"""Thinning edge candidates: non-maximum suppression across the edge (Canny's thinning),
+1-px 8-connected lines from staircases, and keeping creases clear of jumps.
+
+Analysis layer: pure NumPy over arrays (image axes and directions:
+:mod:`rangesim.edges._grid`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["nearest_axis", "nonmax_suppress", "thin_staircases", "JUMP_CLEARANCE", "near_mask"]
+
+
+def nearest_axis(direction: np.ndarray) -> np.ndarray:
+    """Index (0..3) of the ``AXES`` nearest to each direction (radians, any range); int8."""
+    d = np.where(np.isnan(direction), np.float32(0), direction)
+    return np.rint(d * np.float32(4 / np.pi)).astype(np.int8) & 3
+
+
+def nonmax_suppress(
+    strength: np.ndarray,
+    direction: np.ndarray,
+    candidates: np.ndarray | None = None,
+    return_sides: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Keep pixels that are maxima of ``strength`` across the edge (Canny's thinning).
+
+    The strength one pixel away on either side along ``direction`` is interpolated
+    linearly between the two neighbours that bracket it (an axis and a diagonal
+    neighbour), so lines at any angle come out thin. A pixel survives if its strength is
+    strictly above the minus side and at least the plus side: of a two-pixel plateau (an
+    edge running between pixel centres) exactly one is kept. NaN strength never survives
+    and counts as nothing beside a pixel.
+
+    Parameters
+    ----------
+    strength : (H, W) float array
+    direction : (H, W) float array
+        Angle of the (x, y) vector across the edge, radians (any range; NaN: 0).
+    candidates : (H, W) bool, optional
+        Only these pixels are tested (e.g. those above a threshold; much faster when they
+        are few); default all pixels with a finite strength.
+    return_sides : bool
+        Also return the larger of the two interpolated side strengths.
+
+    Returns
+    -------
+    keep : (H, W) bool
+    sides : (H, W) float32, only with ``return_sides``
+        At the tested pixels the larger interpolated strength beside them (NaN where there
+        is none), NaN elsewhere.
+    """
+    h, w = strength.shape
+    if candidates is None:
+        candidates = ~np.isnan(strength)
+    ii, jj = np.nonzero(candidates & ~np.isnan(strength))
+    keep = np.zeros((h, w), bool)
+    sides = np.full((h, w), np.nan, np.float32) if return_sides else None
+    if ii.size == 0:
+        return (keep, sides) if return_sides else keep
+    low = np.float32(-1e30)                      # not -inf: 0 * -inf would be NaN
+    sp = np.pad(np.where(np.isnan(strength), low, strength).astype(np.float32), 1,
+                constant_values=low).ravel()
+    stride = w + 2
+    base = (ii + 1) * stride + (jj + 1)
+    d = direction[ii, jj]
+    theta = np.mod(np.where(np.isnan(d), 0, d), np.pi)
+    c, sn = np.abs(np.cos(theta)), np.sin(theta)          # sin >= 0 on [0, pi)
+    xmajor = c >= sn
+    wgt = np.minimum(c, sn) / np.maximum(c, sn)           # tan of the angle off the axis
+    dx = np.where(theta > np.pi / 2, -1, 1)               # x component's sign
+    # plus side: the axis neighbour (x or y) and the diagonal one bracketing the direction;
+    # minus side: their mirror images
+    prim = np.where(xmajor, dx, stride)
+    diag = stride + dx
+    s0 = sp[base]
+    plus = sp[base + prim] * (1 - wgt) + sp[base + diag] * wgt
+    minus = sp[base - prim] * (1 - wgt) + sp[base - diag] * wgt
+    keep[ii, jj] = (s0 > minus) & (s0 >= plus)
+    if not return_sides:
+        return keep
+    side = np.maximum(plus, minus)
+    sides[ii, jj] = np.where(side > low / 2, side, np.nan)
+    return keep, sides
+
+
+
+def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np.ndarray:
+    """Drop the inner corners of 2-px staircases, keeping 8-connectivity (1 px diagonals).
+
+    Non-maximum suppression leaves diagonal edges as 4-connected staircases (a corner
+    pixel at every step), which an 8-connected 1-px truth does not match one-to-one. A
+    pixel is dropped when two of its 4-neighbours at a right angle (e.g. north and east)
+    are set, the diagonal pixel between them is not (an L, not a 2x2 block), and the
+    opposite 4-neighbours and diagonal are clear: the two stay 8-connected without it
+    and nothing else depends on it. Pixels are removed in two passes by checkerboard
+    parity, so two 4-adjacent pixels are never dropped together (a step's two corners).
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+        Edge pixels (all of them count as neighbours).
+    droppable : (H, W) bool, optional
+        Only these may be dropped (default: all of ``mask``).
+
+    Returns
+    -------
+    (H, W) bool
+        The thinned mask (a new array).
+    """
+    h, w = mask.shape
+    stride = w + 2
+    p = np.pad(mask, 1).ravel()
+    cand = mask if droppable is None else (mask & droppable)
+    ii, jj = np.nonzero(cand)
+    if ii.size == 0:
+        return mask.copy()
+    base = (ii + 1) * stride + (jj + 1)
+    n, s, e, wst = -stride, stride, 1, -1
+    # (a, b, their diagonal, opposite a, opposite b, opposite diagonal)
+    corners = ((n, e, n + e, s, wst, s + wst), (e, s, s + e, wst, n, n + wst),
+               (s, wst, s + wst, n, e, n + e), (wst, n, n + wst, e, s, s + e))
+    parity = ((ii + jj) & 1).astype(bool)
+    for ph in (False, True):
+        b = base[parity == ph]
+        drop = np.zeros(b.size, bool)
+        for a_, b_, d_, oa, ob, od in corners:
+            drop |= p[b + a_] & p[b + b_] & ~p[b + d_] & ~p[b + oa] & ~p[b + ob] & ~p[b + od]
+        p[b[drop]] = False
+    return p.reshape(h + 2, w + 2)[1:-1, 1:-1].copy()
+
+
+#: no crease is kept within this many pixels of a jump: the crest beside an occluding edge
+#: (and the surface just beyond it) is the jump itself, not a roof
+JUMP_CLEARANCE = 2
+
+
+def near_mask(where: np.ndarray, ref: np.ndarray, r: int) -> np.ndarray:
+    """True at pixels of ``where`` within chessboard distance ``r`` of a ``ref`` pixel.
+
+    Sparse: only the pixels of ``where`` look at their (2r+1)^2 window (cheap when
+    ``where`` is thin, e.g. edge candidates); False elsewhere.
+    """
+    h, w = where.shape
+    out = np.zeros((h, w), bool)
+    ii, jj = np.nonzero(where)
+    if ii.size == 0 or r <= 0:
+        return out
+    stride = w + 2 * r
+    rp = np.pad(ref, r).ravel()
+    base = (ii + r) * stride + (jj + r)
+    hit = np.zeros(ii.size, bool)
+    for dr in range(-r, r + 1):
+        for dc in range(-r, r + 1):
+            hit |= rp[base + dr * stride + dc]
+    out[ii[hit], jj[hit]] = True
+    return out
