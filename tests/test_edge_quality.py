@@ -40,7 +40,7 @@ import pytest
 import rangesim as rs
 from rangesim.edges import DETECTORS, estimate_depth_noise
 from rangesim.edges._noise import NOISE_FLOOR
-from rangesim.evaluate.edge_scores import edge_scores
+from rangesim.evaluate._edge_scores import edge_scores
 from rangesim.evaluate.runs import scan_truth
 
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "green_piece.toml"

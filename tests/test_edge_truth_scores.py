@@ -410,7 +410,7 @@ def test_exact_matching_is_maximum_on_dense_random_blobs():
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import maximum_bipartite_matching
 
-    from rangesim.evaluate.edge_scores import _exact_match
+    from rangesim.evaluate._edge_scores import _exact_match
 
     rng = np.random.default_rng(4)
     for _ in range(5):

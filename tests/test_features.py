@@ -14,7 +14,7 @@ import rangesim.edges  # noqa: F401
 import rangesim.evaluate  # noqa: F401
 import rangesim.features as F
 from rangesim.core.geometry import look_at
-from rangesim.evaluate.feature_scores import feature_scores
+from rangesim.evaluate._feature_scores import feature_scores
 
 QUIET = {"noise.sigma_px": 0, "noise.speckle_contrast": 0, "noise.quantization_px": 0}
 HOLES = ("hole_1_rim_top", "hole_2_rim_top", "hole_3_rim_top", "hole_4_rim_top")

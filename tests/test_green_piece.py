@@ -10,7 +10,7 @@ import pytest
 
 import rangesim as rs
 from rangesim.cad import green_piece
-from rangesim.cad.green_piece import DEFAULTS, THREAD_DEPTH_PER_PITCH
+from rangesim.cad._green_piece import DEFAULTS, THREAD_DEPTH_PER_PITCH
 from rangesim.core.constants import Status
 from tests.conftest import make_sensor, top_down_pose
 

@@ -10,7 +10,7 @@ import trimesh
 
 import rangesim as rs
 from rangesim.cad import BSplineSurface, renault_piece
-from rangesim.cad.renault_piece import DEFAULTS, _head_surface, _neck_surface
+from rangesim.cad._renault_piece import DEFAULTS, _head_surface, _neck_surface
 from rangesim.core.constants import Status
 from tests.conftest import make_sensor, top_down_pose
 

@@ -4,13 +4,13 @@ Knows parts, not sensors or scenes: pure geometry over NumPy, SciPy and trimesh 
 files are read here, :mod:`rangesim.cad.meshes`). What a viewpoint sees of sampled points
 is ray casting, in the scene layer: :func:`rangesim.scene.visibility.visible_points`.
 """
+from rangesim.cad._green_piece import green_piece
+from rangesim.cad._renault_piece import renault_piece
 from rangesim.cad.bspline import BSplineSurface, ParametricSurface, surface_curvatures, tessellate_surface
 from rangesim.cad.coons import CoonsPatch, coons_patch
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Curve3D, Segment3D
-from rangesim.cad.green_piece import green_piece
 from rangesim.cad.models import MODELS, load_model, model_names
 from rangesim.cad.part import BuiltPart, PartNode
-from rangesim.cad.renault_piece import renault_piece
 from rangesim.cad.sampling import SurfacePoints, surface_points
 
 __all__ = [

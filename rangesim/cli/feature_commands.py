@@ -56,7 +56,7 @@ def cmd_features(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     report = {"scan": str(args.scan), "edges": args.edges, "scene": scene, **_plain(feats)}
     if scene is not None and scan.xyz_true is not None:
-        from rangesim.evaluate.feature_scores import feature_scores
+        from rangesim.evaluate._feature_scores import feature_scores
         from rangesim.evaluate.ground_truth import ground_truth_features
 
         truth = ground_truth_features(scan, model if model is not None else scene)

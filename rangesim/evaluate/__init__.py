@@ -1,6 +1,6 @@
 """Ground truth and scores: exact edge labels of synthetic scans, and how well a detector finds them."""
-from rangesim.evaluate.edge_scores import edge_scores
-from rangesim.evaluate.feature_scores import feature_scores
+from rangesim.evaluate._edge_scores import edge_scores
+from rangesim.evaluate._feature_scores import feature_scores
 from rangesim.evaluate.ground_truth import (
     ImageEllipse,
     ImageSegment,

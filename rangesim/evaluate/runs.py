@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
-from rangesim.evaluate.edge_scores import edge_scores
+from rangesim.evaluate._edge_scores import edge_scores
 from rangesim.evaluate.ground_truth import ground_truth_edges
 from rangesim.evaluate.regions import region_boundaries
 

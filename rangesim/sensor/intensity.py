@@ -56,9 +56,9 @@ def intensity_image(scene, sensor, pose: np.ndarray | None = None, spp: int = 16
     light: 1 for an unoccluded white Lambertian surface.
     """
     from rangesim.scene import load_scene
+    from rangesim.sensor._scan import default_pose
     from rangesim.sensor.config import load_sensor
     from rangesim.sensor.rendered import check_backend
-    from rangesim.sensor.scan import default_pose
 
     if isinstance(spp, bool) or int(spp) < 1 or int(max_depth) < 2:
         raise RangesimError(f"intensity_image needs spp >= 1 and max_depth >= 2, got {spp}, {max_depth}")

@@ -1,7 +1,7 @@
 """Volumes and sweeps (section 6 of the paper): the CSG-like volumetric model of a part tree
 (:func:`volumetric_model`, :func:`boolean_expression`) and generalized-cylinder models of surfaces
 (:func:`generalized_cylinders`), with the concave-crease decomposition they start from."""
-from rangesim.volumes.decompose import capped_submesh, concave_creases, decompose
+from rangesim.volumes._decompose import capped_submesh, concave_creases, decompose
 from rangesim.volumes.gc import (
                                  GeneralizedCylinder,
                                  Junction,

@@ -16,7 +16,7 @@ O(m log n) in all.
 Sub-parts as closed solids: from a part tree (a :class:`~rangesim.cad.part.BuiltPart`), each
 material leaf's own design solid (closed, exact); from face labels or the crease
 decomposition, the labelled faces of the surface closed by fanning each open boundary loop to
-its centroid (:func:`~rangesim.volumes.decompose.capped_submesh`).
+its centroid (:func:`~rangesim.volumes._decompose.capped_submesh`).
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from rangesim.volumes.decompose import capped_submesh, decompose, merge_small_regions, region_adjacency
+from rangesim.volumes._decompose import capped_submesh, decompose, merge_small_regions, region_adjacency
 from rangesim.volumes.sections import Section, cut_section, sections_intersect
 
 
