@@ -84,4 +84,10 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
         from rangesim.sensor.rendered import scan_rendered
 
         return scan_rendered(scene, sensor, pose, int(seed), keep_frames=keep_frames)
+    if sensor.mode == "structured_light":
+        from rangesim.sensor.structured_light import scan_structured_light
+
+        if keep_frames:
+            raise RangesimError("only the rendered mode has frames (set mode = \"rendered\")", source=sensor.source)
+        return scan_structured_light(scene, sensor, pose, int(seed))
     raise RangesimError(f"sensor mode {sensor.mode!r} is not available", source=sensor.source)

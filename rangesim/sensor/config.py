@@ -21,7 +21,7 @@ from rangesim.core.tomlfile import check_keys, read_toml
 PRESET_DIR = Path(__file__).resolve().parents[2] / "sensors"
 
 SWEEPS = ("rotating", "translating")
-MODES = ("geometric", "rendered")
+MODES = ("geometric", "rendered", "structured_light")
 #: sub-frame estimators of the rendered mode's spacetime peak
 PEAK_FITS = ("gaussian", "parabolic")
 
@@ -72,6 +72,20 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "exposure_e": 4000.0,  # electrons at the stripe peak on the white reference target
         "image_noise": True,  # shot, read and speckle noise on the frames
         "peak": "gaussian",  # sub-frame peak estimator: gaussian or parabolic
+    },
+    # structured-light mode only (mode = "structured_light"): see rangesim.sensor.structured_light.
+    # The projector sits at laser.baseline on the camera's +x axis and shares the camera's intrinsics.
+    "structured_light": {
+        "pattern_seed": 0,  # the projected pseudo-random dot pattern (fixed per device)
+        "dot_density": 0.1,  # dots per projector pixel
+        "dot_sigma_px": 0.6,  # Gaussian std of one dot, projector pixels
+        "exposure_e": 2000.0,  # electrons at a dot's peak on a white facing target at mid-range
+        "ambient": 0.02,  # ambient IR irradiance, relative to a dot's peak at mid-range
+        "window": 9,  # block-matching window (odd), pixels
+        "subpixel_steps": 8,  # disparity quantised to 1 / steps pixel
+        "min_score": 0.5,  # lowest accepted zero-mean normalised cross-correlation
+        "uniqueness": 0.1,  # (1 - second best) must exceed (1 + uniqueness) (1 - best)
+        "lr_check": True,  # left-right consistency (within 1 px)
     },
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
@@ -264,6 +278,26 @@ def _validate(params: dict[str, dict[str, Any]], source) -> None:
     _number(params, "camera", "full_well_e", source, positive=True)
     _number(params, "camera", "read_noise_e", source, nonneg=True)
     _validate_render(params, source)
+    _validate_structured_light(params, source)
+
+
+def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> None:
+    sl = params["structured_light"]
+    _number(params, "structured_light", "pattern_seed", source, nonneg=True, integer=True)
+    for key in ("dot_density", "dot_sigma_px", "exposure_e"):
+        _number(params, "structured_light", key, source, positive=True)
+    if sl["dot_density"] > 1:
+        raise RangesimError(f"structured_light.dot_density must be at most 1 dot per pixel, got {sl['dot_density']}",
+                            source=source)
+    _number(params, "structured_light", "ambient", source, nonneg=True)
+    _number(params, "structured_light", "window", source, positive=True, integer=True)
+    if sl["window"] < 3 or sl["window"] % 2 == 0:
+        raise RangesimError(f"structured_light.window must be an odd integer >= 3, got {sl['window']}", source=source)
+    _number(params, "structured_light", "subpixel_steps", source, positive=True, integer=True)
+    _number(params, "structured_light", "min_score", source, upper=1)
+    _number(params, "structured_light", "uniqueness", source, nonneg=True)
+    if not isinstance(sl["lr_check"], bool):
+        raise RangesimError(f"structured_light.lr_check must be true or false, got {sl['lr_check']!r}", source=source)
 
 
 def _validate_render(params: dict[str, dict[str, Any]], source) -> None:

@@ -1,0 +1,118 @@
+"""The projected pseudo-random dot pattern of a structured-light sensor (PrimeSense type).
+
+The projector casts a fixed pattern of laser dots, fixed per device (``pattern_seed``): dot
+centres drawn uniformly over the projector image, ``dot_density`` dots per projector pixel,
+each a Gaussian spot of std ``dot_sigma_px`` and peak 1. The pattern is rendered on a grid
+``OVERSAMPLE`` times finer than the projector's pixels, so sampling it at the sub-pixel
+positions where scene points project is a smooth bilinear look-up.
+
+Coordinates: projector image coordinates (x, y) in pixels, the pixel (i, j) covering
+[j, j + 1) x [i, i + 1) (the camera's convention, :attr:`rangesim.sensor.Sensor.K`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["DotPattern", "OVERSAMPLE"]
+
+#: pattern samples per projector pixel along each axis
+OVERSAMPLE = 4
+
+
+@dataclass(frozen=True)
+class DotPattern:
+    """A rendered dot pattern.
+
+    Attributes
+    ----------
+    grid : (H * OVERSAMPLE + margin, W * OVERSAMPLE + margin) float32
+        Irradiance of the pattern (1 at a dot's centre), on the fine grid.
+    width, height : int
+        Projector image size, pixels.
+    dots : (N, 2) float64
+        Dot centres (x, y), projector pixels.
+    """
+
+    grid: np.ndarray
+    width: int
+    height: int
+    dots: np.ndarray
+    x_min: float = 0.0
+
+    @classmethod
+    def generate(cls, width: int, height: int, density: float, dot_sigma_px: float, seed: int,
+                 x_min: float = 0.0) -> "DotPattern":
+        """Draw and render the pattern over x in [x_min, x_min + width), y in [0, height).
+
+        Deterministic per ``seed`` (and cached: a device's pattern is fixed).
+
+        Examples
+        --------
+        >>> p = DotPattern.generate(64, 48, 0.1, 0.6, seed=0)
+        >>> p.dots.shape[0] == round(0.1 * 64 * 48), float(p.grid.max()) > 0.9
+        (True, True)
+        """
+        return _generate(int(width), int(height), float(density), float(dot_sigma_px), int(seed), float(x_min))
+
+    @classmethod
+    def _render(cls, width: int, height: int, density: float, dot_sigma_px: float, seed: int,
+                x_min: float) -> "DotPattern":
+        rng = np.random.default_rng([int(seed), 0xD07])
+        n = int(round(density * width * height))
+        dots = rng.random((n, 2)) * [width, height]
+        s = OVERSAMPLE
+        grid = np.zeros((height * s, width * s), np.float32)
+        # splat each dot bilinearly on the fine grid, then blur to the dot's Gaussian profile
+        fx, fy = dots[:, 0] * s - 0.5, dots[:, 1] * s - 0.5
+        x0, y0 = np.floor(fx).astype(int), np.floor(fy).astype(int)
+        ax, ay = fx - x0, fy - y0
+        for dx, dy, w in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)), (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+            xi, yi = x0 + dx, y0 + dy
+            ok = (xi >= 0) & (xi < grid.shape[1]) & (yi >= 0) & (yi < grid.shape[0])
+            np.add.at(grid, (yi[ok], xi[ok]), w[ok])
+        sigma = dot_sigma_px * s
+        grid = ndimage.gaussian_filter(grid, sigma, mode="constant", truncate=4.0)
+        grid *= np.float32(2 * math.pi * sigma * sigma)  # a lone dot peaks at 1
+        grid.setflags(write=False)
+        return cls(grid=grid, width=int(width), height=int(height), dots=dots + [x_min, 0.0], x_min=float(x_min))
+
+    def sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Pattern irradiance at projector coordinates (x, y) (pixels); 0 outside the image.
+
+        Parameters
+        ----------
+        x, y : arrays of one shape
+            Projector image coordinates, pixels.
+
+        Returns
+        -------
+        float32 array of the same shape.
+        """
+        s = OVERSAMPLE
+        coords = np.stack([np.asarray(y, np.float64) * s - 0.5, (np.asarray(x, np.float64) - self.x_min) * s - 0.5])
+        flat = coords.reshape(2, -1)
+        finite = np.isfinite(flat).all(axis=0)
+        out = np.zeros(flat.shape[1], np.float32)
+        if finite.any():
+            out[finite] = ndimage.map_coordinates(self.grid, flat[:, finite], order=1, mode="constant", cval=0.0)
+        return out.reshape(np.shape(x))
+
+    def reference(self, width: int, height: int, disparity_px: float, margin: int = 0) -> np.ndarray:
+        """(height, width + 2 margin) float32: the matcher's reference.
+
+        The pattern as a camera sharing the projector's intrinsics sees it on a fronto-parallel
+        plane of disparity ``disparity_px`` (f b / z0), over the camera's columns and
+        ``margin`` more on either side (a device stores its projector's whole field).
+        """
+        j, i = np.meshgrid(np.arange(-margin, width + margin) + 0.5, np.arange(height) + 0.5)
+        return self.sample(j - disparity_px, i)
+
+
+@lru_cache(maxsize=8)
+def _generate(width: int, height: int, density: float, dot_sigma_px: float, seed: int, x_min: float) -> DotPattern:
+    return DotPattern._render(width, height, density, dot_sigma_px, seed, x_min)

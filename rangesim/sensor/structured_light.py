@@ -1,0 +1,163 @@
+"""The structured-light scanner (PrimeSense / Kinect v1 type): a dot pattern, an IR image, block matching.
+
+Physical model, step by step (camera frame, mm; the projector is a pinhole with the camera's
+intrinsics K at L = (b, 0, 0), b = ``laser.baseline``, looking along +z: a rectified pair):
+
+1. ``rays``: one ``ray_intersect`` of all camera rays -> the surface point P of each pixel
+   (camera occlusion is the primary hit itself).
+2. Projector shadows: one ``ray_test`` from P towards L (``shadows.laser_reach``); a point
+   the projector cannot reach receives no pattern.
+3. Pattern irradiance: P projects into the projector at x_p = f (P_x - b) / P_z + c_x,
+   y_p = f P_y / P_z + c_y, i.e. the pixel's column shifted by the disparity d = f b / z;
+   the pattern (:class:`rangesim.sensor.dot_pattern.DotPattern`) there is scaled by the
+   irradiance law albedo cos(i) (z_ref / d_L)^2 (i the incidence of the projector's ray, d_L
+   the distance to the projector, z_ref mid-range). Ambient IR adds albedo x ``ambient``.
+   A pixel's value is the radiance it sees, so it does not depend on the camera distance.
+4. Image noise (electrons, ``exposure_e`` at a dot's peak on a white facing target at
+   z_ref): laser speckle multiplies the pattern term by a unit-mean Gamma of contrast
+   ``noise.speckle_contrast``; then Poisson shot noise, Gaussian read noise
+   (``camera.read_noise_e``) and full-well saturation (``camera.full_well_e``).
+5. Depth: :func:`rangesim.sensor.block_matching.block_match` of the IR image against the
+   reference (the pattern on a fronto-parallel plane at disparity d0 = round(f b / z_ref), as
+   a device stores it from its factory calibration) along the rows over the disparities of
+   the working range; sub-pixel disparity quantised to 1 / ``subpixel_steps`` px;
+   z = f b / d, the point on the pixel's ray.
+
+So depth noise follows sigma_z = z^2 sigma_d / (f b), depth comes in steps of
+f b / d - f b / (d + 1/8), projector shadows are h b / (D - h) wide behind an edge of height h
+in front of a surface at D, and depth edges fatten outwards by about half the window.
+
+Status: valid where a disparity was accepted and its depth lies in [near, far]; otherwise
+no surface (1), projector shadow (2), outside the range (4) or dropout (3, rejected match).
+A valid pixel may lie in a true shadow (fattening): its ``xyz_true`` is the true surface.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import numpy as np
+
+from rangesim.core.backend import mitsuba
+from rangesim.core.constants import Status
+from rangesim.core.rangescan import RangeScan
+from rangesim.sensor.block_matching import block_match
+from rangesim.sensor.config import Sensor
+from rangesim.sensor.dot_pattern import DotPattern
+from rangesim.sensor.metadata import scan_meta
+from rangesim.sensor.rays import camera_hits
+from rangesim.sensor.shadows import laser_reach
+
+__all__ = ["scan_structured_light", "ir_image", "disparity_range"]
+
+
+def reference_disparity(sensor: Sensor) -> int:
+    """Disparity (whole pixels) of the reference plane: f b / z_ref rounded, so z0 = f b / d0 near mid-range."""
+    return max(int(round(sensor.focal_px * sensor.params["laser"]["baseline"] / sensor.reference_distance)), 1)
+
+
+def disparity_range(sensor: Sensor) -> tuple[int, int]:
+    """Disparities (whole pixels) that cover the working range: f b / far .. f b / near."""
+    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    r = sensor.params["range"]
+    return max(int(np.floor(fb / r["far"])) - 1, 1), int(np.ceil(fb / r["near"])) + 1
+
+
+def ir_image(rng: np.random.Generator, pattern_term: np.ndarray, ambient_term: np.ndarray, sensor: Sensor
+             ) -> np.ndarray:
+    """Electrons of the IR image from the relative pattern and ambient irradiance (flat arrays).
+
+    Speckle (unit-mean Gamma of contrast C on the pattern term), Poisson shot noise, read
+    noise and full-well saturation, in that order; the draws come from ``rng``.
+    """
+    sl, cam = sensor.params["structured_light"], sensor.params["camera"]
+    c = float(sensor.params["noise"]["speckle_contrast"])
+    expected = np.asarray(pattern_term, np.float64)
+    if c > 0:
+        expected = expected * rng.gamma(1.0 / c**2, c**2, size=expected.shape)
+    electrons = sl["exposure_e"] * (expected + np.asarray(ambient_term, np.float64))
+    electrons = rng.poisson(np.maximum(electrons, 0.0)).astype(np.float64)
+    electrons += rng.normal(0.0, float(cam["read_noise_e"]), size=electrons.shape)
+    return np.clip(electrons, 0.0, float(cam["full_well_e"]))
+
+
+def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeScan:
+    """Scan ``scene`` from camera-to-world ``pose``; see the module docstring."""
+    mi = mitsuba()
+    p = sensor.params
+    sl = p["structured_light"]
+    h, w = sensor.height, sensor.width
+    K = sensor.K
+    f = float(K[0, 0])
+    b = float(p["laser"]["baseline"])
+    near, far = p["range"]["near"], p["range"]["far"]
+    z_ref = sensor.reference_distance
+
+    # 1-2. primary hits and projector shadows
+    view = camera_hits(scene, sensor, pose)
+    hits, points, normals = view.hits, view.points, view.normals
+    zero = dr.zeros(mi.Float, h * w)
+    sources = mi.Vector3f(b + zero, zero, zero)
+    in_range, lit = laser_reach(scene.mitsuba_scene(), view, sources, pose, near, far)
+    albedo = dr.gather(mi.Float, mi.Float(np.array([o.albedo for o in scene.objects], np.float32)), hits.part,
+                       hits.hit)
+    dr.eval(points, normals, in_range, lit, albedo)
+    P = np.asarray(dr.ravel(points), np.float64).reshape(-1, 3)
+    n = np.asarray(dr.ravel(normals), np.float64).reshape(-1, 3)
+    hit = np.asarray(hits.hit, bool)
+    lit_np, in_range_np = np.asarray(lit, bool), np.asarray(in_range, bool)
+    albedo_np = np.asarray(albedo, np.float64)
+    P[~hit] = np.nan
+    n[~hit] = np.nan
+
+    # 3. pattern irradiance on each surface point, seen by its pixel
+    d_min, d_max = disparity_range(sensor)
+    # the projector's image spans every column the camera sees anywhere in the working range
+    d0 = reference_disparity(sensor)
+    margin = max(abs(d_min - d0), abs(d_max - d0)) + 2
+    pattern = DotPattern.generate(w + d_max + margin + 4, h, sl["dot_density"], sl["dot_sigma_px"], sl["pattern_seed"],
+                                  x_min=-(d_max + 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        to_proj = np.array([b, 0.0, 0.0]) - P
+        d_proj = np.linalg.norm(to_proj, axis=1)
+        cos_i = np.einsum("ij,ij->i", n, to_proj) / d_proj
+        x_p = f * (P[:, 0] - b) / P[:, 2] + K[0, 2]
+        y_p = f * P[:, 1] / P[:, 2] + K[1, 2]
+    irradiance = np.where(hit & lit_np, albedo_np * np.clip(np.nan_to_num(cos_i), 0, None) * (z_ref / d_proj) ** 2, 0.0)
+    irradiance = np.nan_to_num(irradiance)
+    pattern_term = irradiance * pattern.sample(np.where(hit, x_p, np.nan), np.where(hit, y_p, np.nan))
+    ambient_term = np.where(hit, albedo_np * sl["ambient"], 0.0)
+
+    # 4. the IR image
+    rng = np.random.default_rng(seed)
+    electrons = ir_image(rng, pattern_term, np.nan_to_num(ambient_term), sensor).reshape(h, w)
+
+    # 5. block matching against the reference plane at disparity d0, and triangulation
+    relative, score = block_match(electrons, pattern.reference(w, h, d0, margin), d_min - d0, d_max - d0,
+                                  window=sl["window"], subpixel_steps=sl["subpixel_steps"],
+                                  min_score=sl["min_score"], uniqueness=sl["uniqueness"], lr_check=sl["lr_check"])
+    disparity = relative + d0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = f * b / disparity
+    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    rays = np.stack([(jj - K[0, 2]) / f, (ii - K[1, 2]) / K[1, 1], np.ones_like(jj)], axis=-1)
+    matched = np.isfinite(z) & (z >= near) & (z <= far)
+    xyz = np.where(matched[..., None], rays * z[..., None], np.nan)
+
+    status = np.full(h * w, np.uint8(Status.DROPOUT))
+    status[~in_range_np] = Status.OUT_OF_RANGE
+    status[hit & ~lit_np & in_range_np] = Status.SHADOW
+    status[~hit] = Status.MISS
+    status = status.reshape(h, w)
+    status[matched] = Status.VALID
+
+    part = np.asarray(hits.part, np.int32).reshape(h, w)
+    face = np.asarray(hits.face, np.int32).reshape(h, w)
+    meta = scan_meta(scene, sensor, seed, "structured_light", disparity_range_px=[d_min, d_max],
+                     reference_disparity_px=d0)
+    meta["projector_origin"] = [b, 0.0, 0.0]
+    return RangeScan(
+        depth=xyz[..., 2].astype(np.float32), xyz=xyz.astype(np.float32), valid=status == Status.VALID,
+        normal=n.reshape(h, w, 3).astype(np.float32),
+        intensity=(electrons / sl["exposure_e"]).astype(np.float32),
+        part=np.where(hit.reshape(h, w), part, -1), face=np.where(hit.reshape(h, w), face, -1), status=status,
+        pose=pose, meta=meta, xyz_true=P.reshape(h, w, 3).astype(np.float32),
+    )
