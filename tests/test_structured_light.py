@@ -1,0 +1,147 @@
+"""The structured-light mode (Kinect type) against its laws: disparity, noise, steps, shadows, edges."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+from scipy import ndimage
+
+import rangesim as rs
+from rangesim.core.constants import Status
+from rangesim.sensor.block_matching import block_match
+from rangesim.sensor.dot_pattern import DotPattern
+from tests.conftest import box, plane, top_down_pose
+
+#: a small Kinect: the kinect_v1 optics and matcher on a 320 x 240 image (f halves, so do disparities)
+SMALL = {"camera.width": 320, "camera.height": 240}
+
+
+def small_kinect(**changes):
+    return rs.load_sensor("kinect_v1").with_params({**SMALL, **changes})
+
+
+def _tilted_plane(deg):
+    p = plane(4000)
+    p.apply_transform(trimesh.transformations.rotation_matrix(math.radians(deg), [0, 1, 0]))
+    return p
+
+
+def test_block_matching_recovers_a_known_shift_to_an_eighth_pixel():
+    pattern = DotPattern.generate(200, 60, 0.1, 0.6, seed=3, x_min=-30)
+    ref = pattern.reference(120, 60, 0.0, margin=40)
+    for shift in (7.0, 7.375, 12.625):
+        img = pattern.reference(120, 60, shift, margin=0)  # image[:, j] = pattern at j - shift
+        d, score = block_match(img, ref, 0, 20, window=9, subpixel_steps=8)
+        inner = d[10:-10, 30:-10]
+        assert np.isfinite(inner).mean() > 0.95
+        assert np.nanmedian(inner) == pytest.approx(shift, abs=0.13)
+        assert np.all(np.abs(inner[np.isfinite(inner)] * 8 - np.round(inner[np.isfinite(inner)] * 8)) < 1e-9)
+
+
+def test_depth_is_f_b_over_disparity_on_a_plane():
+    sensor = small_kinect(**{"noise.speckle_contrast": 0.0, "camera.read_noise_e": 0.0})
+    scan = rs.scan([plane(4000)], sensor, pose=top_down_pose(1200.0), seed=0)
+    assert scan.valid.mean() > 0.9 and scan.meta["mode"] == "structured_light"
+    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    d = fb / scan.depth[scan.valid]
+    # one disparity for a fronto-parallel plane: the depth is one 1/8 px step of f b / d from the truth
+    step = 1200.0**2 / (8 * fb)
+    assert np.percentile(np.abs(scan.depth[scan.valid] - 1200.0), 99) < 1.5 * step
+    assert np.allclose(d * 8, np.round(d * 8), atol=1e-3)
+    # points lie on their pixels' rays
+    K = sensor.K
+    jj, ii = np.meshgrid(np.arange(scan.shape[1]) + 0.5, np.arange(scan.shape[0]) + 0.5)
+    np.testing.assert_allclose(scan.xyz[..., 0][scan.valid], ((jj - K[0, 2]) / K[0, 0] * scan.depth)[scan.valid],
+                               rtol=1e-5, atol=1e-3)
+
+
+def test_disparity_steps_of_an_eighth_pixel_are_depth_steps():
+    sensor = small_kinect()
+    scan = rs.scan([_tilted_plane(30.0)], sensor, pose=top_down_pose(2000.0), seed=0)
+    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    d = fb / scan.depth[scan.valid].astype(np.float64)
+    assert np.allclose(d * 8, np.round(d * 8), atol=5e-3)
+    levels = np.unique(np.round(d * 8))
+    assert levels.size > 20  # the tilted plane spans many steps
+    z_levels = np.sort(fb / (levels / 8))
+    # adjacent depth levels differ by z^2 / (8 f b)
+    gaps = np.diff(z_levels)
+    mid = 0.5 * (z_levels[1:] + z_levels[:-1])
+    np.testing.assert_allclose(gaps, mid**2 / (8 * fb), rtol=0.02)
+
+
+def test_depth_noise_follows_z_squared_sigma_d_over_f_b():
+    sensor = small_kinect()
+    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    sigma = {}
+    for z in (1000.0, 2000.0):
+        scan = rs.scan([_tilted_plane(20.0)], sensor, pose=top_down_pose(z), seed=1)
+        ok = scan.valid & np.isfinite(scan.xyz_true[..., 2])
+        z_true = scan.xyz_true[..., 2][ok].astype(np.float64)
+        e_d = fb / scan.depth[ok].astype(np.float64) - fb / z_true
+        e_z = scan.depth[ok] - z_true
+        s_d = 1.4826 * np.median(np.abs(e_d - np.median(e_d)))
+        s_z = 1.4826 * np.median(np.abs(e_z - np.median(e_z)))
+        assert s_z == pytest.approx(np.median(z_true) ** 2 * s_d / fb, rel=0.2)
+        sigma[z] = (s_z, s_d)
+    # the disparity error holds at about a step's size, so the depth error grows about as z^2
+    assert 2.5 < sigma[2000.0][0] / sigma[1000.0][0] < 6.5
+
+
+def test_projector_shadow_width_follows_the_baseline():
+    D, h, x_left = 1000.0, 100.0, -40.0
+    sensor = small_kinect()
+    scan = rs.scan([plane(4000), box([x_left, -60, 0], [20, 60, h])], sensor, pose=top_down_pose(D), seed=0)
+    b = sensor.params["laser"]["baseline"]
+    rows = np.abs(scan.xyz_true[..., 1]) < 40
+    shadow = (scan.status == Status.SHADOW) & (scan.part == 0) & rows
+    x = scan.xyz_true[..., 0][shadow]
+    expected = (b - x_left) * h / (D - h)  # behind the left top edge, away from the projector at +b
+    footprint = D / sensor.focal_px
+    assert abs((x_left - x.min()) - expected) < 1.5 * footprint
+    assert not np.any(scan.valid & (scan.status == Status.SHADOW))
+
+
+def test_edge_fattening_stays_within_half_the_window():
+    # a straddling window takes the brighter foreground's disparity, up to half a window out
+    rng = np.random.default_rng(0)
+    ref = rng.random((30, 200))
+    fg, bg = ref[:, 40 - 20:40 - 20 + 120] * 4.0, ref[:, 40 - 5:40 - 5 + 120]  # d = 20 (bright), d = 5
+    img = np.concatenate([fg[:, :60], bg[:, 60:]], axis=1)
+    d, _ = block_match(img, ref, -10, 30, window=9, min_score=0.0, uniqueness=0.0, lr_check=False)
+    fattened = np.sum(np.abs(d[5:25, 60:] - 20) < 0.5, axis=1)
+    assert np.median(fattened) >= 1 and fattened.max() <= 4
+    # in a scan: wrong-surface depths only within half a window of a true depth edge
+    sensor = small_kinect()
+    scan = rs.scan([plane(4000), box([-100, -150, 0], [20, 150, 1000])], sensor, pose=top_down_pose(2000.0),
+                   seed=0)
+    zt = scan.xyz_true[..., 2]
+    wrong = scan.valid & ~(np.abs(scan.depth - zt) < 0.03 * zt)
+    jump = np.zeros(scan.shape, bool)
+    jump[:, 1:] |= np.abs(np.diff(np.nan_to_num(zt, nan=1e5), axis=1)) > 100
+    near_edge = ndimage.binary_dilation(jump, iterations=sensor.params["structured_light"]["window"] // 2 + 1)
+    assert wrong.sum() > 0 and (wrong & ~near_edge).sum() <= 0.01 * scan.valid.sum()
+
+
+def test_same_seed_same_scan_and_the_ir_image_is_the_intensity():
+    sensor = small_kinect()
+    scene = [plane(4000), box([-40, -60, 0], [20, 60, 100])]
+    a = rs.scan(scene, sensor, pose=top_down_pose(1000.0), seed=4)
+    b = rs.scan(scene, sensor, pose=top_down_pose(1000.0), seed=4)
+    c = rs.scan(scene, sensor, pose=top_down_pose(1000.0), seed=5)
+    np.testing.assert_array_equal(a.depth, b.depth)
+    np.testing.assert_array_equal(a.intensity, b.intensity)
+    assert not np.array_equal(a.intensity, c.intensity)
+    # the IR image shows the dots: a bright, sparse, textured image, dark in the projector's shadow
+    lit = a.status != Status.SHADOW
+    assert a.intensity[lit].std() > 0.1 and a.intensity[a.status == Status.SHADOW].mean() < 0.2 * a.intensity[lit].mean()
+
+
+def test_structured_light_presets_load_and_validate():
+    for name in ("kinect_v1", "structured_light_bench"):
+        s = rs.load_sensor(name)
+        assert s.mode == "structured_light"
+    with pytest.raises(rs.RangesimError, match="window"):
+        small_kinect(**{"structured_light.window": 8})
