@@ -32,7 +32,7 @@ import numpy as np
 
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.io import read_npz, register_reader
+from rangesim.io import read_npz, register_reader, register_writer
 from rangesim.io.npz import EMPTY_ZIP_MAGIC, ZIP_MAGIC
 from rangesim.io.ply_header import read_ply_header
 from rangesim.recorded.common import check_file, grid_scan, read_bytes
@@ -143,6 +143,17 @@ def _checked_options(func: Callable[..., RangeScan], what: str) -> Callable[...,
     return reader
 
 
+def _save_pcd(scan: RangeScan, path: Path) -> None:
+    """``scan.save("x.pcd")``: an organized binary PCD that PCL and Open3D read.
+
+    Fields x y z (metres, NaN where invalid), the normals and intensity when the scan has
+    them, and ``label`` (uint32: the scan's ``part`` + 1, 0 where no surface was hit).
+    """
+    label = np.clip(np.asarray(scan.part, np.int64) + 1, 0, None).astype(np.uint32)
+    write_pcd(scan, path, extras={"label": label})
+
+
+register_writer(".pcd", _save_pcd)
 register_reader(".ply", _checked_options(read_ply, "PLY"))
 register_reader(".pcd", _checked_options(load_pcd, "PCD"))
 register_reader([".msu", ".msu.gz"], _checked_options(read_msu, "MSU"))
