@@ -46,8 +46,7 @@ def main() -> int:
     import rangesim as rs
     from rangesim.core.geometry import look_at
     from rangesim.sensor.block_matching import block_match
-    from rangesim.sensor.dot_pattern import DotPattern
-    from rangesim.sensor.structured_light import disparity_range, reference_disparity
+    from rangesim.sensor.structured_light import matching_setup
 
     floor = trimesh.creation.box(extents=(4000, 4000, 10))
     floor.apply_translation((0, 0, -5))
@@ -64,12 +63,9 @@ def main() -> int:
     # the same pair for both matchers
     sl = sensor.params["structured_light"]
     w, h = sensor.width, sensor.height
-    d_min, d_max = disparity_range(sensor)
-    d0 = reference_disparity(sensor)
-    margin = max(abs(d_min - d0), abs(d_max - d0)) + 2
-    pattern = DotPattern.generate(w + d_max + margin + 4, h, sl["dot_density"], sl["dot_sigma_px"],
-                                  sl["pattern_seed"], x_min=-(d_max + 2))
-    reference = pattern.reference(w, h, d0, margin)
+    pair = matching_setup(sensor)
+    d_min, d_max, d0, margin = pair.d_min, pair.d_max, pair.d0, pair.margin
+    reference = pair.reference(w, h)
     image = scan.intensity.astype(np.float64) * sl["exposure_e"]
 
     import cv2

@@ -420,3 +420,17 @@ def test_dataset_cli(sweep_dir, tmp_path, capsys):
     code = main(["dataset", "--scene", str(sweep_dir / "scene.toml"), "--views", "2", "--out", str(out),
                  "--distance", "500", "100"])
     assert code == 2 and "--distance" in capsys.readouterr().err
+
+
+def test_sweep_over_the_scanner_mode_includes_structured_light(sweep_dir, tmp_path):
+    body = SWEEP_TOML.replace('''[grid]
+"noise.sigma_px" = [0.05, 0.5]
+"object.box.albedo" = [0.6, 0.9]''', '''[grid]
+"mode" = ["geometric", "structured_light"]''').replace('[detectors.gradient]\njump_clearance = 2\n', '')
+    for name in ("scene.toml", "tiny.toml"):
+        (tmp_path / name).write_text((sweep_dir / name).read_text())
+    (tmp_path / "modes.toml").write_text(body)
+    run = run_sweep(tmp_path / "modes.toml", tmp_path / "out", workers=0, progress=False, plots=False)
+    table = run.table
+    assert set(table["mode"]) == {"geometric", "structured_light"}
+    assert table["f1"].notna().all()

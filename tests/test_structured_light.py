@@ -44,7 +44,7 @@ def test_depth_is_f_b_over_disparity_on_a_plane():
     sensor = small_kinect(**{"noise.speckle_contrast": 0.0, "camera.read_noise_e": 0.0})
     scan = rs.scan([plane(4000)], sensor, pose=top_down_pose(1200.0), seed=0)
     assert scan.valid.mean() > 0.9 and scan.meta["mode"] == "structured_light"
-    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
     d = fb / scan.depth[scan.valid]
     # one disparity for a fronto-parallel plane: the depth is one 1/8 px step of f b / d from the truth
     step = 1200.0**2 / (8 * fb)
@@ -60,7 +60,7 @@ def test_depth_is_f_b_over_disparity_on_a_plane():
 def test_disparity_steps_of_an_eighth_pixel_are_depth_steps():
     sensor = small_kinect()
     scan = rs.scan([_tilted_plane(30.0)], sensor, pose=top_down_pose(2000.0), seed=0)
-    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
     d = fb / scan.depth[scan.valid].astype(np.float64)
     assert np.allclose(d * 8, np.round(d * 8), atol=5e-3)
     levels = np.unique(np.round(d * 8))
@@ -74,7 +74,7 @@ def test_disparity_steps_of_an_eighth_pixel_are_depth_steps():
 
 def test_depth_noise_follows_z_squared_sigma_d_over_f_b():
     sensor = small_kinect()
-    fb = sensor.focal_px * sensor.params["laser"]["baseline"]
+    fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
     sigma = {}
     for z in (1000.0, 2000.0):
         scan = rs.scan([_tilted_plane(20.0)], sensor, pose=top_down_pose(z), seed=1)
@@ -90,17 +90,21 @@ def test_depth_noise_follows_z_squared_sigma_d_over_f_b():
     assert 2.5 < sigma[2000.0][0] / sigma[1000.0][0] < 6.5
 
 
-def test_projector_shadow_width_follows_the_baseline():
-    D, h, x_left = 1000.0, 100.0, -40.0
-    sensor = small_kinect()
-    scan = rs.scan([plane(4000), box([x_left, -60, 0], [20, 60, h])], sensor, pose=top_down_pose(D), seed=0)
-    b = sensor.params["laser"]["baseline"]
+@pytest.mark.parametrize("baseline", [-75.0, 75.0])
+def test_projector_shadow_width_follows_the_baseline(baseline):
+    D, h, x_left, x_right = 1000.0, 100.0, -40.0, 20.0
+    sensor = small_kinect(**{"laser.baseline": baseline})
+    scan = rs.scan([plane(4000), box([x_left, -60, 0], [x_right, 60, h])], sensor, pose=top_down_pose(D), seed=0)
     rows = np.abs(scan.xyz_true[..., 1]) < 40
     shadow = (scan.status == Status.SHADOW) & (scan.part == 0) & rows
     x = scan.xyz_true[..., 0][shadow]
-    expected = (b - x_left) * h / (D - h)  # behind the left top edge, away from the projector at +b
+    # behind the top edge away from the projector at (b, 0, 0): |b - x_edge| h / (D - h) wide
+    if baseline > 0:
+        width, expected = x_left - x.min(), (baseline - x_left) * h / (D - h)
+    else:
+        width, expected = x.max() - x_right, (x_right - baseline) * h / (D - h)
     footprint = D / sensor.focal_px
-    assert abs((x_left - x.min()) - expected) < 1.5 * footprint
+    assert abs(width - expected) < 1.5 * footprint
     assert not np.any(scan.valid & (scan.status == Status.SHADOW))
 
 
@@ -162,3 +166,67 @@ def test_scan_saves_as_an_organized_pcd_that_reads_back(tmp_path):
         return
     cloud = o3d.io.read_point_cloud(str(path), remove_nan_points=False)
     assert len(cloud.points) == 160 * 120
+
+
+# -- twins of the recorded Kinect frames ---------------------------------------------------------------
+def _synthetic_frame(shape):
+    """A labelled 'recording' made by scanning a known table and object with the small Kinect."""
+    from rangesim.core.geometry import look_at
+
+    table = trimesh.creation.box(extents=(1200, 800, 20))
+    table.apply_translation((0, 0, -10))
+    obj = (trimesh.creation.box(extents=(160, 100, 120)) if shape == "box"
+           else trimesh.creation.cylinder(radius=60, height=150, sections=96))
+    obj.apply_translation((0, 0, obj.bounds[1, 2] - obj.bounds[0, 2] and (obj.bounds[1, 2] - obj.bounds[0, 2]) / 2))
+    pose = look_at((0, -600, 700), (0, 0, 0), up=(0, 0, 1))
+    scan = rs.scan([table, obj], small_kinect(), pose=pose, seed=2)
+    labels = np.where(scan.valid, np.where(scan.part == 0, 1, np.where(scan.part == 1, 20, 0)), 0).astype(np.uint32)
+    scan.xyz_true = None  # a recording has no truth
+    return scan, labels, obj
+
+
+@pytest.mark.parametrize("shape", ["box", "cylinder"])
+def test_scene_fitted_to_labels_recovers_the_shapes(shape):
+    from rangesim.twin.kinect import scene_from_labels
+
+    scan, labels, obj = _synthetic_frame(shape)
+    shapes = scene_from_labels(scan, labels)
+    assert [s.kind for s in shapes] == ["table", shape]
+    fitted = shapes[1]
+    if shape == "box":
+        size = sorted(fitted.params["size_mm"][:2])
+        # the frame's own fattening (half a 9 px window, 3.4 mm per px here) may widen the footprint
+        assert size == pytest.approx([100, 160], abs=16) and fitted.params["size_mm"][2] == pytest.approx(120, abs=8)
+    else:
+        assert fitted.params["radius_mm"] == pytest.approx(60, abs=4)
+        assert fitted.params["height_mm"] == pytest.approx(150, abs=8)
+
+
+def test_kinect_twin_of_a_recorded_frame(data_dir):
+    from rangesim.evaluate.runs import load_scan_with_labels
+    from rangesim.twin.kinect import compare_kinect
+
+    scan, labels = load_scan_with_labels(data_dir / "mosd-kinect" / "test31.pcd", None)
+    m = compare_kinect(scan, labels, "kinect_v1", detectors=["gradient"])
+    assert [s["kind"] for s in m["shapes"]] == ["table", "cylinder", "cylinder", "cylinder"]
+    assert m["focal_px"] == pytest.approx(525.0, abs=0.5)
+    assert m["iou"] > 0.9
+    k = m["z2_coefficient_mm_per_m2"]
+    assert 0.5 < k["twin"] / k["recorded"] < 2.0  # the z^2 law at the recording's size
+    # both show depth in disparity steps: the recording's levels are 0.8-1 of the preset's 1/8 px step
+    gaps = m["depth_level_gaps_in_steps"]
+    assert gaps["twin"]["median"] == pytest.approx(1.0, abs=0.05)
+    assert 0.7 < gaps["recorded"]["median"] < 1.1
+
+
+def test_cli_compare_kinect_frame_without_mesh(data_dir, tmp_path):
+    import json
+
+    from rangesim.cli.main import main
+
+    out = tmp_path / "k"
+    assert main(["compare", str(data_dir / "mosd-kinect" / "test0.pcd"), "--sensor", "kinect_v1", "--out",
+                 str(out)]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["iou"] > 0.9 and len(metrics["shapes"]) == 3
+    assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -54,12 +54,47 @@ def _detectors_only(scan, labels, args, out: Path) -> dict:
     return metrics
 
 
+def _structured_light(name: str) -> bool:
+    """Whether ``name`` is a structured-light sensor (an unknown name is not: the detectors-only path)."""
+    from rangesim.sensor import load_sensor
+
+    try:
+        return load_sensor(name).mode == "structured_light"
+    except RangesimError:
+        return False
+
+
+def _kinect_twin(scan, labels, args, out: Path) -> int:
+    """A labelled Kinect-type frame against the structured-light twin of its fitted scene."""
+    from rangesim.twin.kinect import compare_kinect
+    from rangesim.viz.compare import save_comparison
+
+    metrics, twin_scan, edge_maps = compare_kinect(scan, labels, args.sensor, seed=args.seed, return_scans=True)
+    metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **metrics}
+    out.mkdir(parents=True, exist_ok=True)
+    _write_json(metrics, out / "metrics.json")
+    save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
+    shapes = ", ".join(s["kind"] for s in metrics["shapes"])
+    print(f"twin: {shapes} fitted to the labels, scanned by {args.sensor} at f = {metrics['focal_px']:.1f} px")
+    print(f"IoU {metrics['iou']:.3f} (no-physics twin {metrics['iou_no_physics']:.3f})")
+    k = metrics["z2_coefficient_mm_per_m2"]
+    g = metrics["depth_level_gaps_in_steps"]
+    print(f"  depth noise sigma_z = k z^2: k recorded {k['recorded']:.2f}, twin {k['twin']:.2f} mm/m^2; depth-level "
+          f"gaps recorded {g['recorded']['median']:.2f}, twin {g['twin']['median']:.2f} disparity steps")
+    for name, e in metrics["edges"].items():
+        print(f"  {name:<15} F1 {e['f1']:.3f}")
+    print(f"wrote {out}/metrics.json, {out}/compare.png")
+    return 0
+
+
 def cmd_compare(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
     path = Path(args.recorded)
     scan, labels = load_scan_with_labels(path, args.conf)
+    if args.mesh is None and labels is not None and _structured_light(args.sensor):
+        return _kinect_twin(scan, labels, args, out)
     if args.mesh is None:
         metrics = _detectors_only(scan, labels, args, out)
         out.mkdir(parents=True, exist_ok=True)
@@ -112,7 +147,9 @@ def register(sub) -> None:
     p = sub.add_parser("compare", help="compare a recorded scan with its simulated twin",
                        description="Twin a recorded scan (scan the mesh from its viewpoint on its grid with the "
                        "sensor's calibration; an uncalibrated sensor's angles and noise are fitted to this view) "
-                       "and write metrics.json and compare.png. "
+                       "and write metrics.json and compare.png. With a structured-light --sensor (kinect_v1) and a "
+                       "labelled frame (mOSD) and no --mesh: the table and objects are fitted to the labels and "
+                       "scanned again. "
                        "Without --mesh: run the detectors and score them against the scan's label regions.")
     p.add_argument("recorded", metavar="RECORDED", help="recorded scan (.ply range grid, .pcd, .msu, ...)")
     p.add_argument("--mesh", help="reference mesh of the object (world frame)")

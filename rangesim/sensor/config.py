@@ -202,7 +202,7 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
         raise RangesimError(
             f"mode {mode!r} is not available; available: {', '.join(MODES)}", source=source
         )
-    _validate(params, source)
+    _validate(params, source, mode)
     return Sensor(
         params=params,
         name=str(data.get("name", Path(str(source)).stem)),
@@ -236,12 +236,18 @@ def _number(params, table, key, source, *, positive=False, nonneg=False, integer
         params[table][key] = number
 
 
-def _validate(params: dict[str, dict[str, Any]], source) -> None:
+def _validate(params: dict[str, dict[str, Any]], source, mode: str = "geometric") -> None:
     for key in ("width", "height"):
         _number(params, "camera", key, source, positive=True, integer=True)
     _number(params, "camera", "fov_deg", source, positive=True, upper=180)
     _number(params, "camera", "aperture_mm", source, positive=True)
-    _number(params, "laser", "baseline", source, positive=True)
+    if mode == "structured_light":  # the projector may sit on either side of the camera
+        _number(params, "laser", "baseline", source)
+        if params["laser"]["baseline"] == 0:
+            raise RangesimError("laser.baseline must not be 0 (the projector's offset along the camera's x axis)",
+                                source=source)
+    else:
+        _number(params, "laser", "baseline", source, positive=True)
     _number(params, "laser", "step", source, positive=True)
     _number(params, "laser", "stripe_width", source, nonneg=True)
     _number(params, "laser", "wavelength_nm", source, positive=True)

@@ -1,7 +1,8 @@
 """The structured-light scanner (PrimeSense / Kinect v1 type): a dot pattern, an IR image, block matching.
 
 Physical model, step by step (camera frame, mm; the projector is a pinhole with the camera's
-intrinsics K at L = (b, 0, 0), b = ``laser.baseline``, looking along +z: a rectified pair):
+intrinsics K at L = (b, 0, 0), b = ``laser.baseline`` (either sign: a Kinect's projector sits
+on the IR camera's -x side), looking along +z: a rectified pair):
 
 1. ``rays``: one ``ray_intersect`` of all camera rays -> the surface point P of each pixel
    (camera occlusion is the primary hit itself).
@@ -33,6 +34,8 @@ A valid pixel may lie in a true shadow (fattening): its ``xyz_true`` is the true
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import numpy as np
 
@@ -46,19 +49,55 @@ from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 
-__all__ = ["scan_structured_light", "ir_image", "disparity_range"]
+__all__ = ["scan_structured_light", "ir_image", "disparity_range", "reference_disparity", "matching_setup",
+           "MatchingSetup"]
 
 
 def reference_disparity(sensor: Sensor) -> int:
     """Disparity (whole pixels) of the reference plane: f b / z_ref rounded, so z0 = f b / d0 near mid-range."""
-    return max(int(round(sensor.focal_px * sensor.params["laser"]["baseline"] / sensor.reference_distance)), 1)
+    d0 = int(round(sensor.focal_px * sensor.params["laser"]["baseline"] / sensor.reference_distance))
+    return d0 if d0 != 0 else (1 if sensor.params["laser"]["baseline"] > 0 else -1)
 
 
 def disparity_range(sensor: Sensor) -> tuple[int, int]:
-    """Disparities (whole pixels) that cover the working range: f b / far .. f b / near."""
+    """Disparities (whole pixels, lowest first) that cover the working range: f b / z for z in [near, far].
+
+    Negative for a projector on the camera's -x side (b < 0).
+    """
     fb = sensor.focal_px * sensor.params["laser"]["baseline"]
     r = sensor.params["range"]
-    return max(int(np.floor(fb / r["far"])) - 1, 1), int(np.ceil(fb / r["near"])) + 1
+    lo, hi = sorted((fb / r["far"], fb / r["near"]))
+    return int(np.floor(lo)) - 1, int(np.ceil(hi)) + 1
+
+
+@dataclass(frozen=True)
+class MatchingSetup:
+    """The device's fixed pattern and the matcher's reference and disparity range (pixels)."""
+
+    pattern: DotPattern
+    d_min: int
+    d_max: int
+    d0: int
+    margin: int
+
+    def reference(self, width: int, height: int) -> np.ndarray:
+        """The stored reference image: the pattern on the plane of disparity d0, ``margin`` columns wider each side."""
+        return self.pattern.reference(width, height, self.d0, self.margin)
+
+
+def matching_setup(sensor: Sensor) -> MatchingSetup:
+    """The pattern (covering every projector column the camera sees in the working range) and the reference."""
+    sl = sensor.params["structured_light"]
+    w, h = sensor.width, sensor.height
+    d_min, d_max = disparity_range(sensor)
+    d0 = reference_disparity(sensor)
+    margin = max(abs(d_min - d0), abs(d_max - d0)) + 2
+    # projector columns seen anywhere: x_p = u - d for the image's and the reference's columns
+    x_lo = -max(d_max, d0 + margin, 0) - margin - 4
+    x_hi = w + max(-d_min, -(d0 - margin), 0) + margin + 4
+    pattern = DotPattern.generate(x_hi - x_lo, h, sl["dot_density"], sl["dot_sigma_px"], sl["pattern_seed"],
+                                  x_min=x_lo)
+    return MatchingSetup(pattern, d_min, d_max, d0, margin)
 
 
 def ir_image(rng: np.random.Generator, pattern_term: np.ndarray, ambient_term: np.ndarray, sensor: Sensor
@@ -109,12 +148,8 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     n[~hit] = np.nan
 
     # 3. pattern irradiance on each surface point, seen by its pixel
-    d_min, d_max = disparity_range(sensor)
-    # the projector's image spans every column the camera sees anywhere in the working range
-    d0 = reference_disparity(sensor)
-    margin = max(abs(d_min - d0), abs(d_max - d0)) + 2
-    pattern = DotPattern.generate(w + d_max + margin + 4, h, sl["dot_density"], sl["dot_sigma_px"], sl["pattern_seed"],
-                                  x_min=-(d_max + 2))
+    pair = matching_setup(sensor)
+    pattern, d_min, d_max, d0 = pair.pattern, pair.d_min, pair.d_max, pair.d0
     with np.errstate(invalid="ignore", divide="ignore"):
         to_proj = np.array([b, 0.0, 0.0]) - P
         d_proj = np.linalg.norm(to_proj, axis=1)
@@ -131,7 +166,7 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     electrons = ir_image(rng, pattern_term, np.nan_to_num(ambient_term), sensor).reshape(h, w)
 
     # 5. block matching against the reference plane at disparity d0, and triangulation
-    relative, score = block_match(electrons, pattern.reference(w, h, d0, margin), d_min - d0, d_max - d0,
+    relative, score = block_match(electrons, pair.reference(w, h), d_min - d0, d_max - d0,
                                   window=sl["window"], subpixel_steps=sl["subpixel_steps"],
                                   min_score=sl["min_score"], uniqueness=sl["uniqueness"], lr_check=sl["lr_check"])
     disparity = relative + d0

@@ -94,10 +94,14 @@ def save_comparison(recorded: RangeScan, twin: RangeScan, metrics: dict[str, Any
     name = source.get("file", "recorded") if isinstance(source, dict) else Path(str(source)).name
     sigma = p.get("sigma_mm")
     noise = "sensor noise model" if sigma is None else f"sigma {sigma:.3f} mm"
-    fig.suptitle(
-        f"{name} vs twin: theta {p.get('theta_deg', float('nan')):.1f} deg,"
-        f" alpha {p.get('alpha_deg', float('nan')):.1f} deg, {noise},"
-        f" hole recall {metrics.get('hole_recall', float('nan')):.2f}", fontsize=12)
+    if "shapes" in metrics:  # a structured-light twin of a scene fitted to the frame's labels
+        shapes = ", ".join(s["kind"] for s in metrics["shapes"])
+        title = f"{name} vs twin: {shapes} fitted to the labels, scanned by {metrics.get('sensor', 'the sensor')}"
+    else:
+        title = (f"{name} vs twin: theta {p.get('theta_deg', float('nan')):.1f} deg,"
+                 f" alpha {p.get('alpha_deg', float('nan')):.1f} deg, {noise},"
+                 f" hole recall {metrics.get('hole_recall', float('nan')):.2f}")
+    fig.suptitle(title, fontsize=12)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
