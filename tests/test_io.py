@@ -195,7 +195,7 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch, suffix):
 
 # -- bad files -------------------------------------------------------------------------------
 def test_unknown_extension(tmp_path):
-    with pytest.raises(RangesimError, match=r"scan\.txt.*\.exr, \.npz, \.ply"):
+    with pytest.raises(RangesimError, match=r"scan\.txt.*\.exr, \.npz, \.pcd, \.ply"):
         rio.save_scan(make_scan(), tmp_path / "scan.txt")
     (tmp_path / "data.abc").write_text("1 2 3\n")
     with pytest.raises(RangesimError, match=r"data\.abc.*\.exr, .*\.npz"):
