@@ -126,6 +126,103 @@ def world_rays(sensor, pose) -> tuple[np.ndarray, np.ndarray]:
 
 
 
+# -- the large-mesh sweep (issue: mesh loading time and memory) -------------------------------
+def sweep_child(args) -> int:
+    """One configuration in a fresh process: load the mesh file, first depth image, warm casts, peak RSS.
+
+    Prints one JSON line. ``rangesim``: ``load_scene`` + ``scan`` (the full geometric scan);
+    ``open3d``: ``read_triangle_mesh`` + ``RaycastingScene`` + ``cast_rays`` on the same rays.
+    """
+    import resource
+
+    if args.child == "rangesim":
+        import rangesim as rs
+        from rangesim.core.backend import mitsuba
+
+        mitsuba()  # the variant is set before the clock starts, as Open3D is imported before it
+    else:
+        import open3d as o3d
+    out: dict = {"child": args.child, "mesh": str(args.mesh)}
+    t0 = time.perf_counter()
+    if args.child == "rangesim":
+        scene = rs.load_scene(str(args.mesh))
+        t_load = time.perf_counter() - t0
+        radius = float(max(np.linalg.norm(o.mesh.vertices, axis=1).max() for o in scene.objects))
+        sensor = build_sensor(args.size, radius)
+        pose = build_pose(np.zeros(3))
+        scan = rs.scan(scene, sensor, pose=pose, seed=0)
+        out.update(load_s=t_load, first_image_s=time.perf_counter() - t0, valid=int(scan.valid.sum()),
+                   triangles=int(sum(len(o.mesh.faces) for o in scene.objects)))
+        warm = []
+        for k in range(args.repeat):
+            t = time.perf_counter()
+            rs.scan(scene, sensor, pose=pose, seed=k + 1)
+            warm.append(time.perf_counter() - t)
+    else:
+        legacy = o3d.io.read_triangle_mesh(str(args.mesh))
+        mesh = o3d.t.geometry.TriangleMesh.from_legacy(legacy)
+        t_load = time.perf_counter() - t0
+        radius = float(np.linalg.norm(np.asarray(legacy.vertices), axis=1).max())
+        sensor = build_sensor(args.size, radius)
+        pose = build_pose(np.zeros(3))
+        origin, dirs = world_rays(sensor, pose)
+        rays = o3d.core.Tensor(np.hstack([np.broadcast_to(origin, dirs.shape), dirs]).astype(np.float32))
+        rc = o3d.t.geometry.RaycastingScene()
+        rc.add_triangles(mesh)
+        t_hit = rc.cast_rays(rays)["t_hit"].numpy()
+        out.update(load_s=t_load, first_image_s=time.perf_counter() - t0, valid=int(np.isfinite(t_hit).sum()),
+                   triangles=int(len(legacy.triangles)))
+        warm = []
+        for _ in range(args.repeat):
+            t = time.perf_counter()
+            rc.cast_rays(rays)["t_hit"].numpy()
+            warm.append(time.perf_counter() - t)
+    out["warm_s"] = statistics.median(warm)
+    out["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    print(json.dumps(out))
+    return 0
+
+
+def sweep_main(args, counts: list[int]) -> int:
+    """Every triangle count: write the mesh file, then run rangesim and Open3D children, interleaved."""
+    import subprocess
+    import tempfile
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in counts:
+            path = Path(tmp) / f"sphere_{n}.ply"
+            bumpy_sphere(n).export(path)  # binary PLY, not timed
+            row = {"requested": n}
+            for child in ("rangesim", "open3d"):
+                cmd = [sys.executable, __file__, "--child", child, "--mesh", str(path), "--size", str(args.size),
+                       "--repeat", str(args.repeat)]
+                done = subprocess.run(cmd, capture_output=True, text=True)
+                lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
+                if done.returncode != 0 or not lines:
+                    print(f"{child} at {n} failed: {done.stderr.strip().splitlines()[-1:] or done.returncode}")
+                    continue
+                row[child] = json.loads(lines[-1])
+            rows.append(row)
+    print(f"large-mesh sweep, {args.size} x {args.size} rays, 2-core CPU (one process per configuration)")
+    print(f"{'triangles':>10} {'load s':>8} {'first image s (rs / o3d = x)':>30} {'warm s (rs / o3d = x)':>26} "
+          f"{'peak MiB (rs / o3d = x)':>26}")
+    for row in rows:
+        r, o = row.get("rangesim"), row.get("open3d")
+        if not r or not o:
+            continue
+        row["ratios"] = {k: r[k] / o[k] for k in ("first_image_s", "warm_s", "peak_rss_mib")}
+        q = row["ratios"]
+        print(f"{r['triangles']:>10,} {r['load_s']:>8.2f} {r['first_image_s']:>11.2f} / {o['first_image_s']:5.2f} = "
+              f"{q['first_image_s']:4.2f}x {r['warm_s']:>9.3f} / {o['warm_s']:5.3f} = {q['warm_s']:4.2f}x "
+              f"{r['peak_rss_mib']:>9.0f} / {o['peak_rss_mib']:5.0f} = {q['peak_rss_mib']:4.2f}x")
+    if args.json:
+        args.json.write_text(json.dumps({"benchmark": "large-mesh sweep", "size": args.size, "machine": cpu_info(),
+                                         "date": datetime.date.today().isoformat(), "rows": rows}, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
 # -- per-stage profile -----------------------------------------------------------------------
 # Nothing in the library is changed: a sys.settrace tracer times the source lines of
 # scan_geometric, and Dr.Jit's kernel history times the kernels. Dr.Jit is lazy, so a
@@ -283,15 +380,25 @@ def open3d_depth(o3d, scene, origin, dirs, n_rays, results, repeat):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", type=int, default=1024, help="image width = height (pixels)")
-    ap.add_argument("--triangles", type=int, default=327680,
-                    help="minimum triangle count of the object (icosphere: 20 * 4^k)")
+    ap.add_argument("--triangles", default="327680",
+                    help="minimum triangle count of the object (icosphere: 20 * 4^k); a comma list "
+                         "(e.g. 20000,327680,1310720,5242880) runs the large-mesh sweep: time to the first "
+                         "depth image and peak memory per configuration, each in its own process")
     ap.add_argument("--repeat", type=int, default=5, help="timed runs after the warm-up")
     ap.add_argument("--json", type=Path, help="write the figures to this JSON file")
     ap.add_argument("--profile", action="store_true",
                     help="also print a per-stage breakdown and a cProfile of one scan")
+    ap.add_argument("--child", choices=["rangesim", "open3d"], help=argparse.SUPPRESS)
+    ap.add_argument("--mesh", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.size < 2 or args.repeat < 1 or args.triangles < 1:
+    counts = [int(t) for t in str(args.triangles).split(",") if t.strip()]
+    if args.size < 2 or args.repeat < 1 or not counts or min(counts) < 1:
         ap.error("--size >= 2, --repeat >= 1, --triangles >= 1")
+    if args.child:
+        return sweep_child(args)
+    if len(counts) > 1:
+        return sweep_main(args, counts)
+    args.triangles = counts[0]
 
     import drjit as dr
     import scipy

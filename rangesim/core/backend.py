@@ -60,3 +60,16 @@ def opaque_point(point):
 
     mi = mitsuba()
     return mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in point))
+
+
+def opaque_scalar(value, kind: str = "Float"):
+    """A Dr.Jit scalar of type ``mi.<kind>`` (Float, Int32, UInt32) entering kernels as an opaque variable.
+
+    Image sizes and focal lengths pass through this, so a scan at a new image size reuses the
+    kernels compiled for another (a literal would be baked into each kernel).
+    """
+    import drjit as dr
+
+    mi = mitsuba()
+    cls = getattr(mi, kind)
+    return dr.opaque(cls, int(value) if kind != "Float" else float(value))

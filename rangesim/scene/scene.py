@@ -62,8 +62,16 @@ class SceneObject:
 
     @property
     def watertight(self) -> bool:
-        """True for a closed, consistently wound mesh (its back faces are never visible)."""
-        return bool(self.mesh.is_watertight and self.mesh.is_winding_consistent)
+        """True for a closed, consistently wound mesh (its back faces are never visible).
+
+        Known from validation (``mesh.metadata["rangesim_closed"]``); computed once otherwise.
+        """
+        from rangesim.cad.meshes import is_closed
+
+        meta = self.mesh.metadata
+        if "rangesim_closed" not in meta:
+            meta["rangesim_closed"] = is_closed(np.asarray(self.mesh.faces))
+        return bool(meta["rangesim_closed"])
 
 
 @dataclass

@@ -25,7 +25,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_scalar
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
@@ -35,7 +35,7 @@ from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
-from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
+from rangesim.sensor.stripe_noise import StripeNoise, border_distance, simulate
 from rangesim.sensor.triangulation import triangulate
 
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined
@@ -86,7 +86,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
 
     # 7b. the peak error triangulated against the sheet
     error = mi.Float(draw.error_px.astype(np.float32))
-    measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + error, f), dr.nan)
+    measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + error, opaque_scalar(f)), dr.nan)
     points = dr.select(hit, points, dr.nan)
     normals = dr.select(hit, normals, dr.nan)
     outputs = {
@@ -120,29 +120,41 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
 
 def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float, z_ref: float,
                  status: np.ndarray, points, normals, sources, sheet_n, rays, signal, albedo):
-    """The inputs of :func:`rangesim.sensor.stripe_noise.simulate` from the camera-frame geometry."""
-    vec = lambda v: np.asarray(dr.ravel(v), dtype=np.float64).reshape(-1, 3)  # noqa: E731
-    P, n, src, sn, r = vec(points), vec(normals), vec(sources), vec(sheet_n), vec(rays)
+    """The inputs of :func:`rangesim.sensor.stripe_noise.simulate` from the camera-frame geometry.
+
+    The per-pixel geometry runs as one fused Dr.Jit kernel; only its five results (float32)
+    come to NumPy, where the draws and the correlated field are made.
+    """
+    mi = mitsuba()
+    to_laser = sources - points
+    d_laser = dr.norm(to_laser)
+    d_camera = dr.norm(points)
+    cos_i = dr.dot(normals, to_laser) / d_laser
+    amplitude = albedo * cos_i * dr.square(z_ref / d_laser)
+    sin_theta = dr.norm(dr.cross(points / d_camera, to_laser / d_laser))
+    f_op = opaque_scalar(f)
+    dzdu = dr.abs(points.z * sheet_n.x / (f_op * dr.dot(sheet_n, rays)))
+    half = 0.5 * noise.aperture_mm
+    sin_u = half * dr.rsqrt(half * half + d_camera * d_camera)
+    # the Dorsch limit (rangesim.sensor.stripe_noise.dorsch_sigma_mm) in pixels
+    speckle_px = noise.speckle_contrast * (noise.wavelength_nm * 1e-6) / (2 * np.pi * sin_u * sin_theta) / dzdu
+    magnification = f_op / d_camera
+    outputs = [cos_i, amplitude, magnification, speckle_px, dzdu]
+    outputs = [dr.select(dr.isfinite(v), v, 0.0) for v in outputs]
+    dr.eval(*outputs)
+    cos_i, amplitude, magnification, speckle_px, dzdu = (np.asarray(v, dtype=np.float32) for v in outputs)
+    del mi
     candidate = status == Status.VALID
-    with np.errstate(invalid="ignore", divide="ignore"):
-        to_laser = src - P
-        d_laser = np.linalg.norm(to_laser, axis=1)
-        d_camera = np.linalg.norm(P, axis=1)
-        cos_i = np.einsum("ij,ij->i", n, to_laser) / d_laser
-        amplitude = np.asarray(albedo, np.float64) * cos_i * (z_ref / d_laser) ** 2
-        sin_theta = np.linalg.norm(np.cross(P / d_camera[:, None], to_laser / d_laser[:, None]), axis=1)
-        dzdu = np.abs(P[:, 2] * sn[:, 0] / (f * np.einsum("ij,ij->i", sn, r)))
-        speckle_px = dorsch_sigma_mm(d_camera, sin_theta, noise.speckle_contrast, noise.wavelength_nm,
-                                     noise.aperture_mm) / dzdu
-        magnification = f / d_camera
-    # the stripe is truncated where the surface ends or the laser cannot reach it
-    reached = (status == Status.VALID) | (status == Status.DROPOUT)
-    border_mm = border_distance(reached.reshape(shape)) / np.where(candidate, magnification, 1.0)
+
+    def border_mm() -> np.ndarray:
+        # the stripe is truncated where the surface ends or the laser cannot reach it
+        reached = (status == Status.VALID) | (status == Status.DROPOUT)
+        return border_distance(reached.reshape(shape)) / np.where(candidate & (magnification > 0), magnification, 1.0)
+
     corr = noise.correlation_mm * f / z_ref
-    clean = lambda a: np.where(candidate & np.isfinite(a), a, 0.0)  # noqa: E731
     draw = simulate(noise, np.random.default_rng(seed), shape, candidate=candidate, signal=np.asarray(signal),
-                    cos_incidence=clean(cos_i), amplitude=clean(amplitude), magnification=clean(magnification),
-                    reference_magnification=f / z_ref, speckle_px=clean(speckle_px), border_mm=border_mm,
+                    cos_incidence=cos_i, amplitude=amplitude, magnification=magnification,
+                    reference_magnification=f / z_ref, speckle_px=speckle_px, border_mm=border_mm,
                     corr_px=(corr, corr))
     draw.depth_per_px = dzdu
     return draw

@@ -22,7 +22,7 @@ import math
 
 import drjit as dr
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import mitsuba, opaque_scalar
 
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 JUMP_RELATIVE = 0.005
@@ -41,6 +41,7 @@ def _near_break(points, lit, measured, width: int, window: int):
     mi = mitsuba()
     n = dr.width(lit)
     index = dr.arange(mi.Int32, n)
+    width = opaque_scalar(width, "Int32")  # a new image size compiles nothing
     col = index % width
     has_right = col < width - 1
     right = mi.UInt32(index + 1)
@@ -91,7 +92,8 @@ def stripe_mixing_shift(points, sheet_normal, lit, signal, measured, width: int,
     pixels = _near_break(points, lit, measured, width, window)
     if dr.width(pixels) == 0:
         return shift
-    col = mi.Int32(pixels % width)
+    width = opaque_scalar(width, "Int32")
+    col = mi.Int32(pixels) % width
     centre = dr.gather(mi.Vector3f, points, pixels)
     normal = dr.gather(mi.Vector3f, sheet_normal, pixels)
     gauss = -0.5 / (stripe_width * FWHM_TO_SIGMA) ** 2

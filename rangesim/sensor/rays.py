@@ -7,7 +7,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba, opaque_point, opaque_transform
+from rangesim.core.backend import mitsuba, opaque_point, opaque_scalar, opaque_transform
 
 #: shift (pixels) of the second ray cast by the shared-edge guard
 RECAST_OFFSET_PX = 1e-3
@@ -50,9 +50,12 @@ class PrimaryHits:
 def pixel_rays(K: np.ndarray, width: int, index, offset: float = 0.0):
     """Camera-frame rays K^-1 (j + 0.5, i + 0.5, 1) (z = 1) for flat pixel indices ``index``."""
     mi = mitsuba()
-    col = mi.Float(index % width) + (0.5 + offset)
-    row = mi.Float(index // width) + (0.5 + offset)
-    return mi.Vector3f((col - K[0, 2]) / K[0, 0], (row - K[1, 2]) / K[1, 1], 1.0)
+    # opaque: a new image size (and so a new focal length in pixels) compiles nothing
+    w = width if not isinstance(width, (int, np.integer)) else opaque_scalar(width, "UInt32")
+    fx, fy, cx, cy = (opaque_scalar(v) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+    col = mi.Float(index % w) + (0.5 + offset)
+    row = mi.Float(index // w) + (0.5 + offset)
+    return mi.Vector3f((col - cx) / fx, (row - cy) / fy, 1.0)
 
 
 def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
@@ -94,26 +97,27 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     mi = mitsuba()
     n_pix = height * width
     index = dr.arange(mi.UInt32, n_pix)
-    rays = pixel_rays(K, width, index)
+    w, h = opaque_scalar(width, "UInt32"), opaque_scalar(height, "UInt32")  # sizes as kernel inputs
+    rays = pixel_rays(K, w, index)
     t, p, n, part, face, d_world = _intersect(mscene, pose, rays, maxt)
     closed = mi.Bool(np.asarray(watertight, dtype=bool))
     dr.eval(t, p, n, part, face, d_world)
 
     hit = dr.isfinite(t)
     back = hit & (dr.dot(n, d_world) > 0) & dr.gather(mi.Bool, closed, part, hit)
-    col, row = index % width, index // width
-    inner = (col > 0) & (col < width - 1) & (row > 0) & (row < height - 1)
+    col, row = index % w, index // w
+    inner = (col > 0) & (col < w - 1) & (row > 0) & (row < h - 1)
     # a pixel whose four neighbours all see one object it does not see: a ray that slipped
     # through that object (a miss inside a silhouette, or a hit on whatever lies behind)
     around = dr.gather(mi.Int32, part, index + 1, inner)
     isolated = inner & (around != part)
-    for neighbour in (index - 1, index + width, index - width):
+    for neighbour in (index - 1, index + w, index - w):
         isolated &= dr.gather(mi.Int32, part, neighbour, inner) == around
     suspect = back | isolated
     recast = int(dr.count(suspect)[0]) if dr.width(suspect) else 0
     if recast:
         sel = dr.compress(suspect)
-        t2, p2, n2, part2, face2, d2 = _intersect(mscene, pose, pixel_rays(K, width, sel, RECAST_OFFSET_PX), maxt)
+        t2, p2, n2, part2, face2, d2 = _intersect(mscene, pose, pixel_rays(K, w, sel, RECAST_OFFSET_PX), maxt)
         ok = dr.isfinite(t2) & ~((dr.dot(n2, d2) > 0) & dr.gather(mi.Bool, closed, part2, dr.isfinite(t2)))
         dr.scatter(t, t2, sel, ok)
         dr.scatter(p, p2, sel, ok)

@@ -82,7 +82,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 from scipy import ndimage, special
@@ -281,10 +281,10 @@ def correlated_field(rng: np.random.Generator, shape: tuple[int, int], corr_px: 
     >>> bool(abs(f.std() - 1) < 0.1), bool(np.corrcoef(f[:, :-1].ravel(), f[:, 1:].ravel())[0, 1] > 0.85)
     (True, True)
     """
-    white = rng.standard_normal(shape)
     sr, sc = (max(float(s), 0.0) for s in corr_px)
     if sr < 0.05 and sc < 0.05:
-        return white
+        return rng.standard_normal(shape, dtype=np.float32)
+    white = rng.standard_normal(shape)
     field = ndimage.gaussian_filter(white, (sr, sc), mode="wrap", truncate=4.0)
     # the filter's L2 norm: its response to a unit impulse
     size = (min(shape[0], int(8 * sr) + 3) | 1, min(shape[1], int(8 * sc) + 3) | 1)
@@ -303,9 +303,9 @@ def draw_peak_error_px(rng: np.random.Generator, shape: tuple[int, int], sigmas:
     steps of q at a uniform random phase comes last.
     """
     n = shape[0] * shape[1]
-    white = rng.standard_normal(n)
-    field = correlated_field(rng, shape, corr_px).reshape(-1)
-    phase = rng.random(n)
+    white = rng.standard_normal(n, dtype=np.float32)
+    field = correlated_field(rng, shape, corr_px).reshape(-1).astype(np.float32, copy=False)
+    phase = rng.random(n, dtype=np.float32)
     error = sigmas["white"] * white + sigmas["correlated"] * field
     if quantization_px > 0:
         offset = phase * quantization_px  # where the true peak sits on the quantiser grid
@@ -380,7 +380,7 @@ class StripeDraw:
 
 def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int], *, candidate: np.ndarray,
              signal: np.ndarray, cos_incidence: np.ndarray, amplitude: np.ndarray, magnification: np.ndarray,
-             reference_magnification: float, speckle_px: np.ndarray, border_mm: np.ndarray,
+             reference_magnification: float, speckle_px: np.ndarray, border_mm: "np.ndarray | Callable",
              corr_px: tuple[float, float]) -> StripeDraw:
     """Dropouts, predicted std and peak errors of one scan: the one mechanism every scanner calls.
 
@@ -401,30 +401,41 @@ def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int
         Pixels per mm at the reference distance (the facing stripe's width w0).
     speckle_px : (N,) array
         Dorsch limit in pixels.
-    border_mm : (N,) array
-        Distance to the nearest outline or shadow border on the surface, mm.
+    border_mm : (N,) array, or a callable returning it
+        Distance to the nearest outline or shadow border on the surface, mm. A callable is
+        called only when a term needs it (the distance transform is the costliest step).
     corr_px : (rows, columns)
         Correlation std of the correlated terms, cells.
     """
     n = shape[0] * shape[1]
     candidate = np.asarray(candidate, bool).reshape(-1)
-    # a stripe cut by an outline or shadow border is dimmer: the detector sees S Phi(t)
-    signal = np.asarray(signal, np.float64) * partial_stripe_fraction(border_mm, cos_incidence, noise.stripe_width_mm)
+    s = noise.stripe_width_mm
+    signal = np.asarray(signal, np.float32)
+    # a stripe cut by an outline or shadow border is dimmer: the detector sees S Phi(t) with
+    # Phi >= 1/2, so only returns below twice the threshold can be tipped over by it
+    need_border = s > 0 and (noise.edge_gain > 0 or (
+        noise.min_signal > 0 and bool(np.any(candidate & (signal < 2 * noise.min_signal)))) or
+        noise.signal_contrast > 0)
+    border = (border_mm() if callable(border_mm) else border_mm) if need_border else None
+    if border is not None:
+        signal = signal * partial_stripe_fraction(border, cos_incidence, s).astype(np.float32)
     if noise.signal_contrast > 0 and noise.min_signal > 0:
         p = detection_probability(signal, noise.min_signal, noise.signal_contrast)
         detected = candidate & draw_detected(rng, shape, np.where(candidate, p, 0.0), corr_px)
     else:
         detected = candidate & (signal >= noise.min_signal)
-    s = noise.stripe_width_mm
-    w = stripe_width_px(cos_incidence, magnification, s, noise.psf_px)
-    w0 = float(stripe_width_px(np.ones(1), reference_magnification, s, noise.psf_px)[0])
-    ratio = w / w0 if w0 > 0 else np.ones(n)
+    if s > 0:
+        w = stripe_width_px(cos_incidence, magnification, s, noise.psf_px)
+        w0 = float(stripe_width_px(np.ones(1), reference_magnification, s, noise.psf_px)[0])
+        ratio = (w / w0).astype(np.float32)
+    else:  # no footprint: the imaged stripe is the blur alone, whatever the incidence
+        ratio = np.ones(n, np.float32)
     if noise.edge_gain > 0 and s > 0:
-        edge_px = partial_stripe_shift_mm(border_mm, cos_incidence, s) * magnification
+        edge_px = (partial_stripe_shift_mm(border, cos_incidence, s) * magnification).astype(np.float32)
     else:
-        edge_px = np.zeros(n)
+        edge_px = np.zeros(n, np.float32)
     sigmas = peak_sigma_px(noise, width_ratio=ratio, amplitude=amplitude, speckle_px=speckle_px, edge_px=edge_px)
-    sigmas = {k: np.where(candidate, v, 0.0) for k, v in sigmas.items()}
+    sigmas = {k: np.where(candidate, v, np.float32(0)) for k, v in sigmas.items()}
     error = draw_peak_error_px(rng, shape, sigmas, noise.quantization_px, corr_px)
-    return StripeDraw(error_px=np.where(detected, error, 0.0), sigma_px=np.where(detected, sigmas["total"], np.nan),
-                      detected=detected)
+    return StripeDraw(error_px=np.where(detected, error, np.float32(0)),
+                      sigma_px=np.where(detected, sigmas["total"], np.float32(np.nan)), detected=detected)
