@@ -110,7 +110,8 @@ def _read_and_validate(path: Path) -> trimesh.Trimesh:
 def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh.Trimesh:
     """Check a mesh is usable for ray casting and return a cleaned copy.
 
-    Duplicate vertices are merged (face order is kept) and a closed mesh wound inside-out is
+    Duplicate vertices are merged unless the mesh is already closed on its own vertex
+    indices (face order is kept either way), and a closed mesh wound inside-out is
     flipped, so its normals point outwards. Whether it is closed (:func:`is_closed`) is kept in
     ``mesh.metadata["rangesim_closed"]``.
 
@@ -131,11 +132,14 @@ def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise RangesimError("face indices out of range of the vertex list", source=source)
     clean = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
-    clean.merge_vertices()
-    # O(n) NumPy checks instead of trimesh's watertightness and mass properties (3x the time
-    # and memory at a million triangles), cached on the mesh for the scanner's shared-edge guard
-    faces = np.asarray(clean.faces)
+    # NumPy checks instead of trimesh's watertightness and mass properties (3x the time and
+    # memory at a million triangles), cached on the mesh for the scanner's shared-edge guard.
+    # A mesh already closed on its own indices shares every edge's vertices: nothing to weld.
     closed = is_closed(faces)
+    if not closed:
+        clean.merge_vertices()
+        faces = np.asarray(clean.faces)
+        closed = is_closed(faces)
     if closed and signed_volume(np.asarray(clean.vertices), faces) < 0:
         clean.invert()
     clean.metadata["rangesim_closed"] = closed
