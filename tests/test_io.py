@@ -267,3 +267,13 @@ def test_ply_readable_by_open3d(tmp_path):
     assert np.array_equal(cloud.point.positions.numpy(), scan.xyz[scan.valid])
     assert np.array_equal(cloud.point.normals.numpy(), scan.normal[scan.valid])
     assert np.array_equal(cloud.point.intensity.numpy()[:, 0], scan.intensity[scan.valid])
+
+
+def test_run_timings_stay_out_of_scan_files():
+    # the rendered mode's stage timings and kernel-cache counts vary per run: files stay byte-identical
+    import json
+
+    from rangesim.io.exr import encode_meta
+
+    text = encode_meta({"seed": 3, "seconds": {"paths": 0.1}, "kernels": {"first_tile": 2}, "frames": 9})
+    assert json.loads(text) == {"seed": 3, "frames": 9}

@@ -62,6 +62,19 @@ def renault_piece(**params) -> BuiltPart:
         Mesh, part tree (base_plate minus holes, united with neck, right_head, back_bump,
         left_head), sub-part labels, analytic features (hole rims, plate and head edges,
         the heads' and bump's sharp top rims as curves).
+
+    Examples
+    --------
+    >>> import rangesim as rs
+    >>> part = rs.cad.renault_piece()
+    >>> part.mesh.is_watertight, sorted(leaf.name for leaf in part.tree.leaves())[:3]
+    (True, ['back_bump', 'base_plate', 'hole_1'])
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 2 (Fig.
+       4-6).
     """
     unknown = sorted(set(params) - set(DEFAULTS))
     if unknown:

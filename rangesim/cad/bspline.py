@@ -569,6 +569,22 @@ class BSplineSurface(ParametricSurface):
     derivatives. Rational derivatives use the quotient rule on the homogeneous surface
     ``A = sum N N w P`` and ``w = sum N N w`` (Piegl & Tiller eq. 4.20). Curvature signs:
     see the module docstring (sphere with outward normal: ``H = -1/r``).
+
+    Examples
+    --------
+    >>> from rangesim.cad import BSplineSurface
+    >>> sphere = BSplineSurface.sphere_patch(50.0)             # exact (rational) sphere patch, r = 50 mm
+    >>> c = sphere.curvatures(0.3, 0.6)
+    >>> round(c["K"] * 2500, 9), round(c["H"] * 50, 9)        # K = 1/r^2, H = -1/r (outward normal)
+    (1.0, -1.0)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4
+       (B-spline curvatures, Fig. 11).
+    .. [2] L. Piegl, W. Tiller, "The NURBS Book", 2nd ed., Springer (1997),
+       doi:10.1007/978-3-642-59223-2.
     """
 
     def __init__(self, control_points, knots_u, knots_v, degree_u: int, degree_v: int, weights=None):

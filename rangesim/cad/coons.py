@@ -193,6 +193,22 @@ def coons_patch(
     ------
     RangesimError
         If a curve has the wrong shape, or two curves meeting at a corner disagree.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rangesim.cad import coons_patch
+    >>> t = np.linspace(0, 1, 11)[:, None]
+    >>> line = lambda a, b: a + t * (np.asarray(b, float) - a)      # straight boundaries: a flat square
+    >>> patch = coons_patch(line(np.zeros(3), [100, 0, 0]), line(np.array([0, 100.0, 0]), [100, 100, 0]),
+    ...                     line(np.zeros(3), [0, 100, 0]), line(np.array([100.0, 0, 0]), [100, 100, 0]))
+    >>> np.round(patch.evaluate(0.5, 0.5), 6).tolist(), round(abs(patch.curvatures(0.3, 0.7)["K"]), 9)
+    ([50.0, 50.0, 0.0], 0.0)
+
+    References
+    ----------
+    .. [1] S. A. Coons, "Surfaces for computer-aided design of space forms", MIT Project MAC,
+       MAC-TR-41 (1967).
     """
     curves = {
         name: BoundaryCurve(curve, name, samples)

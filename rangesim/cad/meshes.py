@@ -94,7 +94,10 @@ def _read_and_validate(path: Path) -> trimesh.Trimesh:
         # process=False keeps the face order of the file, so face indices in scans match it
         loaded = trimesh.load(path, process=False)
     except Exception as exc:
-        raise RangesimError(f"cannot read mesh ({type(exc).__name__}: {exc})", source=path) from exc
+        from rangesim.io.mesh_check import diagnose_mesh_file
+
+        problem = diagnose_mesh_file(path)  # name the real problem (truncated, empty, ...) where it can be told
+        raise RangesimError(problem or f"cannot read mesh ({type(exc).__name__}: {exc})", source=path) from exc
     if isinstance(loaded, trimesh.Scene):
         geometries = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
         if not geometries:

@@ -221,6 +221,21 @@ def surface_points(
     RangesimError
         A bad resolution, an empty mesh, a resolution so fine the sample count would
         exceed :data:`MAX_POINTS`, or a ``view``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import trimesh
+    >>> from rangesim.cad import surface_points
+    >>> cube = trimesh.creation.box((20, 20, 20))
+    >>> samples = surface_points(cube, 5.0)                    # every 5 mm
+    >>> samples.points.shape[1], bool(np.all(np.abs(samples.points).max(1) > 9.999))   # all on the faces
+    (3, True)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 3.
     """
     if view is not None:
         raise RangesimError(

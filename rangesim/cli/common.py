@@ -7,6 +7,9 @@ from pathlib import Path
 
 from rangesim.core.errors import RangesimError
 
+#: the lengths ``--units`` accepts for a bare mesh file
+MESH_UNITS = ("mm", "cm", "m", "in")
+
 
 def check_suffix(path: Path, allowed: Sequence[str], what: str) -> None:
     """Reject an output extension before any work is done."""
@@ -37,6 +40,65 @@ def writing(path: Path, tmp: Path | None = None) -> Iterator[None]:
         raise relabelled from exc
 
 
+def mesh_problem(path: Path) -> None:
+    """Raise a one-line error naming what is wrong with a broken mesh file (truncated, empty, ...)."""
+    from rangesim.io.mesh_check import diagnose_mesh_file
+
+    if path.is_file():
+        problem = diagnose_mesh_file(path)
+        if problem is not None:
+            raise RangesimError(problem, source=path)
+
+
+def load_scene_arg(source: str, units: str | None = None, option: str = "--units"):
+    """A scene from a scene .toml or a bare mesh file (with ``--units``), broken meshes named clearly."""
+    from rangesim.cad.meshes import MESH_SUFFIXES, load_mesh
+    from rangesim.core.units import UNITS_MM
+    from rangesim.scene import Scene, SceneObject, load_scene
+
+    path = Path(source)
+    is_mesh = path.suffix.lower() in MESH_SUFFIXES
+    if units is not None and not is_mesh:
+        raise RangesimError(f"{option} applies to a bare mesh file; a scene .toml sets its own units "
+                            "(units = ...)", source=path)
+    if not is_mesh:
+        return load_scene(path)
+    mesh_problem(path)
+    if units is None or UNITS_MM[units] == 1.0:
+        return load_scene(path)
+    mesh = load_mesh(path)
+    mesh.apply_scale(UNITS_MM[units])
+    return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path.resolve()))
+
+
+def make_out_dir(path: Path, option: str = "--out") -> None:
+    """Create an output folder; when folders above it are new too (a mistyped path), say so once on stderr."""
+    import sys
+
+    if not path.exists():
+        missing = [p for p in path.parents if not p.exists()]
+        with writing(path):
+            path.mkdir(parents=True, exist_ok=True)
+        if missing:
+            print(f"rangesim: note: {option} {path}: created {missing[-1]} and the folders below it",
+                  file=sys.stderr)
+    elif not path.is_dir():
+        raise RangesimError("output must be a directory", source=path)
+
+
+def positive(name: str, value: float | None, *, allow_zero: bool = False, upper: float | None = None) -> None:
+    """Reject a non-finite, negative (or zero) or too large numeric option, naming it."""
+    import math
+
+    if value is None:
+        return
+    if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        need = "a non-negative" if allow_zero else "a positive"
+        raise RangesimError(f"{name} must be {need} number, got {value:g}")
+    if upper is not None and value >= upper:
+        raise RangesimError(f"{name} must be below {upper:g}, got {value:g}")
+
+
 def build_model(name: str, param_texts: Sequence[str]):
     """A built-in CAD model from its name and ``--param KEY=VALUE`` texts (TOML values)."""
     import tomllib
@@ -54,4 +116,24 @@ def build_model(name: str, param_texts: Sequence[str]):
             params[key.strip()] = tomllib.loads(f"v = {raw}")["v"]
         except tomllib.TOMLDecodeError as exc:
             raise RangesimError(f"--param {key}: not a TOML value: {raw!r}") from exc
-    return MODELS[name](**params)
+    import warnings
+
+    from rangesim.cad.models import check_model_params
+
+    check_model_params(name, params)
+    try:
+        # numeric warnings of a build that then fails are noise before the one-line error
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            part = MODELS[name](**params)
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return part
+    except RangesimError:
+        raise
+    except TypeError as exc:  # an unknown keyword
+        raise RangesimError(f"--param: {exc}", source=name) from exc
+    except (ValueError, ArithmeticError, IndexError, KeyError) as exc:  # numpy.linalg.LinAlgError included
+        given = ", ".join(f"{k}={v!r}" for k, v in params.items())
+        raise RangesimError(f"cannot build the model with --param {given} ({type(exc).__name__}: {exc})",
+                            source=name) from exc

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.cli.common import writing
+from rangesim.cli.common import make_out_dir, positive, writing
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate.runs import load_scan_with_labels
 from rangesim.io.atomic import atomic_path
@@ -71,7 +71,7 @@ def _kinect_twin(scan, labels, args, out: Path) -> int:
 
     metrics, twin_scan, edge_maps = compare_kinect(scan, labels, args.sensor, seed=args.seed, return_scans=True)
     metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **metrics}
-    out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(out)
     _write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
     shapes = ", ".join(s["kind"] for s in metrics["shapes"])
@@ -91,13 +91,28 @@ def cmd_compare(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
+    positive("--sigma-mm", args.sigma_mm, allow_zero=True)
+    positive("--tolerance", args.tolerance)
+    if args.min_cos is not None and not 0 <= args.min_cos < 1:
+        raise RangesimError(f"--min-cos must lie in [0, 1), got {args.min_cos:g}")
+    for name in ("theta_deg", "alpha_deg"):
+        value = getattr(args, name)
+        if value is not None and not abs(value) < 90:
+            raise RangesimError(f"--{name.replace('_', '-')} must lie within (-90, 90) degrees, got {value:g}")
+    if args.fit and args.no_fit:
+        raise RangesimError("--fit and --no-fit exclude each other")
+    if args.seed < 0:
+        raise RangesimError(f"--seed must not be negative, got {args.seed}")
     path = Path(args.recorded)
     scan, labels = load_scan_with_labels(path, args.conf)
+    from rangesim.cli.edge_commands import require_grid
+
+    require_grid(scan, path)
     if args.mesh is None and labels is not None and _structured_light(args.sensor):
         return _kinect_twin(scan, labels, args, out)
     if args.mesh is None:
         metrics = _detectors_only(scan, labels, args, out)
-        out.mkdir(parents=True, exist_ok=True)
+        make_out_dir(out)
         _write_json(metrics, out / "metrics.json")
         for name, e in metrics["edges"].items():
             score = f"  F1 {e['f1']:.3f}" if "f1" in e else ""
@@ -121,7 +136,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     metrics, twin_scan, edge_maps = compare(scan, args.mesh, args.sensor, params=fixed, fit=fit,
                                             seed=args.seed, return_scans=True)
     metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **metrics}
-    out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(out)
     _write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
     p = metrics["params"]

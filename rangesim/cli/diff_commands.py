@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rangesim.cli.common import check_suffix, writing
+from rangesim.cli.common import check_suffix, positive, writing
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
@@ -13,6 +13,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     check_suffix(out, (".png",), "difference pictures")
+    positive("--limit", args.limit)
     a, b = load_scan(args.scan_a), load_scan(args.scan_b)
     labels = tuple(args.labels) if args.labels else (Path(args.scan_a).stem, Path(args.scan_b).stem)
     with writing(out):

@@ -7,9 +7,17 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import writing
+from rangesim.cli.common import make_out_dir, positive, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
+
+
+def require_grid(scan, path: Path) -> None:
+    """Edge detectors need an organized range image, not a list of points."""
+    h, w = scan.shape
+    if min(h, w) < 3:
+        raise RangesimError(f"not an organized range image ({w:,} x {h:,} points): the edge detectors need a "
+                            "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
 
 
 def cmd_detect(args: argparse.Namespace) -> int:
@@ -21,12 +29,15 @@ def cmd_detect(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
+    positive("--tolerance", args.tolerance)
+    positive("--crease-deg", args.crease_deg, upper=180)
     path = Path(args.scan)
     scan, segment_labels = load_scan_with_labels(path, args.conf)
+    require_grid(scan, path)
     truth = scan_truth(scan, args.scene, segment_labels, crease_deg=args.crease_deg)
     results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
 
-    out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(out)
     for method, result in results.items():
         edge_map = result["edge_map"]
         arrays = {"mask": edge_map.mask, "labels": edge_map.labels, "strength": edge_map.strength}

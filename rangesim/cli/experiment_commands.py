@@ -50,10 +50,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def cmd_dataset(args: argparse.Namespace) -> int:
     """``rangesim dataset``: render views from random poses with ground truth and a manifest."""
+    from rangesim.cli.common import positive
     from rangesim.cli.main import _parse_setting
     from rangesim.experiments.dataset import make_dataset
 
     changes = dict(_parse_setting(text) for text in args.set)
+    if args.views < 1:
+        raise RangesimError(f"--views must be at least 1, got {args.views}")
+    if args.seed < 0:
+        raise RangesimError(f"--seed must not be negative, got {args.seed}")
+    positive("--cap-deg", args.cap_deg, allow_zero=True, upper=180.0001)
+    positive("--crease-deg", args.crease_deg, upper=180)
     distance = None
     if args.distance is not None:
         lo, hi = args.distance

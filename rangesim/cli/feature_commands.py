@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import writing
+from rangesim.cli.common import make_out_dir, positive, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -36,7 +36,14 @@ def cmd_features(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
+    positive("--rmin", args.rmin)
+    positive("--rmax", args.rmax)
+    if args.rmin >= args.rmax:
+        raise RangesimError(f"--rmin ({args.rmin:g}) must be less than --rmax ({args.rmax:g})")
     scan = load_scan(args.scan)
+    from rangesim.cli.edge_commands import require_grid
+
+    require_grid(scan, Path(args.scan))
     scene = args.scene
     if scene is None and scan.xyz_true is not None:
         source = scan.meta.get("scene")
@@ -53,7 +60,7 @@ def cmd_features(args: argparse.Namespace) -> int:
     ell = F.ellipses(edge_map, scan if scene else None, model, explained=(*segs, *circ, *arc))
     feats = {"segments": segs, "circles": circ, "arcs": arc, "ellipses": ell}
     rows = F.relations(segs, circ, ell)
-    out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(out)
     report = {"scan": str(args.scan), "edges": args.edges, "scene": scene, **_plain(feats)}
     if scene is not None and scan.xyz_true is not None:
         from rangesim.evaluate._feature_scores import feature_scores

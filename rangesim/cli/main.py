@@ -27,6 +27,7 @@ import sys
 import time
 import tomllib
 import traceback
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -34,13 +35,13 @@ from typing import Any
 import numpy as np
 
 from rangesim import __version__
-from rangesim.cli.common import check_suffix, writing
+from rangesim.cli.common import MESH_UNITS, check_suffix, load_scene_arg, writing
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.io import atomic_path, load_scan, save_scan
-from rangesim.scene import load_scene
 from rangesim.sensor import intensity_image, load_sensor, preset_names, scan
+from rangesim.sensor._scan import EmptyScanWarning
 from rangesim.viz import save_preview
 from rangesim.viz.intensity import save_intensity_image
 
@@ -70,8 +71,13 @@ def _debug() -> bool:
     return os.environ.get("RANGESIM_DEBUG", "") not in ("", "0")
 
 
+def _printable(text: str) -> str:
+    """Control characters and raw bytes of a broken file escaped (\\x1b), never sent to the terminal."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def _error(message: str) -> None:
-    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
+    print(f"{PROG}: error: {_printable(_one_line(message))}", file=sys.stderr)
 
 
 def _os_error_message(exc: OSError) -> str:
@@ -110,8 +116,11 @@ def _load_pose(path: Path) -> np.ndarray:
     if suffix == ".npy":
         try:
             data = np.load(path, allow_pickle=False)
-        except (ValueError, EOFError) as exc:
-            raise RangesimError(f"cannot read pose ({type(exc).__name__}: {exc})", source=path) from exc
+        except (ValueError, EOFError, SyntaxError, TypeError, OSError) as exc:  # a broken header: SyntaxError
+            raise RangesimError(f"cannot read pose ({type(exc).__name__}: {_one_line(exc)[:200]})",
+                                source=path) from exc
+        except Exception as exc:  # noqa: BLE001 -- tokenize.TokenError and the like from a mangled header
+            raise RangesimError(f"not a readable .npy file ({type(exc).__name__})", source=path) from exc
     elif suffix == ".json":
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
@@ -186,11 +195,20 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if args.keep_frames and sensor.mode != "rendered":
         raise RangesimError("--keep-frames needs the rendered mode (--set mode=rendered, or "
                             "mode = \"rendered\" in the sensor file)", source=sensor.source)
-    scene = load_scene(args.scene)
-    if args.keep_frames:
-        result, stack = scan(scene, sensor, pose=pose, seed=args.seed, keep_frames=True)
-    else:
-        result = scan(scene, sensor, pose=pose, seed=args.seed)
+    scene = load_scene_arg(args.scene, args.units)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", EmptyScanWarning)
+        if args.keep_frames:
+            result, stack = scan(scene, sensor, pose=pose, seed=args.seed, keep_frames=True)
+        else:
+            result = scan(scene, sensor, pose=pose, seed=args.seed)
+    for w in caught:
+        if not issubclass(w.category, EmptyScanWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        elif args.keep_empty:
+            print(f"{PROG}: warning: {_one_line(str(w.message))}", file=sys.stderr)
+        else:
+            raise RangesimError(f"{w.message}; nothing written (--keep-empty writes it anyway)", source=args.scene)
     extras = []
     if intensity is not None:
         image = intensity_image(scene, sensor, pose=result.pose, seed=args.seed)
@@ -283,6 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"preset name or sensor .toml (default: {DEFAULT_SENSOR})")
     p.add_argument("--out", required=True, metavar="OUT",
                    help=f"scan file ({', '.join(SCAN_SUFFIXES)})")
+    p.add_argument("--units", choices=MESH_UNITS, help="length unit of a bare mesh file (default: mm)")
+    p.add_argument("--keep-empty", action="store_true",
+                   help="write a scan with no (or almost no) valid pixel instead of failing (a warning)")
     p.add_argument("--preview", metavar="PNG", help="also write a preview picture (.png)")
     p.add_argument("--seed", type=int, default=0, metavar="N", help="noise seed (default: 0)")
     p.add_argument("--pose", metavar="POSE", help="4x4 camera-to-world matrix (.json or .npy); "

@@ -30,6 +30,17 @@ def curvature_edges(k1: ArrayLike, k2: ArrayLike, threshold: float) -> np.ndarra
     -------
     bool array, the shape of k1
         True at edge points; False where either curvature is NaN.
+
+    Examples
+    --------
+    >>> from rangesim.curvature import curvature_edges
+    >>> curvature_edges([0.5, 0.5, 0.01], [0.4, 0.0, 0.01], threshold=0.2).tolist()   # corner, crease, flat
+    [True, False, False]
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
     k1 = np.asarray(k1, dtype=np.float64)
     k2 = np.asarray(k2, dtype=np.float64)

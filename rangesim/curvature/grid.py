@@ -66,6 +66,28 @@ def curvature_scan(
         ``dir1``, ``dir2`` (H, W, 3) fitted unit normal (towards the camera) and principal
         directions; ``n_points`` (H, W) int valid pixels used. Float arrays are float64,
         NaN at invalid pixels and where the fit is not possible.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> curv = rs.curvature.curvature_scan(scan)
+    >>> sorted(curv)[:4], curv["K"].shape
+    (['H', 'K', 'dir1', 'dir2'], (120, 128))
+
+    References
+    ----------
+    .. [1] P. J. Besl, R. C. Jain, "Invariant surface characteristics for 3D object recognition
+       in range images", Computer Vision, Graphics, and Image Processing 33(1), 33-80 (1986),
+       doi:10.1016/0734-189X(86)90220-3.
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
     window = int(window)
     if window < 3 or window % 2 == 0:

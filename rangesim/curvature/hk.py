@@ -66,6 +66,21 @@ def hk_sign_map(
     -------
     uint8 array, the shape of K
         :class:`SurfaceType` values; UNDEFINED where K or H is NaN.
+
+    Examples
+    --------
+    >>> from rangesim.curvature import hk_sign_map, surface_type_name
+    >>> labels = hk_sign_map([0.0004, 0.0, -0.0004, 0.0], [-0.02, -0.01, 0.0, 0.0])
+    >>> [surface_type_name(t) for t in labels]
+    ['peak', 'ridge', 'minimal surface', 'flat']
+
+    References
+    ----------
+    .. [1] P. J. Besl, R. C. Jain, "Invariant surface characteristics for 3D object recognition
+       in range images", Computer Vision, Graphics, and Image Processing 33(1), 33-80 (1986),
+       doi:10.1016/0734-189X(86)90220-3.
+    .. [2] P. J. Besl, R. C. Jain, "Segmentation through variable-order surface fitting", IEEE
+       TPAMI 10(2), 167-192 (1988), doi:10.1109/34.3881.
     """
     K = np.asarray(K, dtype=np.float64)
     H = np.asarray(H, dtype=np.float64)

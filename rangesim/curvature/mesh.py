@@ -112,6 +112,24 @@ def curvature_mesh(
         ``K`` (V,) 1/mm^2; ``H``, ``k1``, ``k2`` (V,) 1/mm with k1 >= k2; ``normal``,
         ``dir1``, ``dir2`` (V, 3) fitted unit normal (outward) and principal directions;
         ``n_points`` (V,) neighbourhood sizes. NaN where the fit failed.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import trimesh
+    >>> from rangesim.curvature import curvature_mesh
+    >>> sphere = trimesh.creation.icosphere(subdivisions=4, radius=50.0)
+    >>> curv = curvature_mesh(sphere)
+    >>> round(float(np.median(curv["H"])) * 50, 2), round(float(np.median(curv["K"])) * 2500, 2)   # r H, r^2 K
+    (-1.01, 1.01)
+
+    References
+    ----------
+    .. [1] P. J. Besl, R. C. Jain, "Invariant surface characteristics for 3D object recognition
+       in range images", Computer Vision, Graphics, and Image Processing 33(1), 33-80 (1986),
+       doi:10.1016/0734-189X(86)90220-3.
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     vnormals = np.asarray(mesh.vertex_normals, dtype=np.float64)

@@ -335,6 +335,23 @@ def fit_quadric(
         Curvatures (sign convention in the module docstring), directions, fitted normals;
         NaN where there are fewer than ``min_points`` neighbours or the fit is degenerate
         (e.g. all neighbours on a line).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rangesim.curvature import fit_quadric
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.uniform(-5, 5, (200, 2))
+    >>> points = np.c_[xy, (xy ** 2).sum(1) / (2 * 100.0)]     # a paraboloid of radius 100 mm at 0
+    >>> fit = fit_quadric([[0.0, 0.0, 0.0]], points[None], orient=[[0.0, 0.0, 1.0]])   # one centre, 200 points
+    >>> round(float(fit.H[0]), 4), round(float(fit.K[0]) * 1e4, 3)
+    (0.01, 1.0)
+
+    References
+    ----------
+    .. [1] P. J. Besl, R. C. Jain, "Invariant surface characteristics for 3D object recognition
+       in range images", Computer Vision, Graphics, and Image Processing 33(1), 33-80 (1986),
+       doi:10.1016/0734-189X(86)90220-3.
     """
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     points = np.asarray(points, dtype=np.float64)

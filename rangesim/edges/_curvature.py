@@ -69,6 +69,28 @@ def curvature(
     EdgeMap
         ``method="curvature"``; ``strength`` is ``min(|k1|, |k2|)`` in 1/mm (NaN where the
         fit failed); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> edges = rs.edges.curvature(scan)
+    >>> edges.method, bool(edges.mask.any())
+    ('curvature', True)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
+    .. [2] P. J. Besl, R. C. Jain, "Invariant surface characteristics for 3D object recognition
+       in range images", Computer Vision, Graphics, and Image Processing 33(1), 33-80 (1986),
+       doi:10.1016/0734-189X(86)90220-3.
     """
     window = int(window)
     if window < 3 or window % 2 == 0:

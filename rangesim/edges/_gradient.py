@@ -325,6 +325,25 @@ def gradient(
         ``direction`` is the angle in [0, pi) of the (x, y) vector across the edge, for
         every pixel with a response (and across the discontinuity at jump pixels);
         ``labels`` CONVEX/CONCAVE on creases, JUMP on the near side of jumps.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> edges = rs.edges.gradient(scan)
+    >>> edges.method, edges.mask.shape, bool(edges.mask.any())
+    ('gradient', (120, 128), True)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)

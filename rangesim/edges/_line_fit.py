@@ -146,6 +146,25 @@ def line_fit(
     (N,) bool array for a point list; EdgeMap for a scan
         ``method="line_fit"``; ``strength`` 1.0 at edge pixels, 0 at other valid pixels,
         NaN at invalid ones; ``direction`` None.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> edges = rs.edges.line_fit(scan)
+    >>> edges.method, bool(edges.mask.any())
+    ('line_fit', True)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
     if not hasattr(points_or_scan, "xyz"):
         tol = 15.0 if angle_tol_deg is None else angle_tol_deg

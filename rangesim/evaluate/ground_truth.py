@@ -543,6 +543,25 @@ def ground_truth_edges(
     (H, W) uint8
         :class:`~rangesim.core.constants.EdgeLabel` per pixel: 0 none, 1 jump, 2 convex,
         3 concave.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> truth = rs.ground_truth_edges(scan, scene)
+    >>> truth.shape == scan.shape, sorted(int(v) for v in set(truth.ravel()))   # none, jump, convex, concave
+    (True, [0, 1, 2, 3])
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
     from rangesim.scene.scene import load_scene
 

@@ -252,8 +252,17 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
         "views": records,
     }
     manifest_path = write_json(out / MANIFEST, manifest)
+    _remove_stale_views(views_dir, [_stem(p["index"], p["key"]) for p in payloads], fmt)
     return DatasetRun(out, manifest_path, views, len(todo), views - len(todo), time.perf_counter() - start,
                       where, records)
+
+
+def _remove_stale_views(views_dir: Path, stems: list[str], fmt: str) -> None:
+    """Delete view files of an earlier plan (other views, counts or formats) left in a reused folder."""
+    keep = {name for stem in stems for name in (f"{stem}.{fmt}", f"{stem}_truth.npz", f"{stem}.json")}
+    for path in views_dir.glob("*"):
+        if path.is_file() and path.name not in keep and path.suffix in (".exr", ".npz", ".json"):
+            path.unlink(missing_ok=True)
 
 
 def _write_view(views_dir: Path, payload: dict[str, Any], result: dict[str, Any], fmt: str) -> None:

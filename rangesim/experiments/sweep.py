@@ -131,8 +131,14 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
     if plots and len(table):
         from rangesim.viz.sweep_plots import save_sweep_plots
 
-        files += save_sweep_plots(table, spec.swept_keys, out / "plots", title=spec.name,
-                                  tolerance_px=spec.tolerance_px)
+        plot_files = save_sweep_plots(table, spec.swept_keys, out / "plots", title=spec.name,
+                                      tolerance_px=spec.tolerance_px)
+        files += plot_files
+        # plots of an earlier plan (another grid, other swept keys) in a reused folder would mislead
+        current = {Path(f).resolve() for f in plot_files}
+        for stale in (out / "plots").glob("*.png"):
+            if stale.resolve() not in current:
+                stale.unlink(missing_ok=True)
     return SweepRun(out, table, len(tasks), len(todo) - len(failures), len(tasks) - len(todo),
                     time.perf_counter() - start, where, files)
 

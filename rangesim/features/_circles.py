@@ -9,6 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangesim.core.conics import fit_circle
+from rangesim.core.errors import RangesimError
 from rangesim.features._edge_points import angular_coverage, edge_points
 
 
@@ -84,6 +85,7 @@ def circle_hypotheses(
     nr = len(r_bins)
     pad = int(np.ceil(r_bins[-1] / cell)) + 2
     Hp, Wp = Hc + 2 * pad, Wc + 2 * pad
+    _check_accumulator(nr, Hp, Wp, len(xy) * len(r_of), radii)
     rc = (r_of * np.cos(k_of) / cell).astype(np.float32)
     rs_ = (r_of * np.sin(k_of) / cell).astype(np.float32)
     ct, st = np.cos(theta).astype(np.float32), np.sin(theta).astype(np.float32)
@@ -220,6 +222,41 @@ def _dedupe(items: list, key_c, key_r, dist_px: float) -> list:
     return kept
 
 
+def _memory_budget() -> int | None:
+    """Bytes available: RANGESIM_MEMORY_LIMIT (bytes, or with K/M/G/T) if smaller than MemAvailable."""
+    import os
+    import re
+
+    budget = None
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            budget = next((int(line.split()[1]) * 1024 for line in f if line.startswith("MemAvailable:")), None)
+    except (OSError, ValueError, IndexError):
+        pass
+    match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([kKmMgGtT]?)(?:i?[bB])?\s*", os.environ.get("RANGESIM_MEMORY_LIMIT", ""))
+    if match:
+        try:
+            limit = int(float(match.group(1)) * 1024 ** " KMGT".index(match.group(2).upper() or " "))
+        except ValueError:
+            limit = None
+        if limit and (budget is None or limit < budget):
+            budget = limit
+    return budget
+
+
+def _check_accumulator(n_radii: int, rows: int, cols: int, n_votes: int, radii) -> None:
+    """Refuse (one line, naming the radius range) a Hough accumulator that would not fit in memory."""
+    cells = float(n_radii) * rows * cols
+    estimate = cells * 28 + float(n_votes) * 40  # int64 counts + float32 copies; int32/float32 vote tables
+    budget = _memory_budget()
+    if budget is not None and estimate > budget:
+        raise RangesimError(
+            f"circle radii {radii[0]:g}..{radii[1]:g} px (--rmin/--rmax) need a Hough accumulator of {cells:,.0f} "
+            f"cells, about {estimate / 1024**3:,.1f} GB, more than the {budget / 1024**3:,.1f} GB available; "
+            "use a smaller --rmax"
+        )
+
+
 def circles(
     edge_map: Any,
     radii: tuple[float, float] = (5, 80),
@@ -255,6 +292,28 @@ def circles(
     list of Circle
         Strongest (largest support) first; near-duplicates (centre and radius within 2 px)
         removed.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> found = rs.features.circles(rs.edges.gradient(scan), radii=(5, 30))
+    >>> len(found), round(found[0].radius)                  # the hole's rim, radius in pixels
+    (1, 9)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5 (the
+       gradient-directed Hough transform).
+    .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
+       in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
     xy, _ = edge_points(edge_map, keep)
     found = []

@@ -260,6 +260,27 @@ def ellipses(
     Returns
     -------
     list of Ellipse
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> found = rs.features.ellipses(rs.edges.gradient(scan), scan, scene)
+    >>> len(found) > 0, round(found[0].axes[0])           # the hole's rim seen obliquely, semi-axis in px
+    (True, 9)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
+    .. [2] A. Fitzgibbon, M. Pilu, R. B. Fisher, "Direct least square fitting of ellipses", IEEE
+       TPAMI 21(5), 476-480 (1999), doi:10.1109/34.765658.
     """
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     H, W = mask.shape

@@ -88,6 +88,27 @@ def lines(
     Returns
     -------
     list of Segment, longest first.
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> segments = rs.features.lines(rs.edges.gradient(scan), scan)
+    >>> len(segments) >= 4, all(s.length_mm > 20 for s in segments)    # the plate's outline
+    (True, True)
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
+    .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
+       in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     if keep is not None:

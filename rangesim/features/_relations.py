@@ -35,6 +35,26 @@ def relations(segments: list = (), circles: list = (), ellipses: list = (), arcs
     ellipse's major axis, degrees in [0, 90]) and, with ``pairs``,
     ``segment_segment_distance`` (px) and ``segment_segment_angle`` (degrees).
     Arcs count as circles (``arc:i``).
+
+    Examples
+    --------
+    >>> import rangesim as rs, trimesh
+    >>> from rangesim.core.geometry import look_at
+    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
+    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
+    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
+    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
+    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+
+    >>> edges = rs.edges.gradient(scan)
+    >>> rows = rs.features.relations(rs.features.lines(edges, scan), rs.features.circles(edges, radii=(5, 30)))
+    >>> rows[0]["relation"], rows[0]["unit"]
+    ('circle_segment_distance', 'px')
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
     rows: list[dict] = []
     round_ = [("circle", i, c) for i, c in enumerate(circles)] + [("arc", i, a) for i, a in enumerate(arcs)]

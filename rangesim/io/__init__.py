@@ -11,6 +11,10 @@ the writers above there.
 """
 from __future__ import annotations
 
+import struct
+import tokenize
+import zipfile
+import zlib
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
@@ -122,6 +126,9 @@ def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
         return reader(path, **kwargs)
     except RangesimError:
         raise
-    except (OSError, ValueError, KeyError, EOFError) as exc:
-        # safety net for registered readers that let a parser error through
-        raise RangesimError(f"cannot read scan ({type(exc).__name__}: {exc})", path) from exc
+    except (OSError, ValueError, KeyError, EOFError, IndexError, TypeError, SyntaxError, struct.error, zlib.error,
+            zipfile.BadZipFile, tokenize.TokenError) as exc:
+        # safety net for registered readers that let a parser error through (a mangled .npy header in an
+        # .npz raises SyntaxError or TokenError); the message stays one printable line
+        detail = " ".join(str(exc).split())[:200].encode("ascii", "backslashreplace").decode()
+        raise RangesimError(f"cannot read scan ({type(exc).__name__}: {detail})", path) from exc

@@ -59,12 +59,19 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"{type(obj).__name__} is not JSON-serialisable")
 
 
+#: meta keys not written to files: wall-clock timings and Dr.Jit kernel-cache counts of a run
+VOLATILE_META = ("seconds", "kernels")
+
+
 def encode_meta(meta: dict[str, Any], source: str | Path | None = None) -> str:
     """``meta`` as JSON text; numpy arrays become nested lists, numpy scalars Python ones.
 
     Tuples come back as lists and non-string keys as strings (JSON has nothing else).
-    ``source`` (the file being written) only labels the error.
+    ``source`` (the file being written) only labels the error. Run statistics that vary
+    from run to run (:data:`VOLATILE_META`: the rendered mode's stage timings and kernel
+    cache counts) stay in memory only, so a scan file is byte-identical for the same seed.
     """
+    meta = {k: v for k, v in meta.items() if k not in VOLATILE_META}
     try:
         return json.dumps(meta, default=_json_default)
     except (TypeError, ValueError) as exc:

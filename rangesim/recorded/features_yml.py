@@ -127,8 +127,12 @@ def _block(lines: list[list], i: int, indent: int) -> tuple[Any, int]:
 
 def obj_vertices(path: str | Path) -> np.ndarray:
     """(N, 3) float vertices of a Wavefront OBJ, in file order (``v`` lines only)."""
-    rows = [ln.split()[1:4] for ln in Path(path).read_text().splitlines() if ln.startswith("v ")]
-    return np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    text = Path(path).read_bytes().decode("utf-8", errors="replace")
+    rows = [ln.split()[1:4] for ln in text.splitlines() if ln.startswith("v ")]
+    try:
+        return np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    except ValueError as exc:
+        raise RangesimError(f"OBJ vertices are not 3 numbers each ({exc})", source=path) from None
 
 
 def curves_to_features(curves: list[dict], vertices: np.ndarray | None = None, *,
@@ -197,14 +201,22 @@ def read_features_yml(path: str | Path, obj: str | Path | None = None, matrix: n
         guess = path.with_name(path.name.replace("_features.yml", "_trimesh.obj"))
         obj = guess if guess.is_file() and guess != path else None
     # only the ``curves`` section is needed: stop at the next top-level key
-    text = path.read_text()
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise RangesimError(f"not a UTF-8 text file (byte {exc.start:,})", source=path) from None
     lines = text.splitlines(keepends=True)
     start = next((n for n, ln in enumerate(lines) if ln.startswith("curves:")), None)
     if start is None:
         raise RangesimError(f"{path}: no 'curves' section")
     end = next((n for n in range(start + 1, len(lines))
                 if lines[n][:1] not in (" ", "-", "#", "\n", "\r", "")), len(lines))
-    doc = parse_block_yaml("".join(lines[start:end]))
-    vertices = obj_vertices(obj) if obj is not None else None
-    feats = curves_to_features(doc.get("curves") or [], vertices, sharp_only=sharp_only)
+    try:
+        doc = parse_block_yaml("".join(lines[start:end]))
+        vertices = obj_vertices(obj) if obj is not None else None
+        feats = curves_to_features(doc.get("curves") or [], vertices, sharp_only=sharp_only)
+    except RangesimError:
+        raise
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:
+        raise RangesimError(f"cannot read the curves ({type(exc).__name__}: {exc})", source=path) from exc
     return feats.transformed(np.asarray(matrix, float)) if matrix is not None else feats

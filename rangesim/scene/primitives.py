@@ -13,7 +13,11 @@ def _positive(spec: dict[str, Any], key: str, default=None, source="scene") -> f
     value = spec.get(key, default)
     if value is None:
         raise RangesimError(f"primitive needs '{key}'", source=source)
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise RangesimError(f"primitive '{key}' must be a number or a list of numbers, got {value!r}",
+                            source=source) from None
     if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
         raise RangesimError(f"primitive '{key}' must be positive, got {value!r}", source=source)
     return arr

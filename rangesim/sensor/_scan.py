@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
 
+from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
+from rangesim.io.memory import check_memory
 from rangesim.scene.scene import Scene, load_scene
 from rangesim.sensor.config import Sensor, load_sensor
 
@@ -28,6 +31,111 @@ def default_pose(scene: Scene, sensor: Sensor) -> np.ndarray:
     near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
     distance = min(max(fit, near + radius), max(near + radius, far - radius))
     return scene.framing_pose(distance)
+
+
+#: measured peak memory per pixel of each mode (bytes; 2000 x 2000 px scans, NumPy and Dr.Jit
+#: buffers together), and the fixed cost of a scan; see :func:`scan_memory_estimate`
+BYTES_PER_PIXEL = {"geometric": 500, "rendered": 600, "structured_light": 1100}
+BASE_BYTES = 300 * 1024**2
+#: a scan with fewer valid pixels than this fraction (or none) is reported by :func:`empty_scan_reason`
+ALMOST_EMPTY = 0.001
+
+
+class EmptyScanWarning(UserWarning):
+    """A scan has no (or almost no) valid pixel; the message says why."""
+
+
+def scan_memory_estimate(sensor: Sensor, keep_frames: bool = False) -> tuple[float, str]:
+    """(bytes, the parameters that set them) of a scan with this sensor, before it is run.
+
+    Pixels x bytes per pixel of the mode; in the rendered mode with ``keep_frames`` also the
+    frame stack (frames x pixels x 4 bytes; ``render.frames = "auto"`` is estimated as one
+    frame per ``laser.step`` across the field of view at the far end of the working range).
+    """
+    w, h = sensor.width, sensor.height
+    pixels = float(w) * float(h)
+    what = f"camera.width x camera.height = {w:,} x {h:,} px"
+    estimate = BASE_BYTES + pixels * BYTES_PER_PIXEL.get(sensor.mode, BYTES_PER_PIXEL["geometric"])
+    if sensor.mode == "rendered":
+        render = sensor.params["render"]
+        estimate += pixels * 16 * int(render["spp"])
+        if keep_frames:
+            frames = render["frames"]
+            if frames == "auto":
+                far = sensor.params["range"]["far"]
+                fov = math.radians(sensor.params["camera"]["fov_deg"])
+                frames = max(3, int(math.ceil(2 * far * math.tan(fov / 2) / sensor.params["laser"]["step"])))
+            estimate += pixels * 4.0 * frames
+            what += f" x {frames:,} frames (--keep-frames)"
+    return estimate, what
+
+
+def _winding_number(mesh, point: np.ndarray) -> float:
+    """Generalised winding number of a closed mesh at a point: about 1 inside, 0 outside."""
+    tri = np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)] - point
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
+    det = np.einsum("ij,ij->i", a, np.cross(b, c))
+    div = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb \
+        + np.einsum("ij,ij->i", b, c) * la
+    return float(np.sum(2 * np.arctan2(det, div)) / (4 * np.pi))
+
+
+def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | None:
+    """Why a scan has no (or almost no) valid pixel, in one line; None if it has enough.
+
+    Examples of the reasons: hits outside the working range (with their depths), a scene
+    smaller than a pixel (a bare mesh in metres), a camera inside a part, no surface in view,
+    the laser shadowed, the signal below ``noise.min_signal``.
+    """
+    total = int(result.status.size)
+    n_valid = int(np.count_nonzero(result.status == Status.VALID))
+    if total == 0 or n_valid >= max(1, ALMOST_EMPTY * total):
+        return None
+    head = f"{n_valid:,} valid pixels of {total:,}" if n_valid else "no valid pixel"
+    head = f"{sensor.name}: {head}"
+    pose = np.asarray(result.pose, float)
+    eye = pose[:3, 3]
+    # a camera inside a closed part sees only its inside
+    try:
+        for obj in scene.objects:
+            mesh = obj.mesh
+            if len(mesh.faces) <= 2_000_000 and mesh.is_watertight and _winding_number(mesh, eye) > 0.5:
+                return (f"{head}: the camera at ({eye[0]:.1f}, {eye[1]:.1f}, {eye[2]:.1f}) mm is inside "
+                        f"{obj.name!r}")
+    except Exception:  # noqa: BLE001 -- a diagnosis must never fail the scan
+        pass
+    counts = {code: int(np.count_nonzero(result.status == code)) for code in Status}
+    near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
+    n_hits = total - counts[Status.MISS]
+    distance = float(np.linalg.norm(eye - scene.bounds.mean(axis=0)))
+    size = 2 * scene.bounding_radius
+    footprint = max(distance, 1e-9) / sensor.focal_px
+    if size < 2 * footprint:
+        return (f"{head}: the scene is only {size:.3g} mm across, under {max(size / footprint, 0):.2g} pixel at "
+                f"{distance:.0f} mm (a bare mesh in metres or inches? give its units, e.g. --units m)")
+    lo, hi = scene.bounds
+    nearest = float(np.linalg.norm(eye - np.clip(eye, lo, hi)))
+    if n_hits == 0 and nearest > far:
+        return (f"{head}: the scene lies {nearest:,.0f} mm or more from the camera, beyond the end of "
+                f"{sensor.name}'s working range {near:g}-{far:g} mm")
+    if n_hits == 0:
+        return (f"{head}: the camera sees no surface (nothing of the scene within its "
+                f"{sensor.params['camera']['fov_deg']:g} degree field of view from this pose)")
+    worst = max((Status.OUT_OF_RANGE, Status.SHADOW, Status.DROPOUT), key=lambda code: counts[code])
+    if worst == Status.OUT_OF_RANGE and result.xyz_true is not None:
+        z = np.asarray(result.xyz_true, float)[..., 2][result.status == Status.OUT_OF_RANGE]
+        z = z[np.isfinite(z)]
+        if z.size:
+            share = f"all {n_hits:,}" if counts[worst] == n_hits else f"{counts[worst]:,} of the {n_hits:,}"
+            return (f"{head}: {share} hits lie at {z.min():.0f}-{z.max():.0f} mm, outside "
+                    f"{sensor.name}'s working range {near:g}-{far:g} mm")
+    if worst == Status.OUT_OF_RANGE:
+        return f"{head}: {counts[worst]:,} of the {n_hits:,} hits lie outside the working range {near:g}-{far:g} mm"
+    if worst == Status.SHADOW:
+        return f"{head}: the laser cannot reach {counts[worst]:,} of the {n_hits:,} surface points the camera sees"
+    return (f"{head}: the return signal of {counts[worst]:,} of the {n_hits:,} hits is below noise.min_signal "
+            f"({sensor.params['noise']['min_signal']:g}; grazing or dark surfaces)")
 
 
 def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
@@ -74,20 +182,26 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
     rot = pose[:3, :3]
     if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
         raise RangesimError("pose rotation must be orthonormal and right-handed")
+    if keep_frames and sensor.mode != "rendered":
+        raise RangesimError("only the rendered mode has frames (set mode = \"rendered\")", source=sensor.source)
+    if sensor.mode not in ("geometric", "rendered", "structured_light"):
+        raise RangesimError(f"sensor mode {sensor.mode!r} is not available", source=sensor.source)
+    estimate, what = scan_memory_estimate(sensor, keep_frames)
+    check_memory(estimate, what, source=sensor.source)
     if sensor.mode == "geometric":
         from rangesim.sensor.geometric import scan_geometric
 
-        if keep_frames:
-            raise RangesimError("only the rendered mode has frames (set mode = \"rendered\")", source=sensor.source)
-        return scan_geometric(scene, sensor, pose, int(seed))
-    if sensor.mode == "rendered":
+        output = scan_geometric(scene, sensor, pose, int(seed))
+    elif sensor.mode == "rendered":
         from rangesim.sensor.rendered import scan_rendered
 
-        return scan_rendered(scene, sensor, pose, int(seed), keep_frames=keep_frames)
-    if sensor.mode == "structured_light":
+        output = scan_rendered(scene, sensor, pose, int(seed), keep_frames=keep_frames)
+    else:
         from rangesim.sensor.structured_light import scan_structured_light
 
-        if keep_frames:
-            raise RangesimError("only the rendered mode has frames (set mode = \"rendered\")", source=sensor.source)
-        return scan_structured_light(scene, sensor, pose, int(seed))
-    raise RangesimError(f"sensor mode {sensor.mode!r} is not available", source=sensor.source)
+        output = scan_structured_light(scene, sensor, pose, int(seed))
+    result = output[0] if isinstance(output, tuple) else output
+    reason = empty_scan_reason(result, scene, sensor)
+    if reason is not None:
+        warnings.warn(reason, EmptyScanWarning, stacklevel=2)
+    return output

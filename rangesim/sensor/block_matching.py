@@ -30,7 +30,7 @@ def box_sum(a: np.ndarray, r: int) -> np.ndarray:
 
     Examples
     --------
-    >>> box_sum(np.ones((5, 5)), 1)[2, 2], bool(np.isnan(box_sum(np.ones((5, 5)), 1)[0, 0]))
+    >>> float(box_sum(np.ones((5, 5)), 1)[2, 2]), bool(np.isnan(box_sum(np.ones((5, 5)), 1)[0, 0]))
     (9.0, True)
     """
     h, w = a.shape

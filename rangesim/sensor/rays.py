@@ -64,7 +64,7 @@ def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
     to_world = opaque_transform(pose)
     d_world = dr.normalize(to_world @ rays)
     ray = mi.Ray3f(opaque_point(pose[:3, 3]), d_world)
-    ray.maxt = maxt
+    ray.maxt = opaque_scalar(maxt)  # depends on the image size (the corner ray)
     si = mscene.scene.ray_intersect(ray)
     hit = si.is_valid()
     t = dr.select(hit, si.t, dr.inf)

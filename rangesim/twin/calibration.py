@@ -135,6 +135,24 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
         (valid-mask IoU of the noise-free geometry), ``fitted`` (names fitted),
         ``recorded_noise_mm`` (robust std of the recorded residuals), ``side`` and the
         ``stage`` (for :func:`rangesim.twin.twin`).
+
+    Examples
+    --------
+    Needs the shared data (``../shared/data``, or ``$RANGESIM_DATA``), so not run as a test:
+
+    >>> import rangesim as rs
+    >>> bunny = "../shared/data/stanford-bunny/"
+    >>> views = [rs.load_scan(bunny + f"{v}.ply", conf=bunny + "bun.conf") for v in ("bun000", "bun045")]  # doctest: +SKIP
+    >>> sensor = rs.calibrate(views, bunny + "reconstruction/bun_zipper.ply",
+    ...                       "sensors/uncalibrated/cyberware_3030.toml")                                # doctest: +SKIP
+
+    References
+    ----------
+    .. [1] R. G. Dorsch, G. Haeusler, J. M. Herrmann, "Laser triangulation: fundamental
+       uncertainty in distance measurement", Applied Optics 33(7), 1306-1314 (1994),
+       doi:10.1364/AO.33.001306.
+    .. [2] B. Curless, M. Levoy, "Better optical triangulation through spacetime analysis", ICCV
+       1995, 987-994, doi:10.1109/ICCV.1995.466772.
     """
     if not isinstance(recorded, RangeScan):  # several views: one joint calibration
         from rangesim.twin.joint import calibrate_views

@@ -65,7 +65,7 @@ def fit_plane(points: np.ndarray, rng: np.random.Generator, iterations: int = 30
     >>> rng = np.random.default_rng(0)
     >>> p = np.c_[rng.uniform(-100, 100, (500, 2)), np.full(500, 900.0)]
     >>> n, d, inl = fit_plane(p, rng)
-    >>> np.round(n, 6).tolist(), round(d, 3), bool(inl.all())
+    >>> (np.round(n, 6) + 0.0).tolist(), round(d, 3), bool(inl.all())
     ([0.0, 0.0, -1.0], 900.0, True)
     """
     p = np.asarray(points, np.float64)

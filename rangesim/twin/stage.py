@@ -574,6 +574,25 @@ def twin(recorded_scan: RangeScan, mesh: Any, sensor: Any = None, *, theta_deg: 
         Noise seed.
     stage : TwinStage, optional
         A prepared stage (reuses the ray casts).
+
+    Examples
+    --------
+    Needs the shared data (``../shared/data``, or ``$RANGESIM_DATA``), so not run as a test:
+
+    >>> import rangesim as rs
+    >>> bunny = "../shared/data/stanford-bunny/"
+    >>> recorded = rs.load_scan(bunny + "bun000.ply", conf=bunny + "bun.conf")            # doctest: +SKIP
+    >>> sim = rs.twin(recorded, bunny + "reconstruction/bun_zipper.ply", "cyberware_3030")   # doctest: +SKIP
+    >>> sim.shape == recorded.shape                                                          # doctest: +SKIP
+    True
+
+    References
+    ----------
+    .. [1] R. G. Dorsch, G. Haeusler, J. M. Herrmann, "Laser triangulation: fundamental
+       uncertainty in distance measurement", Applied Optics 33(7), 1306-1314 (1994),
+       doi:10.1364/AO.33.001306.
+    .. [2] B. Curless, M. Levoy, "Better optical triangulation through spacetime analysis", ICCV
+       1995, 987-994, doi:10.1109/ICCV.1995.466772.
     """
     if stage is None:
         stage = TwinStage(recorded_scan, mesh, sensor)

@@ -38,6 +38,19 @@ def volumetric_model(tree: PartNode) -> dict[str, Any]:
     centroid (3,), inertia (3, 3), principal moments (3,) ascending, principal axes (3, 3)
     rows, plus ``radii_of_gyration`` (3,) mm), and for inner nodes ``expression`` (of the
     children) and ``expanded`` (of the leaves).
+
+    Examples
+    --------
+    >>> import rangesim as rs
+    >>> from rangesim.volumes.csg import volumetric_model
+    >>> model = volumetric_model(rs.cad.green_piece().tree)
+    >>> model["expanded"][:40], model["operation"]
+    ('green_piece = ((((plate - hole_1 - hole_', 'difference')
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 6.
     """
     def visit(node: PartNode, role: str) -> dict[str, Any]:
         props = dict(node.properties)

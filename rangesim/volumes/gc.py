@@ -373,6 +373,21 @@ def generalized_cylinders(mesh: trimesh.Trimesh, resolution: float, parts: Any =
     -------
     list of GeneralizedCylinder
         In sub-part order, each with its ``junctions``.
+
+    Examples
+    --------
+    >>> from rangesim.volumes import generalized_cylinders
+    >>> from rangesim.volumes.shapes import deformed_ellipsoid
+    >>> mesh, centre_line = deformed_ellipsoid(subdivisions=3)
+    >>> [len(generalized_cylinders(mesh, 4.0, max_recursions=r)[0].sections) for r in (1, 3, 5)]   # Fig. 18
+    [3, 9, 33]
+
+    References
+    ----------
+    .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
+       (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 6.
+    .. [2] T. O. Binford, "Visual perception by computer", IEEE Conference on Systems and
+       Control, Miami (1971) (generalized cylinders).
     """
     labels, names, solids = _subparts(mesh, parts, crease_deg, min_area_frac)
     gcs = []

@@ -1,0 +1,266 @@
+"""Malformed inputs and arguments: exit code 2, one line on stderr naming the culprit, no traceback,
+no file left behind (issue 16). Memory limits are exercised with RANGESIM_MEMORY_LIMIT, never by
+allocating."""
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from rangesim.cli.main import main
+
+SENSOR_TOML = """\
+name = "tiny"
+[camera]
+width = 64
+height = 48
+fov_deg = 40.0
+[laser]
+baseline = 150.0
+[range]
+near = 100.0
+far = 1000.0
+"""
+
+SCENE_TOML = """\
+units = "mm"
+
+[[object]]
+name = "box"
+primitive = "box"
+size = [50, 40, 20]
+translate = [0, 0, 10]
+albedo = 0.6
+
+[[object]]
+name = "ground"
+primitive = "plane"
+size = [300, 300]
+albedo = 0.3
+
+[view]
+position = [0, -180, 300]
+look_at = [0, 0, 10]
+"""
+
+#: garbage bytes for every extension a reader accepts
+GARBAGE = b"\x00\xff\xfe garbage \x89\x1b[31m not a file of this kind \x07\x00" * 3
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("bad_inputs")
+    (d / "tiny.toml").write_text(SENSOR_TOML)
+    (d / "scene.toml").write_text(SCENE_TOML)
+    for suffix in ("exr", "npz", "ply", "pcd", "msu", "xyz", "stl", "obj", "off", "glb", "json", "npy", "conf"):
+        (d / f"garbage.{suffix}").write_bytes(GARBAGE)
+    (d / "empty.stl").write_bytes(b"")
+    (d / "empty.exr").write_bytes(b"")
+    box = trimesh.creation.box(extents=(60.0, 40.0, 30.0))
+    binary = box.export(file_type="stl")
+    (d / "truncated.stl").write_bytes(binary[:-30])
+    (d / "short_header.stl").write_bytes(binary[:60])
+    (d / "zero.stl").write_bytes(b"\x00" * 80 + struct.pack("<I", 0))
+    ply = box.export(file_type="ply")
+    (d / "truncated.ply").write_bytes(ply[: len(ply) // 2])
+    (d / "no_end_header.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\n")
+    (d / "bad.glb").write_bytes(b"glTF" + struct.pack("<II", 2, 100000) + b"\x00" * 20)
+    (d / "points_only.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 20\nproperty float x\nproperty float y\nproperty float z\n"
+        "end_header\n" + "".join(f"{i} {i % 3} {300 + i}\n" for i in range(20)))
+    (d / "bad_size.toml").write_text(SCENE_TOML.replace("size = [50, 40, 20]", 'size = "big"'))
+    (d / "far.toml").write_text(SCENE_TOML.replace("position = [0, -180, 300]", "position = [0, -1800, 3000]"))
+    (d / "pose.json").write_text("[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1]]")
+    (d / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (d / "a_file").write_text("not a directory")
+    return d
+
+
+@pytest.fixture(scope="module")
+def good_scan(inputs, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bad_inputs_scan") / "scan.exr"
+    assert main(["scan", str(inputs / "scene.toml"), "--sensor", str(inputs / "tiny.toml"), "--out", str(out)]) == 0
+    return out
+
+
+def _scan(scene, *extra):
+    return ["scan", "{in}/" + scene, "--sensor", "{in}/tiny.toml", "--out", "{out}/scan.exr", *extra]
+
+
+#: (arguments with {in}, {out} and {scan} placeholders, words the one error line must hold)
+CASES = [
+    # garbage files of every extension a reader accepts
+    *[pytest.param(["info", "{in}/garbage." + s], ["garbage." + s], id=f"info-garbage-{s}")
+      for s in ("exr", "npz", "ply", "pcd", "msu", "xyz")],
+    pytest.param(["info", "{in}/empty.exr"], ["empty.exr"], id="info-empty-exr"),
+    pytest.param(["info", "{in}/scene.toml"], ["scene.toml", "cannot read scans"], id="info-unknown-suffix"),
+    pytest.param(["info", "{in}/missing.exr"], ["missing.exr", "no such file"], id="info-missing"),
+    *[pytest.param(["detect", "{in}/garbage." + s, "--out", "{out}/d"], ["garbage." + s], id=f"detect-garbage-{s}")
+      for s in ("exr", "ply", "pcd", "msu")],
+    # garbage and broken meshes
+    *[pytest.param(_scan("garbage." + s), ["garbage." + s], id=f"scan-garbage-{s}")
+      for s in ("stl", "obj", "off", "glb", "ply")],
+    pytest.param(_scan("empty.stl"), ["empty.stl", "empty"], id="scan-empty-stl"),
+    pytest.param(_scan("truncated.stl"), ["truncated.stl", "truncated binary STL", "12 triangles"],
+                 id="scan-truncated-stl"),
+    pytest.param(_scan("short_header.stl"), ["short_header.stl", "84-byte header"], id="scan-stl-short-header"),
+    pytest.param(_scan("zero.stl"), ["zero.stl", "0 triangles"], id="scan-stl-zero-triangles"),
+    pytest.param(_scan("truncated.ply"), ["truncated.ply"], id="scan-truncated-ply"),
+    pytest.param(_scan("no_end_header.ply"), ["no_end_header.ply", "end_header"], id="scan-ply-no-end-header"),
+    pytest.param(_scan("bad.glb"), ["bad.glb", "truncated GLB"], id="scan-truncated-glb"),
+    pytest.param(_scan("nan.obj"), ["nan.obj", "NaN"], id="scan-nan-obj"),
+    pytest.param(["model", "green_piece", "--out", "{out}/m.stl", "--param", "holes=[[0,0,100]]"],
+                 ["green_piece", "holes"], id="model-hole-too-big"),
+    pytest.param(["model", "green_piece", "--out", "{out}/m.stl", "--param", "segments=100000"],
+                 ["segments", "4096"], id="model-segments-limit"),
+    pytest.param(["model", "green_piece", "--out", "{out}/m.stl", "--param", "segments=2.5"],
+                 ["segments", "integer"], id="model-segments-not-integer"),
+    pytest.param(["model", "green_piece", "--out", "{out}/m.stl", "--param", "no_such=1"],
+                 ["no_such"], id="model-unknown-param"),
+    # scene and pose files
+    pytest.param(_scan("bad_size.toml"), ["bad_size.toml", "size"], id="scene-size-not-numbers"),
+    pytest.param(_scan("scene.toml", "--pose", "{in}/pose.json"), ["pose.json", "4x4"], id="pose-not-4x4"),
+    pytest.param(_scan("scene.toml", "--pose", "{in}/garbage.json"), ["garbage.json"], id="pose-garbage-json"),
+    pytest.param(_scan("scene.toml", "--pose", "{in}/garbage.npy"), ["garbage.npy"], id="pose-garbage-npy"),
+    # scans that see nothing
+    pytest.param(_scan("far.toml"), ["far.toml", "working range", "--keep-empty"], id="scan-beyond-range"),
+    pytest.param(_scan("scene.toml", "--units", "m"), ["--units", "bare mesh"], id="units-on-a-scene"),
+    # sizes: refused up front against a small limit, nothing allocated
+    pytest.param(_scan("scene.toml", "--set", "camera.width=20000", "--set", "camera.height=20000"),
+                 ["camera.width x camera.height", "20,000 x 20,000", "GB"], id="scan-too-many-pixels"),
+    pytest.param(["model", "green_piece", "--out", "{out}/m.stl", "--param", "segments=4000"],
+                 ["segments=4000", "GB"], id="model-segments-memory"),
+    pytest.param(["features", "{scan}", "--rmax", "100000", "--out", "{out}/f"], ["--rmax", "accumulator"],
+                 id="features-rmax-memory"),
+    # arguments
+    pytest.param(_scan("scene.toml", "--set", "noise.sigma_px=-1"), ["noise.sigma_px"], id="set-negative-noise"),
+    pytest.param(_scan("scene.toml", "--set", "camera.width=0"), ["camera.width"], id="set-zero-width"),
+    pytest.param(_scan("scene.toml", "--set", "nope.key=1"), ["nope"], id="set-unknown-table"),
+    pytest.param(_scan("scene.toml", "--seed", "-1"), ["seed"], id="scan-negative-seed"),
+    pytest.param(["scan", "{in}/scene.toml", "--out", "{out}/scan.tiff"], ["scan.tiff", "supported"],
+                 id="scan-out-suffix"),
+    pytest.param(["scan", "{in}/scene.toml", "--sensor", "{in}/tiny.toml", "--out", "{in}/a_file/scan.exr"],
+                 ["a_file is not a directory"], id="scan-out-under-a-file"),
+    pytest.param(["features", "{scan}", "--rmin", "50", "--rmax", "10", "--out", "{out}/f"], ["--rmin", "--rmax"],
+                 id="features-rmin-above-rmax"),
+    pytest.param(["features", "{scan}", "--rmin", "-5", "--out", "{out}/f"], ["--rmin"], id="features-negative-rmin"),
+    pytest.param(["detect", "{scan}", "--tolerance", "-1", "--out", "{out}/d"], ["--tolerance"],
+                 id="detect-negative-tolerance"),
+    pytest.param(["detect", "{scan}", "--crease-deg", "0", "--out", "{out}/d"], ["--crease-deg"],
+                 id="detect-crease-zero"),
+    pytest.param(["detect", "{scan}", "--crease-deg", "nan", "--out", "{out}/d"], ["--crease-deg"],
+                 id="detect-crease-nan"),
+    pytest.param(["detect", "{in}/points_only.ply", "--out", "{out}/d"], ["points_only.ply", "organized"],
+                 id="detect-points-only-ply"),
+    pytest.param(["diff", "{scan}", "{scan}", "--limit", "-1", "--out", "{out}/d.png"], ["--limit"],
+                 id="diff-negative-limit"),
+    pytest.param(["compare", "{scan}", "--sigma-mm", "-1", "--out", "{out}/c"], ["--sigma-mm"],
+                 id="compare-negative-sigma"),
+    pytest.param(["compare", "{scan}", "--min-cos", "2", "--out", "{out}/c"], ["--min-cos"], id="compare-min-cos"),
+    pytest.param(["dataset", "--scene", "{in}/scene.toml", "--views", "0", "--out", "{out}/ds"], ["--views"],
+                 id="dataset-zero-views"),
+    pytest.param(["dataset", "--scene", "{in}/scene.toml", "--cap-deg", "-3", "--out", "{out}/ds"], ["--cap-deg"],
+                 id="dataset-negative-cap"),
+]
+
+
+@pytest.mark.parametrize(("args", "words"), CASES)
+def test_bad_input_is_one_line_exit_2_no_outputs(inputs, good_scan, tmp_path, capsys, monkeypatch, args, words):
+    monkeypatch.setenv("RANGESIM_MEMORY_LIMIT", "1G")
+    out = tmp_path / "out"
+    before = sorted(p.name for p in inputs.iterdir())
+    argv = [a.replace("{in}", str(inputs)).replace("{out}", str(out)).replace("{scan}", str(good_scan))
+            for a in args]
+    code = main(argv)
+    captured = capsys.readouterr()
+    assert code == 2, captured.err
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rangesim: error: "), captured.err
+    assert "Traceback" not in captured.err and "internal error" not in captured.err
+    assert lines[0].isprintable(), lines[0]  # no raw bytes or escape codes echoed to the terminal
+    for word in words:
+        assert word in lines[0], lines[0]
+    assert not out.exists() or [p for p in out.rglob("*") if p.is_file()] == []
+    assert sorted(p.name for p in inputs.iterdir()) == before  # nothing beside the inputs either
+
+
+def test_table_is_large_enough():
+    assert len(CASES) >= 40
+
+
+def test_keep_empty_writes_the_scan_with_a_warning(inputs, tmp_path, capsys):
+    out = tmp_path / "scan.npz"
+    code = main(["scan", str(inputs / "far.toml"), "--sensor", str(inputs / "tiny.toml"), "--out", str(out),
+                 "--keep-empty"])
+    err = capsys.readouterr().err
+    assert code == 0 and out.is_file()
+    assert err.startswith("rangesim: warning: ") and "working range" in err and len(err.splitlines()) == 1
+
+
+def test_units_scales_a_bare_mesh(inputs, tmp_path, capsys):
+    mesh = tmp_path / "box_m.stl"
+    trimesh.creation.box(extents=(0.06, 0.04, 0.03)).export(mesh)  # metres
+    code = main(["scan", str(mesh), "--sensor", str(inputs / "tiny.toml"), "--out", str(tmp_path / "a.npz")])
+    assert code == 2 and "--units" in capsys.readouterr().err
+    code = main(["scan", str(mesh), "--sensor", str(inputs / "tiny.toml"), "--out", str(tmp_path / "b.npz"),
+                 "--units", "m"])
+    assert code == 0
+    scan = np.load(tmp_path / "b.npz", allow_pickle=False)
+    assert "depth" in scan.files and np.isfinite(scan["depth"]).sum() > 0
+
+
+def test_latin1_text_meshes_load(tmp_path):
+    from rangesim.cad.meshes import load_mesh
+
+    box = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    stl = trimesh.exchange.stl.export_stl_ascii(box).replace("solid", "solid caf\xe9", 1)
+    (tmp_path / "latin1.stl").write_bytes(stl.encode("latin-1"))
+    (tmp_path / "latin1.obj").write_bytes(b"# caf\xe9 cr\xe8me\n" + trimesh.exchange.obj.export_obj(box).encode())
+    for name in ("latin1.stl", "latin1.obj"):
+        assert len(load_mesh(tmp_path / name).faces) == 12
+
+
+def test_memory_limit_names_parameter(monkeypatch):
+    from rangesim.core.errors import RangesimError
+    from rangesim.io.memory import check_memory, parse_size
+
+    assert parse_size("2G") == 2 * 1024**3 and parse_size("512m") == 512 * 1024**2
+    monkeypatch.setenv("RANGESIM_MEMORY_LIMIT", "1M")
+    with pytest.raises(RangesimError, match="the thing needs about 2.0 MB"):
+        check_memory(2 * 1024**2, "the thing")
+    check_memory(1000, "small")  # fits
+    monkeypatch.setenv("RANGESIM_MEMORY_LIMIT", "lots")
+    with pytest.raises(RangesimError, match="RANGESIM_MEMORY_LIMIT"):
+        check_memory(1000, "small")
+
+
+def test_reused_dataset_folder_loses_stale_views(tmp_path):
+    from rangesim.experiments.dataset import _remove_stale_views
+
+    views = tmp_path / "views"
+    views.mkdir()
+    for name in ("0000_a.exr", "0000_a_truth.npz", "0000_a.json", "0001_b.exr", "0001_b.json", "0000_a.npz",
+                 "notes.txt"):
+        (views / name).write_text("x")
+    _remove_stale_views(views, ["0000_a"], "exr")
+    assert sorted(p.name for p in views.iterdir()) == ["0000_a.exr", "0000_a.json", "0000_a_truth.npz", "notes.txt"]
+
+
+def test_empty_scan_warnings_say_why():
+    import rangesim as rs
+    from rangesim.core.geometry import look_at
+    from rangesim.sensor._scan import EmptyScanWarning
+
+    sensor = rs.load_sensor({"name": "tiny", "camera": {"width": 32, "height": 24, "fov_deg": 40.0},
+                             "laser": {"baseline": 150.0}, "range": {"near": 100.0, "far": 1000.0}})
+    box = trimesh.creation.box(extents=(60.0, 60.0, 60.0))
+    with pytest.warns(EmptyScanWarning, match="camera at .* is inside 'object0'"):
+        rs.scan([box], sensor, pose=look_at((0, 0, 10), (0, 0, -30), up=(0, 1, 0)))
+    tiny = trimesh.creation.box(extents=(0.06, 0.06, 0.06))  # a 60 mm box written in metres
+    with pytest.warns(EmptyScanWarning, match=r"only 0\.104 mm across.*--units m"):
+        rs.scan([tiny], sensor)
+    with pytest.warns(EmptyScanWarning, match="outside tiny's working range 100-1000 mm"):
+        rs.scan([box], sensor, pose=look_at((0, 0, 1500), (0, 0, 0), up=(0, 1, 0)))
