@@ -146,10 +146,11 @@ def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float
     del mi
     candidate = status == Status.VALID
 
-    def border_mm() -> np.ndarray:
+    def border_mm(where: np.ndarray) -> np.ndarray:
         # the stripe is truncated where the surface ends or the laser cannot reach it
         reached = (status == Status.VALID) | (status == Status.DROPOUT)
-        return border_distance(reached.reshape(shape)) / np.where(candidate & (magnification > 0), magnification, 1.0)
+        return border_distance(reached.reshape(shape), where=where) / np.where(
+            candidate & (magnification > 0), magnification, 1.0)
 
     corr = noise.correlation_mm * f / z_ref
     draw = simulate(noise, np.random.default_rng(seed), shape, candidate=candidate, signal=np.asarray(signal),

@@ -297,11 +297,14 @@ def _percent(n: int, total: int) -> str:
 
 
 def default_title(scan: RangeScan) -> str:
-    """``"<sensor> -- H×W px, N valid (P %)"``, the sensor name from ``scan.meta``."""
+    """``"<sensor> -- W × H px, N valid (P %)"``, width first as the command line prints it.
+
+    The sensor name comes from ``scan.meta``.
+    """
     h, w = scan.shape
     name = (scan.meta.get("sensor") or {}).get("name") or "range scan"
     n_valid = int(_valid_depth_mask(scan).sum())
-    return f"{name} — {h}×{w} px, {n_valid:,} valid ({100.0 * n_valid / max(h * w, 1):.1f} %)"
+    return f"{name} — {w} × {h} px (W × H), {n_valid:,} valid ({100.0 * n_valid / max(h * w, 1):.1f} %)"
 
 
 def save_preview(
