@@ -8,6 +8,7 @@
 from rangesim import (  # noqa: E402  (subpackages as rs.*)
     cad,
     curvature,
+    datasets,  # small scenes and scans for examples and doctests
     edges,
     evaluate,
     features,
@@ -27,5 +28,5 @@ __all__ = [
     "RangeScan", "RangesimError", "Status", "Scene", "SceneObject", "Sensor",
     "load_scene", "load_sensor", "load_scan", "save_scan", "scan", "default_pose",
     "__version__", "cad", "curvature", "edges", "evaluate", "features", "volumes", "ground_truth_edges",
-    "twin", "calibrate", "intensity_image",
+    "twin", "calibrate", "intensity_image", "datasets",
 ]

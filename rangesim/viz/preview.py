@@ -354,13 +354,8 @@ def save_preview(
 
     Examples
     --------
-    >>> import rangesim as rs, trimesh
-    >>> from rangesim.core.geometry import look_at
-    >>> plate = trimesh.creation.box((60, 40, 10)).difference(trimesh.creation.cylinder(8, 20))
-    >>> table = trimesh.creation.box((300, 300, 2)).apply_translation((0, 0, -6))
-    >>> scene = rs.load_scene([plate, table])        # a plate with a hole, on a table
-    >>> sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 128, "camera.height": 120})
-    >>> scan = rs.scan(scene, sensor, pose=look_at((20, -60, 300), (0, 0, 0)), seed=0)
+    >>> import rangesim as rs
+    >>> scan = rs.datasets.plate_scan()        # a plate with a hole, on a table, 128 x 120
 
     >>> import tempfile, pathlib
     >>> from rangesim.viz import save_preview
