@@ -225,7 +225,7 @@ def test_latin1_text_meshes_load(tmp_path):
 
 def test_memory_limit_names_parameter(monkeypatch):
     from rangesim.core.errors import RangesimError
-    from rangesim.io.memory import check_memory, parse_size
+    from rangesim.core.memory import check_memory, parse_size
 
     assert parse_size("2G") == 2 * 1024**3 and parse_size("512m") == 512 * 1024**2
     monkeypatch.setenv("RANGESIM_MEMORY_LIMIT", "1M")

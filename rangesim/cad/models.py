@@ -8,7 +8,7 @@ import trimesh
 
 from rangesim.cad.meshes import MESH_SUFFIXES, load_mesh
 from rangesim.core.errors import RangesimError
-from rangesim.io.memory import check_memory
+from rangesim.core.memory import check_memory
 
 #: the most facets a circle of a built-in model may have (``segments``), a documented limit:
 #: memory grows with the square of it (about 8 GB at 960) and time faster

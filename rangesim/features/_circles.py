@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangesim.core.conics import fit_circle
-from rangesim.core.errors import RangesimError
+from rangesim.core.memory import check_memory
 from rangesim.features._edge_points import angular_coverage, edge_points
 
 
@@ -222,39 +222,12 @@ def _dedupe(items: list, key_c, key_r, dist_px: float) -> list:
     return kept
 
 
-def _memory_budget() -> int | None:
-    """Bytes available: RANGESIM_MEMORY_LIMIT (bytes, or with K/M/G/T) if smaller than MemAvailable."""
-    import os
-    import re
-
-    budget = None
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            budget = next((int(line.split()[1]) * 1024 for line in f if line.startswith("MemAvailable:")), None)
-    except (OSError, ValueError, IndexError):
-        pass
-    match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([kKmMgGtT]?)(?:i?[bB])?\s*", os.environ.get("RANGESIM_MEMORY_LIMIT", ""))
-    if match:
-        try:
-            limit = int(float(match.group(1)) * 1024 ** " KMGT".index(match.group(2).upper() or " "))
-        except ValueError:
-            limit = None
-        if limit and (budget is None or limit < budget):
-            budget = limit
-    return budget
-
-
 def _check_accumulator(n_radii: int, rows: int, cols: int, n_votes: int, radii) -> None:
     """Refuse (one line, naming the radius range) a Hough accumulator that would not fit in memory."""
     cells = float(n_radii) * rows * cols
     estimate = cells * 28 + float(n_votes) * 40  # int64 counts + float32 copies; int32/float32 vote tables
-    budget = _memory_budget()
-    if budget is not None and estimate > budget:
-        raise RangesimError(
-            f"circle radii {radii[0]:g}..{radii[1]:g} px (--rmin/--rmax) need a Hough accumulator of {cells:,.0f} "
-            f"cells, about {estimate / 1024**3:,.1f} GB, more than the {budget / 1024**3:,.1f} GB available; "
-            "use a smaller --rmax"
-        )
+    check_memory(estimate, f"circle radii {radii[0]:g}..{radii[1]:g} px (--rmin/--rmax, a Hough accumulator of "
+                           f"{cells:,.0f} cells)")
 
 
 def circles(

@@ -9,8 +9,8 @@ import numpy as np
 
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
+from rangesim.core.memory import check_memory
 from rangesim.core.rangescan import RangeScan
-from rangesim.io.memory import check_memory
 from rangesim.scene.scene import Scene, load_scene
 from rangesim.sensor.config import Sensor, load_sensor
 
