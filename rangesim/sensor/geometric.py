@@ -35,7 +35,7 @@ from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
-from rangesim.sensor.stripe_noise import StripeNoise, border_distance, simulate
+from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
 from rangesim.sensor.triangulation import triangulate
 
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined
@@ -75,7 +75,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
 
     # 7a. dropouts, predicted std and peak errors: the stripe noise model (NumPy)
     status_np = np.asarray(status).astype(np.uint8)
-    draw = _stripe_draw(noise, seed, (h, w), f, sensor.reference_distance, status_np, points, normals, sources,
+    draw, dz_du = _stripe_draw(noise, seed, (h, w), f, sensor.reference_distance, status_np, points, normals, sources,
                         sheet_n, rays, signal, albedo)
     status_np[(status_np == Status.VALID) & ~draw.detected] = Status.DROPOUT
     valid = mi.Bool(status_np == Status.VALID)
@@ -101,7 +101,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     status_np = status_np.reshape(h, w)
     # predicted std (mm): the model's peak std with the mixed pixels' centroid shift, through dz/du
     sigma_px = np.hypot(draw.sigma_px, np.nan_to_num(arrays["shift"]))
-    sigma = np.where(status_np.reshape(-1) == Status.VALID, sigma_px * draw.depth_per_px, np.nan)
+    sigma = np.where(status_np.reshape(-1) == Status.VALID, sigma_px * dz_du, np.nan)
     return RangeScan(
         depth=xyz[..., 2].copy(),
         xyz=xyz,
@@ -123,9 +123,9 @@ def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float
     """The inputs of :func:`rangesim.sensor.stripe_noise.simulate` from the camera-frame geometry.
 
     The per-pixel geometry runs as one fused Dr.Jit kernel; only its five results (float32)
-    come to NumPy, where the draws and the correlated field are made.
+    come to NumPy, where the draws and the correlated field are made. Returns the draw and
+    dz/du (mm of depth per pixel of peak shift, flat float32), which turns its std into mm.
     """
-    mi = mitsuba()
     to_laser = sources - points
     d_laser = dr.norm(to_laser)
     d_camera = dr.norm(points)
@@ -134,16 +134,13 @@ def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float
     sin_theta = dr.norm(dr.cross(points / d_camera, to_laser / d_laser))
     f_op = opaque_scalar(f)
     dzdu = dr.abs(points.z * sheet_n.x / (f_op * dr.dot(sheet_n, rays)))
-    half = 0.5 * noise.aperture_mm
-    sin_u = half * dr.rsqrt(half * half + d_camera * d_camera)
-    # the Dorsch limit (rangesim.sensor.stripe_noise.dorsch_sigma_mm) in pixels
-    speckle_px = noise.speckle_contrast * (noise.wavelength_nm * 1e-6) / (2 * np.pi * sin_u * sin_theta) / dzdu
+    speckle_px = dorsch_sigma_mm(d_camera, sin_theta, noise.speckle_contrast, noise.wavelength_nm,
+                                 noise.aperture_mm) / dzdu
     magnification = f_op / d_camera
     outputs = [cos_i, amplitude, magnification, speckle_px, dzdu]
     outputs = [dr.select(dr.isfinite(v), v, 0.0) for v in outputs]
     dr.eval(*outputs)
     cos_i, amplitude, magnification, speckle_px, dzdu = (np.asarray(v, dtype=np.float32) for v in outputs)
-    del mi
     candidate = status == Status.VALID
 
     def border_mm(where: np.ndarray) -> np.ndarray:
@@ -157,5 +154,4 @@ def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float
                     cos_incidence=cos_i, amplitude=amplitude, magnification=magnification,
                     reference_magnification=f / z_ref, speckle_px=speckle_px, border_mm=border_mm,
                     corr_px=(corr, corr))
-    draw.depth_per_px = dzdu
-    return draw
+    return draw, dzdu

@@ -175,6 +175,8 @@ def dorsch_sigma_mm(distance_mm: np.ndarray | float, sin_triangulation: np.ndarr
                     wavelength_nm: float, aperture_mm: float) -> np.ndarray:
     """Speckle-limited depth uncertainty C lambda / (2 pi sin u_obs sin theta), mm [1]_.
 
+    Takes floats, NumPy arrays or Dr.Jit arrays.
+
     ``sin u_obs = (D / 2) / sqrt((D / 2)^2 + distance^2)``; theta the angle between the
     camera ray and the laser ray at the point.
 
@@ -184,9 +186,10 @@ def dorsch_sigma_mm(distance_mm: np.ndarray | float, sin_triangulation: np.ndarr
     0.0406
     """
     half = 0.5 * aperture_mm
-    sin_u = half / np.sqrt(half * half + np.square(distance_mm))
+    # plain arithmetic, so NumPy arrays, floats and Dr.Jit arrays (the geometric scanner) all work
+    sin_u = half / (half * half + distance_mm * distance_mm) ** 0.5
     with np.errstate(divide="ignore", invalid="ignore"):
-        return contrast * (wavelength_nm * 1e-6) / (2 * math.pi * sin_u * np.asarray(sin_triangulation))
+        return contrast * (wavelength_nm * 1e-6) / (2 * math.pi * sin_u * sin_triangulation)
 
 
 def partial_stripe_shift_mm(edge_distance_mm: np.ndarray, cos_incidence: np.ndarray, stripe_width_mm: float
