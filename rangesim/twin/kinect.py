@@ -28,6 +28,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull
 
+from rangesim.core.conics import fit_circle
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.twin.realism import robust_std
@@ -127,15 +128,6 @@ def _rectangle_residual(hull: np.ndarray, centre, width, depth, angle) -> float:
     return float(np.sqrt(np.mean(np.minimum(np.abs(dx), np.abs(dy)) ** 2)))
 
 
-def _fit_circle(q: np.ndarray) -> tuple[np.ndarray, float, float]:
-    a = np.c_[2 * q, np.ones(len(q))]
-    sol, *_ = np.linalg.lstsq(a, np.sum(q * q, axis=1), rcond=None)
-    centre = sol[:2]
-    radius = float(math.sqrt(max(sol[2] + centre @ centre, 1e-12)))
-    residual = float(np.sqrt(np.mean((np.linalg.norm(q - centre, axis=1) - radius) ** 2)))
-    return centre, radius, residual
-
-
 def fit_upright_object(points: np.ndarray, n: np.ndarray, d: float, label: int) -> FittedShape:
     """An upright box or cylinder standing on the plane (n, d) through the segment's points (mm)."""
     p = np.asarray(points, np.float64)
@@ -153,7 +145,7 @@ def fit_upright_object(points: np.ndarray, n: np.ndarray, d: float, label: int) 
     hull = q[ConvexHull(q).vertices]
     centre_r, width, depth, angle = _min_area_rectangle(q)
     rect_res = _rectangle_residual(hull, centre_r, width, depth, angle)
-    centre_c, radius, circ_res = _fit_circle(hull)
+    centre_c, radius, circ_res = fit_circle(hull)
     base = -d * n  # the plane's point nearest the camera
     # the object's frame: e1, e2 in the plane, n up (towards the camera)
     if circ_res < rect_res:
