@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from rangesim.cli.common import writing
+from rangesim.cli.common import write_json, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -42,10 +41,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print("range error: " + ", ".join(f"{k} {v:.4g}" for k, v in n.items() if k not in ("cost", "evaluations"))
               + f"  (cost {n['cost']:.4f}, {n['evaluations']} evaluations)")
     if args.report:
-        report = Path(args.report)
-        with writing(report), atomic_path(report) as tmp:
-            Path(tmp).write_text(json.dumps({k: result[k] for k in ("geometry", "iou", "dropout", "noise", "views")},
-                                            indent=2) + "\n", encoding="utf-8")
+        write_json({k: result[k] for k in ("geometry", "iou", "dropout", "noise", "views")}, Path(args.report))
     print(f"wrote {out}")
     return 0
 

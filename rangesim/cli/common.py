@@ -1,10 +1,16 @@
 """Helpers shared by the command modules: output checks and write-error reporting."""
 from __future__ import annotations
 
+import json
+import math
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
+import numpy as np
+
+from rangesim.core.atomic import atomic_path
 from rangesim.core.errors import RangesimError
 
 #: the lengths ``--units`` accepts for a bare mesh file
@@ -137,3 +143,22 @@ def build_model(name: str, param_texts: Sequence[str]):
         given = ", ".join(f"{k}={v!r}" for k, v in params.items())
         raise RangesimError(f"cannot build the model with --param {given} ({type(exc).__name__}: {exc})",
                             source=name) from exc
+
+
+def json_safe(value: Any) -> Any:
+    """Plain JSON types: NumPy scalars to Python, non-finite floats to None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(float(value)) else None
+    return value
+
+
+def write_json(data: dict, path: Path) -> None:
+    """``data`` as indented JSON at ``path``, written atomically (see :func:`writing`)."""
+    with writing(path), atomic_path(path) as tmp:
+        Path(tmp).write_text(json.dumps(json_safe(data), indent=2) + "\n", encoding="utf-8")

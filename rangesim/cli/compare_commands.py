@@ -6,34 +6,12 @@ detectors are scored against the region boundaries of the scan's labels, if it h
 from __future__ import annotations
 
 import argparse
-import json
-import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from rangesim.cli.common import make_out_dir, positive, writing
+from rangesim.cli.common import make_out_dir, positive, write_json
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate.runs import load_scan_with_labels
-from rangesim.io.atomic import atomic_path
-
-
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(float(value)) else None
-    return value
-
-
-def _write_json(data: dict, path: Path) -> None:
-    with writing(path), atomic_path(path) as tmp:
-        Path(tmp).write_text(json.dumps(_json_safe(data), indent=2) + "\n", encoding="utf-8")
 
 
 def _detectors_only(scan, labels, args, out: Path) -> dict:
@@ -72,7 +50,7 @@ def _kinect_twin(scan, labels, args, out: Path) -> int:
     metrics, twin_scan, edge_maps = compare_kinect(scan, labels, args.sensor, seed=args.seed, return_scans=True)
     metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **metrics}
     make_out_dir(out)
-    _write_json(metrics, out / "metrics.json")
+    write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
     shapes = ", ".join(s["kind"] for s in metrics["shapes"])
     print(f"twin: {shapes} fitted to the labels, scanned by {args.sensor} at f = {metrics['focal_px']:.1f} px")
@@ -113,7 +91,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.mesh is None:
         metrics = _detectors_only(scan, labels, args, out)
         make_out_dir(out)
-        _write_json(metrics, out / "metrics.json")
+        write_json(metrics, out / "metrics.json")
         for name, e in metrics["edges"].items():
             score = f"  F1 {e['f1']:.3f}" if "f1" in e else ""
             print(f"{name:<15}{e['edges']:>9,}{score}")
@@ -137,7 +115,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                                             seed=args.seed, return_scans=True)
     metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **metrics}
     make_out_dir(out)
-    _write_json(metrics, out / "metrics.json")
+    write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
     p = metrics["params"]
     noise = "the sensor's noise model" if p["sigma_mm"] is None else f"sigma {p['sigma_mm']:.3f} mm"
