@@ -143,8 +143,9 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
     >>> import rangesim as rs
     >>> bunny = "../shared/data/stanford-bunny/"
     >>> views = [rs.load_scan(bunny + f"{v}.ply", conf=bunny + "bun.conf") for v in ("bun000", "bun045")]  # doctest: +SKIP
-    >>> sensor = rs.calibrate(views, bunny + "reconstruction/bun_zipper.ply",
-    ...                       "sensors/uncalibrated/cyberware_3030.toml")                                # doctest: +SKIP
+    >>> fit = rs.calibrate(views, bunny + "reconstruction/bun_zipper.ply",
+    ...                    "sensors/uncalibrated/cyberware_3030.toml")                                   # doctest: +SKIP
+    >>> calibrated = fit["sensor"]   # a Sensor; fit["toml"] is its file text                      # doctest: +SKIP
 
     References
     ----------
