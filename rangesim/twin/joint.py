@@ -115,14 +115,9 @@ def _noise_objective(views, base: StripeNoise, names, log_values) -> float:
         st = v["stage"]
         noise, optics = _with_values(base, st.optics, values)
         reg = replace(st.registration, std_mm=float(values.get("registration_mm", st.registration.std_mm)))
-        st_optics = st.optics
-        st.optics = optics
-        try:
-            geo = v["quiet"].meta["twin"]
-            _, error, _ = st.draw({**geo, "sigma_mm": None}, seed=FIT_SEED, noise=replace(noise, signal_contrast=0.0),
-                                  registration=reg)
-        finally:
-            st.optics = st_optics
+        geo = v["quiet"].meta["twin"]
+        _, error, _ = st.draw({**geo, "sigma_mm": None}, seed=FIT_SEED, noise=replace(noise, signal_contrast=0.0),
+                              registration=reg, optics=optics)
         sim = np.where(v["cells"], error.reshape(st.shape), np.nan)
         total += _mismatch(v, sim)
     return total

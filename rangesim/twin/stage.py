@@ -305,6 +305,7 @@ class TwinStage:
         self._mi_points = _mi_vec(mi, pts, "Point3f")
         self._mi_normals = _mi_vec(mi, nrm)
         self._cache: dict[tuple[str, float], tuple[np.ndarray, np.ndarray]] = {}
+        self._border_cache: dict[str, Any] = {}
 
     # -- geometry ------------------------------------------------------------------------
     def _cast(self, origin: np.ndarray, direction: np.ndarray, side: int):
@@ -422,12 +423,12 @@ class TwinStage:
         return out
 
     def draw(self, params: dict[str, Any], *, seed: int = 0, noise: StripeNoise | None = None,
-             quiet: bool = False, registration: "Registration | None" = None
+             quiet: bool = False, registration: "Registration | None" = None, optics: "TwinOptics | None" = None
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Status, range error (mm) and predicted std (mm) of every cell, flat (H * W,).
 
-        ``noise`` and ``registration`` replace the sensor's (a calibration tries many);
-        ``quiet`` draws nothing: the geometry's status, zero error.
+        ``noise``, ``registration`` and ``optics`` replace the sensor's (a calibration tries
+        many); ``quiet`` draws nothing: the geometry's status, zero error.
         """
         status = self.status_codes(params["theta_deg"], params["alpha_deg"], params["min_cos"],
                                    int(params.get("camera_views", 1)))
@@ -435,7 +436,7 @@ class TwinStage:
         if quiet:
             return status, np.zeros(n), np.where(status == Status.VALID, 0.0, np.nan)
         noise = self.noise if noise is None else noise
-        optics = self.optics
+        optics = self.optics if optics is None else optics
         if params.get("sigma_mm") is not None:  # the legacy twin: white range noise of that std alone
             noise = StripeNoise(sigma_px=float(params["sigma_mm"]) / optics.dz_du, min_signal=noise.min_signal,
                                 signal_contrast=noise.signal_contrast, stripe_width_mm=noise.stripe_width_mm)
@@ -470,9 +471,14 @@ class TwinStage:
         candidate = status == Status.VALID
         reached = candidate | (status == Status.DROPOUT)
         row_mm, col_mm = self.cell_mm
+        # the border depends on the geometry only: a calibration trying many noise models reuses it
+        key = reached.tobytes()
+        if self._border_cache.get("key") != key:
+            self._border_cache = {"key": key, "border": border_distance(reached.reshape(self.shape),
+                                                                       sampling=(row_mm, col_mm))}
         return {
             "candidate": candidate, "signal": cos_l * cos_c, "cos_laser": cos_l,
-            "border_mm": border_distance(reached.reshape(self.shape), sampling=(row_mm, col_mm)),
+            "border_mm": self._border_cache["border"],
             "corr_px": (noise.correlation_mm / row_mm, noise.correlation_mm / col_mm),
         }
 
