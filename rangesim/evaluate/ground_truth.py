@@ -22,6 +22,7 @@ import numpy as np
 
 from rangesim.core.conics import ellipse_from_conic
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import circle_basis, project_circle
 from rangesim.core.rangescan import RangeScan
 
@@ -265,7 +266,7 @@ def _sample_segments(
 # creases
 # ---------------------------------------------------------------------------------------
 def _raster_segments(
-    K: np.ndarray, a: np.ndarray, b: np.ndarray, shape: tuple[int, int]
+    K: np.ndarray, a: np.ndarray, b: np.ndarray, shape: tuple[int, int], *, minor_out: list | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """8-connected rasterisation of projected camera-frame 3D segments.
 
@@ -293,6 +294,10 @@ def _raster_segments(
         Index of the segment each sample belongs to.
     row, col : (N,) intp
         The pixel each sample marks (inside the image).
+
+    With ``minor_out`` (a list), two (N,) arrays are appended to it: each sample's
+    continuous image coordinate across the line (row for x-major lines, column otherwise,
+    pixel (i, j) spanning [i, i + 1)), and whether its line is y-major.
     """
     h, w = shape
     empty = (np.zeros((0, 3)), np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp))
@@ -325,6 +330,8 @@ def _raster_segments(
     col, row = pos[:, 0], pos[:, 1]
     inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
     pts = _perspective_points(a[seg], b[seg], s)
+    if minor_out is not None:
+        minor_out += [other[inside], major[seg][inside].astype(bool)]
     return (pts[inside], idx[seg[inside]], row[inside].astype(np.intp), col[inside].astype(np.intp))
 
 
@@ -422,6 +429,100 @@ def _mesh_creases(
     np.maximum.at(out, (row[vis], col[vis]), label[vis])
 
 
+def _contour_edges(mesh: Any, watertight: bool, verts: np.ndarray, normals: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Occluding-contour edges of a mesh seen from the camera at the origin.
+
+    Returns (edges (M, 2) vertex indices, front (M,) the face on the seen side). A contour
+    edge joins a face turned towards the camera and one turned away (where the surface
+    folds out of sight); on an open sheet, which is seen from both sides, its boundary
+    edges are contours too.
+    """
+    facing = np.einsum("ij,ij->i", normals, -verts[mesh.faces[:, 0]]) > 0
+    pairs = np.asarray(mesh.face_adjacency)
+    edges = np.asarray(mesh.face_adjacency_edges)
+    if len(pairs):
+        flip = facing[pairs[:, 0]] != facing[pairs[:, 1]]
+        edges, pairs = edges[flip], pairs[flip]
+        front = np.where(facing[pairs[:, 0]], pairs[:, 0], pairs[:, 1])
+    else:
+        edges, front = np.zeros((0, 2), np.intp), np.zeros(0, np.intp)
+    if not watertight:
+        import trimesh
+
+        once = trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1)
+        edges = np.concatenate([edges, mesh.edges_sorted[once]])
+        front = np.concatenate([front, mesh.edges_face[once]])
+    return np.asarray(edges, np.intp), np.asarray(front, np.intp)
+
+
+def _contour_jumps(
+    scan: RangeScan, scene: Any, k: int, R: np.ndarray, t: np.ndarray, K: np.ndarray,
+    jump_angle_deg: float, depth_tol_px: float, out: np.ndarray,
+) -> None:
+    """Mark object ``k``'s visible occluding contours in ``out`` ((H, W) bool, in place).
+
+    Each contour edge (:func:`_contour_edges`) is rasterised like a crease (one sample per
+    pixel column or row it crosses) and, at each sample, the two pixels whose centres
+    straddle the edge across it are looked at: the *near* one on the side the seen face
+    lies (the occluding side) and the *far* one beyond. The near pixel is marked when it
+    hits object ``k``, the edge point itself is seen (shadow ray, as creases), and the
+    far pixel either sees nothing or sees a surface the jump rule of :func:`jump_edges`
+    calls a jump from the near pixel's point (so a box's bottom edge standing on a floor,
+    a contour of the box but no step in depth, is not one). So a contour is a line one
+    pixel wide on the occluding side, and a steep face seen at grazing incidence, which
+    faces the camera, is never filled.
+    """
+    obj = scene.objects[k]
+    mesh = obj.mesh
+    if len(mesh.faces) == 0 or not np.any(scan.part == k):
+        return
+    verts = mesh.vertices @ R.T + t
+    normals = mesh.face_normals @ R.T
+    edges, front = _contour_edges(mesh, obj.watertight, verts, normals)
+    if len(edges) == 0:
+        return
+    a, b = verts[edges[:, 0]], verts[edges[:, 1]]
+    # the seen face's direction into itself, perpendicular to the edge (3D)
+    tri = verts[mesh.faces[front]]
+    inward = tri.mean(axis=1) - 0.5 * (a + b)
+    along = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1, keepdims=True), 1e-300)
+    inward -= np.einsum("ij,ij->i", inward, along)[:, None] * along
+    inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-300)
+    minor: list = []
+    pts, seg, row, col = _raster_segments(K, a, b, scan.shape, minor_out=minor)
+    if len(pts) == 0:
+        return
+    across, y_major = minor
+    # which way across the line the seen face lies: a small step into it, projected
+    step = pts + (1e-4 * pts[:, 2])[:, None] * inward[seg]
+    uv0, uv1 = _project(K, pts), _project(K, step)
+    axis = np.where(y_major, 0, 1)  # image coordinate across the line: u (0) or v (1)
+    ar = np.arange(len(pts))
+    side = np.sign(uv1[ar, axis] - uv0[ar, axis])
+    base = np.ceil(across - 0.5).astype(np.intp)  # first pixel whose centre lies past the line
+    near = np.where(side > 0, base, base - 1)
+    far = np.where(side > 0, base - 1, base)
+    h, w = scan.shape
+    limit = np.where(y_major, w, h)
+    ok = (side != 0) & (near >= 0) & (near < limit) & (far >= 0) & (far < limit)
+    pts, row, col, near, far, y_major = pts[ok], row[ok], col[ok], near[ok], far[ok], y_major[ok]
+    nr, nc = np.where(y_major, row, near), np.where(y_major, near, col)
+    fr, fc = np.where(y_major, row, far), np.where(y_major, far, col)
+    on = scan.part[nr, nc] == k
+    pts, nr, nc, fr, fc = pts[on], nr[on], nc[on], fr[on], fc[on]
+    if len(pts) == 0:
+        return
+    p = scan.xyz_true[nr, nc].astype(np.float64)
+    q = np.nan_to_num(scan.xyz_true[fr, fc].astype(np.float64))
+    beyond = scan.part[fr, fc] >= 0
+    step_jump, _ = _pair_jumps(p, q, beyond, float(np.cos(np.radians(jump_angle_deg))), None)
+    jump = ~beyond | step_jump
+    pts, nr, nc = pts[jump], nr[jump], nc[jump]
+    seen = _unoccluded(scene, scan, pts, depth_tol_px * pts[:, 2] / K[0, 0])
+    out[nr[seen], nc[seen]] = True
+
+
 def _contact_creases(
     scan: RangeScan, faces_of: list[np.ndarray], K: np.ndarray, crease_deg: float,
     jump_angle_deg: float, out: np.ndarray,
@@ -508,11 +609,20 @@ def ground_truth_edges(
     *,
     jump_angle_deg: float = JUMP_ANGLE_DEG,
     depth_tol_px: float = 1.0,
+    jump_rule: str = "contours",
 ) -> np.ndarray:
     """Exact edge labels of a synthetic scan from the geometry behind it.
 
-    Jump edges follow :func:`jump_edges` on ``scan.xyz_true`` (hits are ``part >= 0``),
-    including hit-next-to-miss, marked on the near side. Creases are the mesh edges of each
+    Jump edges (``jump_rule="contours"``, the default) are the scene's occluding contours:
+    mesh edges between a face turned towards the camera and one turned away (and the
+    boundary of open sheets), rasterised one pixel wide and marked on the occluding side,
+    where the edge itself is seen and the pixel beyond it sees nothing or a surface that
+    the jump rule of :func:`jump_edges` (the 3D step within ``jump_angle_deg`` of the
+    viewing ray) puts behind it; see ``_contour_jumps``. A face seen at grazing incidence
+    still faces the camera, so it is never filled with jumps, and a box standing on a
+    floor has no jump along its foot. ``jump_rule="pairs"`` is the former rule: every
+    4-neighbour pair :func:`jump_edges` calls a jump, hit-next-to-miss included (it fills
+    faces seen beyond 75 degrees). Creases are the mesh edges of each
     object whose dihedral angle (between face normals) exceeds ``crease_deg`` and whose two
     faces both face the camera (one facing away makes it an occluding contour: a jump),
     rasterised 8-connected (one pixel per column or row crossed, 1 px on diagonals) and kept
@@ -535,8 +645,10 @@ def ground_truth_edges(
     jump_angle_deg : float
         The jump rule's angle (see :func:`jump_edges`).
     depth_tol_px : float
-        Occluders closer than this to a crease sample (pixel footprints, z / fx mm) do not
-        hide it.
+        Occluders closer than this to a crease or contour sample (pixel footprints,
+        z / fx mm) do not hide it.
+    jump_rule : {"contours", "pairs"}
+        Occluding contours of the meshes (default), or the pixel-pair rule.
 
     Returns
     -------
@@ -565,11 +677,18 @@ def ground_truth_edges(
     R, t, K = _camera(scan)
     if scan.part.max(initial=-1) >= len(scene.objects):
         raise ValueError(f"scan hits object {int(scan.part.max())} but the scene has {len(scene.objects)}")
-    hit = (scan.part >= 0) & np.all(np.isfinite(scan.xyz_true), axis=-1)
-    jump = jump_edges(scan.xyz_true, hit, max_angle_deg=jump_angle_deg)
+    if jump_rule not in ("contours", "pairs"):
+        raise RangesimError(f"jump_rule must be 'contours' or 'pairs', got {jump_rule!r}")
+    if jump_rule == "pairs":
+        hit = (scan.part >= 0) & np.all(np.isfinite(scan.xyz_true), axis=-1)
+        jump = jump_edges(scan.xyz_true, hit, max_angle_deg=jump_angle_deg)
+    else:
+        jump = np.zeros(scan.shape, dtype=bool)
     labels = np.zeros(scan.shape, dtype=np.uint8)
     for k in range(len(scene.objects)):
         _mesh_creases(scan, scene, k, R, t, K, crease_deg, depth_tol_px, labels)
+        if jump_rule == "contours":
+            _contour_jumps(scan, scene, k, R, t, K, jump_angle_deg, depth_tol_px, jump)
     _contact_creases(scan, [np.asarray(o.mesh.faces) for o in scene.objects], K, crease_deg,
                      jump_angle_deg, labels)
     labels[jump] = EdgeLabel.JUMP

@@ -10,7 +10,7 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.evaluate._edge_scores import edge_scores
-from rangesim.evaluate.ground_truth import ground_truth_edges
+from rangesim.evaluate._visible import visible_truth
 from rangesim.evaluate.regions import region_boundaries
 
 
@@ -72,9 +72,8 @@ def scan_truth(scan, scene: Any = None, segment_labels: np.ndarray | None = None
         if scene is not None:
             from rangesim.scene import load_scene
 
-            labels = ground_truth_edges(scan, load_scene(scene), crease_deg=crease_deg)
             # no detector can find an edge where the scanner measured nothing (laser shadow)
-            labels[~scan.valid] = EdgeLabel.NONE
+            labels = visible_truth(scan, load_scene(scene), crease_deg=crease_deg)
             return EdgeTruth(labels, "geometry")
     if segment_labels is not None:
         boundary = region_boundaries(segment_labels, scan.valid)

@@ -1,0 +1,167 @@
+"""Edge truth of what a scan could see, and one call that scores an edge map against it.
+
+The exact truth of :func:`~rangesim.evaluate.ground_truth.ground_truth_edges` holds every
+edge the camera looks at, also where the scanner measured nothing (laser shadow, dropout,
+out of range): no detector can find those. :func:`visible_truth` keeps the truth on
+measured pixels; :func:`score_edges` scores a detector against it in one call.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
+from rangesim.evaluate._edge_scores import _as_mask_labels, edge_scores
+from rangesim.evaluate.ground_truth import ground_truth_edges
+
+__all__ = ["visible_truth", "data_boundary", "score_edges"]
+
+
+def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: Any) -> np.ndarray:
+    """Ground-truth edge labels where the scanner measured a point.
+
+    :func:`~rangesim.evaluate.ground_truth.ground_truth_edges` (occluding contours one
+    pixel wide on the occluding side, visible creases one pixel wide, contact creases),
+    with every pixel that ``scan.valid`` does not hold set to NONE: an edge inside a laser
+    shadow, a dropout or beyond the working range is nobody's to find.
+
+    Label types (:class:`~rangesim.core.constants.EdgeLabel`): 0 none; 1 jump (an occluding
+    contour, the near side of a depth discontinuity, also against empty space); 2 convex
+    crease (material angle below 180 deg, a roof); 3 concave crease (a valley, also where
+    two objects touch).
+
+    Parameters
+    ----------
+    scan : RangeScan
+        A synthetic scan (``xyz_true``, ``part``, ``face``, ``normal``, ``valid``).
+    scene : Scene or anything :func:`rangesim.load_scene` accepts
+        The scene the scan was made of.
+    crease_deg : float
+        Smallest dihedral angle that makes a crease, degrees.
+    **options
+        Passed to :func:`~rangesim.evaluate.ground_truth.ground_truth_edges`
+        (``jump_angle_deg``, ``depth_tol_px``, ``jump_rule``).
+
+    Returns
+    -------
+    (H, W) uint8
+        EdgeLabel per pixel, 0 wherever ``scan.valid`` is False.
+
+    Examples
+    --------
+    >>> import rangesim as rs
+    >>> scan, scene = rs.datasets.plate_scan(), rs.datasets.plate_scene()
+    >>> truth = rs.evaluate.visible_truth(scan, scene)
+    >>> bool(truth[~scan.valid].any()), bool((truth == 1).any())
+    (False, True)
+    """
+    labels = ground_truth_edges(scan, scene, crease_deg, **options)
+    labels[~np.asarray(scan.valid, dtype=bool)] = EdgeLabel.NONE
+    return labels
+
+
+def data_boundary(valid: np.ndarray) -> np.ndarray:
+    """(H, W) bool: measured pixels with an unmeasured 4-neighbour (image borders excluded).
+
+    Where the data stops (a laser shadow on a flat floor, a dropout) the scan cannot tell
+    whether the surface breaks; :func:`score_edges` leaves predictions there that match no
+    true edge out of precision.
+
+    Parameters
+    ----------
+    valid : (H, W) bool
+        Measured pixels.
+
+    Returns
+    -------
+    (H, W) bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> valid = np.ones((3, 4), bool); valid[:, 3] = False
+    >>> data_boundary(valid).astype(int)
+    array([[0, 0, 1, 0],
+           [0, 0, 1, 0],
+           [0, 0, 1, 0]])
+    """
+    valid = np.asarray(valid, dtype=bool)
+    if valid.ndim != 2:
+        raise RangesimError(f"valid must be an (H, W) mask, got shape {valid.shape}")
+    # pad with True: the image border is no boundary of the data
+    missing = ndimage.binary_dilation(~np.pad(valid, 1, constant_values=True),
+                                      structure=ndimage.generate_binary_structure(2, 1))[1:-1, 1:-1]
+    return valid & missing
+
+
+def score_edges(
+    edges: Any,
+    scan: Any,
+    scene: Any = None,
+    *,
+    truth: np.ndarray | None = None,
+    tolerance_px: float = 2.0,
+    crease_deg: float = 20.0,
+    ignore_data_boundary: bool = True,
+) -> dict[str, Any]:
+    """Score an edge map against what the scan could see, in one call.
+
+    The truth is :func:`visible_truth` (computed from ``scene``, or given as ``truth``);
+    the scores are :func:`~rangesim.evaluate.edge_scores` with labels (overall and per
+    type: jump, convex, concave). With ``ignore_data_boundary``, predicted pixels on
+    :func:`data_boundary` farther than ``tolerance_px`` from every true edge are left out
+    (counted neither right nor wrong): the scan ends there, and whether the surface does
+    cannot be told from it. ``n_ignored`` says how many.
+
+    Parameters
+    ----------
+    edges : EdgeMap or (H, W) array
+        The detector's output (nonzero = edge; an EdgeMap's labels are used).
+    scan : RangeScan
+        The synthetic scan the edges were found on.
+    scene : Scene or anything :func:`rangesim.load_scene` accepts, optional
+        The scene behind the scan; needed unless ``truth`` is given.
+    truth : (H, W) uint8, optional
+        Precomputed :func:`visible_truth` (saves the ray casting when scoring many maps).
+    tolerance_px : float
+        Largest matching distance, pixels.
+    crease_deg : float
+        Smallest dihedral angle of a true crease, degrees.
+    ignore_data_boundary : bool
+        Leave unmatched predictions at the border of the measured data out of precision.
+
+    Returns
+    -------
+    dict
+        As :func:`~rangesim.evaluate.edge_scores` (``precision``, ``recall``, ``f1``, ``fom``,
+        counts, ``per_label``), plus ``n_ignored``.
+
+    Examples
+    --------
+    >>> import rangesim as rs
+    >>> scan, scene = rs.datasets.plate_scan(), rs.datasets.plate_scene()
+    >>> s = rs.evaluate.score_edges(rs.edges.gradient(scan), scan, scene)
+    >>> sorted(s["per_label"]), bool(s["f1"] > 0.7)
+    (['concave', 'convex', 'jump'], True)
+    """
+    if truth is None:
+        if scene is None:
+            raise RangesimError("score_edges needs the scene behind the scan, or truth=")
+        truth = visible_truth(scan, scene, crease_deg)
+    truth = np.asarray(truth)
+    pred, labels = _as_mask_labels(edges)
+    if pred.shape != truth.shape:
+        raise RangesimError(f"edge map {pred.shape} and scan {truth.shape} differ in shape")
+    n_ignored = 0
+    if ignore_data_boundary:
+        far = ndimage.distance_transform_edt(truth == EdgeLabel.NONE) > tolerance_px
+        drop = pred & far & data_boundary(scan.valid)
+        n_ignored = int(drop.sum())
+        pred = pred & ~drop
+    scores = edge_scores(pred, truth != EdgeLabel.NONE, tolerance_px,
+                         pred_labels=None if labels is None else np.where(pred, labels, 0), gt_labels=truth)
+    scores["n_ignored"] = n_ignored
+    return scores
