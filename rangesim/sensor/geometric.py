@@ -11,7 +11,8 @@ Mitsuba variant's backend, LLVM on the CPU or CUDA on a GPU):
 5. working range on the true depth -> status 4 outside [near, far].
 6. ``mixed_pixels`` (NumPy, near depth edges only): centroid shift where a finite-width
    stripe straddles a depth edge.
-7. ``stripe_noise`` (NumPy, one mechanism with the twin of a recording): status 3 where the
+7. ``stripe_noise`` (one mechanism with the twin of a recording; here in Dr.Jit, with a
+   PCG32 stream per pixel): status 3 where the
    return, dimmed where the stripe is cut by an outline or shadow border, is below
    ``min_signal`` (a hard threshold, or a speckle probability with ``signal_contrast``);
    the peak error (floor, signal-limited term, correlated speckle, partial stripes,
@@ -35,7 +36,7 @@ from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
-from rangesim.sensor.stripe_noise import StripeNoise, border_distance, dorsch_sigma_mm, simulate
+from rangesim.sensor.stripe_noise import PixelDraws, StripeNoise, border_distance, dorsch_sigma_mm, simulate
 from rangesim.sensor.triangulation import triangulate
 
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined
@@ -73,35 +74,34 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
         status = dr.select(condition, int(code), status)
     dr.eval(points, normals, sources, sheet_n, signal, status, lit, albedo)
 
-    # 7a. dropouts, predicted std and peak errors: the stripe noise model (NumPy)
-    status_np = np.asarray(status).astype(np.uint8)
-    draw, dz_du = _stripe_draw(noise, seed, (h, w), f, sensor.reference_distance, status_np, points, normals, sources,
-                        sheet_n, rays, signal, albedo)
-    status_np[(status_np == Status.VALID) & ~draw.detected] = Status.DROPOUT
-    valid = mi.Bool(status_np == Status.VALID)
+    # 7a. dropouts, predicted std and peak errors: the stripe noise model (lazy Dr.Jit)
+    candidate = status == int(Status.VALID)
+    draw, dz_du = _stripe_draw(noise, seed, (h, w), f, sensor.reference_distance, status, points, normals, sources,
+                               sheet_n, rays, signal, albedo)
+    status = dr.select(candidate & ~draw.detected, int(Status.DROPOUT), status)
+    valid = status == int(Status.VALID)
 
     # 6. mixed pixels at depth edges
     window = peak_window_px(p["laser"]["stripe_width"], f, near)
     shift = stripe_mixing_shift(points, sheet_n, lit, signal, valid, w, p["laser"]["stripe_width"], window)
 
-    # 7b. the peak error triangulated against the sheet
-    error = mi.Float(draw.error_px.astype(np.float32))
-    measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + error, opaque_scalar(f)), dr.nan)
+    # 7b. the peak error triangulated against the sheet; the predicted std (mm): the model's
+    # peak std with the mixed pixels' centroid shift, through dz/du
+    measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + draw.error_px, opaque_scalar(f)), dr.nan)
+    shift_px = dr.select(dr.isfinite(shift), shift, 0.0)
+    sigma = dr.select(valid, dr.sqrt(dr.square(draw.sigma_px) + dr.square(shift_px)) * dz_du, dr.nan)
     points = dr.select(hit, points, dr.nan)
     normals = dr.select(hit, normals, dr.nan)
     outputs = {
         "xyz": dr.ravel(measured), "xyz_true": dr.ravel(points), "normal": dr.ravel(normals),
-        "intensity": signal, "part": hits.part, "face": hits.face, "shift": shift,
+        "intensity": signal, "part": hits.part, "face": hits.face, "status": status, "sigma": sigma,
     }
     dr.eval(*outputs.values())
     arrays = {name: np.asarray(value) for name, value in outputs.items()}
 
     meta = scan_meta(scene, sensor, seed, "geometric", peak_window_px=window, recast_rays=hits.recast)
     xyz = arrays["xyz"].reshape(h, w, 3)
-    status_np = status_np.reshape(h, w)
-    # predicted std (mm): the model's peak std with the mixed pixels' centroid shift, through dz/du
-    sigma_px = np.hypot(draw.sigma_px, np.nan_to_num(arrays["shift"]))
-    sigma = np.where(status_np.reshape(-1) == Status.VALID, sigma_px * dz_du, np.nan)
+    status_np = arrays["status"].astype(np.uint8).reshape(h, w)
     return RangeScan(
         depth=xyz[..., 2].copy(),
         xyz=xyz,
@@ -114,18 +114,21 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
         pose=pose,
         meta=meta,
         xyz_true=arrays["xyz_true"].reshape(h, w, 3),
-        sigma=sigma.reshape(h, w).astype(np.float32),
+        sigma=arrays["sigma"].reshape(h, w),
     )
 
 
 def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float, z_ref: float,
-                 status: np.ndarray, points, normals, sources, sheet_n, rays, signal, albedo):
-    """The inputs of :func:`rangesim.sensor.stripe_noise.simulate` from the camera-frame geometry.
+                 status, points, normals, sources, sheet_n, rays, signal, albedo):
+    """:func:`rangesim.sensor.stripe_noise.simulate` on the camera-frame geometry, in Dr.Jit.
 
-    The per-pixel geometry runs as one fused Dr.Jit kernel; only its five results (float32)
-    come to NumPy, where the draws and the correlated field are made. Returns the draw and
-    dz/du (mm of depth per pixel of peak shift, flat float32), which turns its std into mm.
+    The per-pixel inputs, the model's arithmetic and its white draws (a PCG32 stream per
+    pixel) stay lazy Dr.Jit expressions, so they fuse into the scan's last kernel; only the
+    border distance of the few cells that need it and any correlated field are made in
+    NumPy. Returns the draw (Dr.Jit arrays) and dz/du (mm of depth per pixel of peak
+    shift), which turns its std into mm.
     """
+    mi = mitsuba()
     to_laser = sources - points
     d_laser = dr.norm(to_laser)
     d_camera = dr.norm(points)
@@ -137,21 +140,22 @@ def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float
     speckle_px = dorsch_sigma_mm(d_camera, sin_theta, noise.speckle_contrast, noise.wavelength_nm,
                                  noise.aperture_mm) / dzdu
     magnification = f_op / d_camera
-    outputs = [cos_i, amplitude, magnification, speckle_px, dzdu]
-    outputs = [dr.select(dr.isfinite(v), v, 0.0) for v in outputs]
-    dr.eval(*outputs)
-    cos_i, amplitude, magnification, speckle_px, dzdu = (np.asarray(v, dtype=np.float32) for v in outputs)
-    candidate = status == Status.VALID
+    cos_i, amplitude, magnification, speckle_px, dzdu = (
+        dr.select(dr.isfinite(v), v, 0.0) for v in (cos_i, amplitude, magnification, speckle_px, dzdu))
+    candidate = status == int(Status.VALID)
 
-    def border_mm(where: np.ndarray) -> np.ndarray:
+    def border_mm(where) -> "mi.Float":
         # the stripe is truncated where the surface ends or the laser cannot reach it
-        reached = (status == Status.VALID) | (status == Status.DROPOUT)
-        return border_distance(reached.reshape(shape), where=where) / np.where(
-            candidate & (magnification > 0), magnification, 1.0)
+        status_np = np.asarray(status)
+        reached = (status_np == Status.VALID) | (status_np == Status.DROPOUT)
+        m = np.asarray(magnification)
+        d = border_distance(reached.reshape(shape), where=np.asarray(where)) / np.where(
+            (status_np == Status.VALID) & (m > 0), m, 1.0)
+        return mi.Float(d.astype(np.float32))
 
     corr = noise.correlation_mm * f / z_ref
-    draw = simulate(noise, np.random.default_rng(seed), shape, candidate=candidate, signal=np.asarray(signal),
-                    cos_incidence=cos_i, amplitude=amplitude, magnification=magnification,
-                    reference_magnification=f / z_ref, speckle_px=speckle_px, border_mm=border_mm,
-                    corr_px=(corr, corr))
+    draws = PixelDraws(np.random.default_rng(seed), shape[0] * shape[1])
+    draw = simulate(noise, draws, shape, candidate=candidate, signal=signal, cos_incidence=cos_i,
+                    amplitude=amplitude, magnification=magnification, reference_magnification=f / z_ref,
+                    speckle_px=speckle_px, border_mm=border_mm, corr_px=(corr, corr))
     return draw, dzdu

@@ -82,8 +82,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
+import drjit as dr
 import numpy as np
 from scipy import ndimage, special
 
@@ -91,6 +93,7 @@ __all__ = [
     "StripeNoise", "stripe_width_px", "dorsch_sigma_mm", "partial_stripe_shift_mm",
     "peak_sigma_px", "correlated_field", "draw_peak_error_px", "detection_probability",
     "draw_detected", "NOISE_KEYS", "partial_stripe_fraction", "border_distance", "StripeDraw", "simulate",
+    "NumPyDraws", "PixelDraws",
 ]
 
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
@@ -101,6 +104,34 @@ NOISE_KEYS: dict[str, float] = {
     "sigma_px": 0.0, "quantization_px": 0.0, "min_signal": 0.0, "speckle_contrast": 0.0,
     "signal_px": 0.0, "correlation_mm": 0.0, "edge_gain": 0.0, "signal_contrast": 0.0,
 }
+
+
+# The model's arithmetic runs on NumPy arrays (the twin's grid cells, float64) or on Dr.Jit
+# arrays (the geometric scanner's pixels, float32, fused into the scan's kernels): the
+# formulas are written once against these two namespaces.
+def _dr_like(a, ref):
+    """A NumPy array as a Dr.Jit array of ``ref``'s type (float32 or bool)."""
+    a = np.asarray(a)
+    return type(ref)(np.ascontiguousarray(a, dtype=bool if a.dtype == bool else np.float32))
+
+
+_NP = SimpleNamespace(
+    sqrt=np.sqrt, abs=np.abs, clip=np.clip, maximum=np.maximum, where=np.where, isfinite=np.isfinite,
+    round=np.round, ndtr=special.ndtr, any=lambda a: bool(np.any(a)), numpy=np.asarray,
+    full_like=lambda a, v: np.full(np.shape(a), v), f32=lambda a: np.asarray(a, np.float32),
+    like=lambda a, ref: np.asarray(a),
+)
+_DR = SimpleNamespace(
+    sqrt=dr.sqrt, abs=dr.abs, clip=dr.clip, maximum=dr.maximum, where=dr.select, isfinite=dr.isfinite,
+    round=dr.round, ndtr=lambda x: 0.5 * (1.0 + dr.erf(x * (1.0 / math.sqrt(2.0)))),
+    any=lambda a: bool(dr.any(a)), numpy=np.asarray, full_like=lambda a, v: dr.full(type(a), v, dr.width(a)),
+    f32=lambda a: a, like=_dr_like,
+)
+
+
+def _ops(*arrays) -> SimpleNamespace:
+    """The namespace for ``arrays``: Dr.Jit's when any of them is a Dr.Jit array."""
+    return _DR if any(dr.is_array_v(a) for a in arrays) else _NP
 
 
 @dataclass(frozen=True)
@@ -154,7 +185,8 @@ def stripe_width_px(cos_incidence: np.ndarray, magnification: np.ndarray | float
     Parameters
     ----------
     cos_incidence : (N,) array
-        Cosine of the laser's incidence angle on the surface.
+        Cosine of the laser's incidence angle on the surface (NumPy, or Dr.Jit: then the
+        result is a Dr.Jit array too).
     magnification : (N,) array or float
         Pixels per mm on the surface across the stripe (f / distance).
     stripe_width_mm, psf_px : float
@@ -166,9 +198,11 @@ def stripe_width_px(cos_incidence: np.ndarray, magnification: np.ndarray | float
     >>> w.tolist()
     [2.0, 4.0]
     """
-    c = np.clip(np.abs(np.asarray(cos_incidence, np.float64)), MIN_COS, 1.0)
-    foot = np.asarray(magnification, np.float64) * stripe_width_mm / c
-    return np.sqrt(psf_px**2 + foot**2)
+    xp = _ops(cos_incidence, magnification)
+    if xp is _NP:
+        cos_incidence, magnification = np.asarray(cos_incidence, np.float64), np.asarray(magnification, np.float64)
+    foot = magnification * stripe_width_mm / xp.clip(xp.abs(cos_incidence), MIN_COS, 1.0)
+    return xp.sqrt(psf_px**2 + foot * foot)
 
 
 def dorsch_sigma_mm(distance_mm: np.ndarray | float, sin_triangulation: np.ndarray | float, contrast: float,
@@ -229,11 +263,13 @@ def partial_stripe_fraction(edge_distance_mm: np.ndarray, cos_incidence: np.ndar
     >>> np.round(partial_stripe_fraction(np.array([0.0, 10.0]), np.ones(2), 1.0), 3).tolist()
     [0.5, 1.0]
     """
+    xp = _ops(edge_distance_mm, cos_incidence)
     if stripe_width_mm <= 0:
-        return np.ones(np.shape(edge_distance_mm))
-    c = np.clip(np.abs(np.asarray(cos_incidence, np.float64)), MIN_COS, 1.0)
-    sigma_s = stripe_width_mm * FWHM_TO_SIGMA / c
-    return special.ndtr(np.asarray(edge_distance_mm, np.float64) / sigma_s)
+        return xp.full_like(edge_distance_mm, 1.0)
+    if xp is _NP:
+        cos_incidence, edge_distance_mm = np.asarray(cos_incidence, np.float64), np.asarray(edge_distance_mm, np.float64)
+    sigma_s = stripe_width_mm * FWHM_TO_SIGMA / xp.clip(xp.abs(cos_incidence), MIN_COS, 1.0)
+    return xp.ndtr(edge_distance_mm / sigma_s)
 
 
 def peak_sigma_px(noise: StripeNoise, *, width_ratio: np.ndarray, amplitude: np.ndarray,
@@ -254,19 +290,22 @@ def peak_sigma_px(noise: StripeNoise, *, width_ratio: np.ndarray, amplitude: np.
 
     Returns
     -------
-    dict of (N,) float64 arrays
+    dict of (N,) arrays
         ``white`` (term 1), ``correlated`` (terms 2-4), ``total`` (all, with the
-        quantisation variance q^2 / 12).
+        quantisation variance q^2 / 12); float64 for NumPy inputs, Dr.Jit floats for Dr.Jit
+        inputs.
     """
+    xp = _ops(width_ratio, amplitude)
+    if xp is _NP:
+        amplitude = np.asarray(amplitude, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
-        root_w = np.sqrt(np.maximum(width_ratio, 0.0))
-        a = np.maximum(np.asarray(amplitude, np.float64), 1e-6)
-        white = np.full(np.shape(root_w), float(noise.sigma_px))
-        correlated = np.sqrt(np.square(noise.signal_px * root_w / a) + np.square(speckle_px * root_w)
-                             + np.square(noise.edge_gain * edge_px))
-    white = np.where(np.isfinite(white), white, 0.0)
-    correlated = np.where(np.isfinite(correlated), correlated, 0.0)
-    total = np.sqrt(white**2 + correlated**2 + noise.quantization_px**2 / 12.0)
+        root_w = xp.sqrt(xp.maximum(width_ratio, 0.0))
+        signal_term = noise.signal_px * root_w / xp.maximum(amplitude, 1e-6)
+        speckle_term, edge_term = speckle_px * root_w, noise.edge_gain * edge_px
+        correlated = xp.sqrt(signal_term * signal_term + speckle_term * speckle_term + edge_term * edge_term)
+    white = xp.full_like(root_w, float(noise.sigma_px))
+    correlated = xp.where(xp.isfinite(correlated), correlated, 0.0)
+    total = xp.sqrt(white * white + correlated * correlated + noise.quantization_px**2 / 12.0)
     return {"white": white, "correlated": correlated, "total": total}
 
 
@@ -297,22 +336,90 @@ def correlated_field(rng: np.random.Generator, shape: tuple[int, int], corr_px: 
     return field / norm
 
 
-def draw_peak_error_px(rng: np.random.Generator, shape: tuple[int, int], sigmas: Mapping[str, np.ndarray],
-                       quantization_px: float, corr_px: tuple[float, float]) -> np.ndarray:
-    """Draw the peak error (pixels) of every cell of an (H, W) grid, flat (H * W,) float64.
+class NumPyDraws:
+    """Random draws for the model from a ``numpy.random.Generator``, in call order (float32).
 
-    ``sigmas`` from :func:`peak_sigma_px` (flat, H * W). The white terms use independent
-    normals, the correlated terms one field of :func:`correlated_field`; quantisation to
-    steps of q at a uniform random phase comes last.
+    The twin's source: every draw of a grid is one NumPy call.
     """
+
+    def __init__(self, rng: np.random.Generator):
+        self.rng = rng
+
+    def white(self, n: int) -> np.ndarray:
+        """(n,) independent standard normals."""
+        return self.rng.standard_normal(n, dtype=np.float32)
+
+    def uniform(self, n: int) -> np.ndarray:
+        """(n,) independent uniforms in [0, 1)."""
+        return self.rng.random(n, dtype=np.float32)
+
+    def field(self, shape: tuple[int, int], corr_px: tuple[float, float]) -> np.ndarray:
+        """A flat :func:`correlated_field` over ``shape``."""
+        return correlated_field(self.rng, shape, corr_px).reshape(-1)
+
+
+class PixelDraws:
+    """Random draws for the model as Dr.Jit arrays: a PCG32 stream per pixel.
+
+    The geometric scanner's source. Stream ``k`` (sequence = pixel index) starts from one
+    state drawn from ``rng``, entered as an opaque value so a new seed compiles nothing;
+    a pixel's white draws depend only on the seed and its index. Correlated fields (a
+    Gaussian filter over the whole image) are made in NumPy from ``rng`` and moved over.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    n : int
+        Number of pixels.
+    """
+
+    def __init__(self, rng: np.random.Generator, n: int):
+        from rangesim.core.backend import mitsuba
+
+        self.mi = mi = mitsuba()
+        self.rng = rng
+        state = int(rng.integers(0, 2**63))
+        self.pcg = mi.PCG32(size=n, initstate=dr.opaque(mi.UInt64, state), initseq=dr.arange(mi.UInt64, n))
+
+    def white(self, n: int):
+        """Standard normals (Box-Muller of two uniforms), ``mi.Float``."""
+        u1, u2 = self.pcg.next_float32(), self.pcg.next_float32()
+        return self.mi.warp.square_to_std_normal(self.mi.Point2f(u1, u2)).x
+
+    def uniform(self, n: int):
+        """Uniforms in [0, 1), ``mi.Float``."""
+        return self.pcg.next_float32()
+
+    def field(self, shape: tuple[int, int], corr_px: tuple[float, float]):
+        """A unit-variance field: white PCG normals, or a NumPy :func:`correlated_field`."""
+        if max(corr_px) < 0.05:  # the same cut-off as correlated_field's white case
+            return self.white(shape[0] * shape[1])
+        return self.mi.Float(correlated_field(self.rng, shape, corr_px).reshape(-1).astype(np.float32))
+
+
+def _draws(rng) -> "NumPyDraws | PixelDraws":
+    return rng if isinstance(rng, (NumPyDraws, PixelDraws)) else NumPyDraws(rng)
+
+
+def draw_peak_error_px(rng, shape: tuple[int, int], sigmas: Mapping[str, np.ndarray],
+                       quantization_px: float, corr_px: tuple[float, float]) -> np.ndarray:
+    """Draw the peak error (pixels) of every cell of an (H, W) grid, flat (H * W,).
+
+    ``rng``: a ``numpy.random.Generator`` (or a :class:`NumPyDraws` / :class:`PixelDraws`
+    source). ``sigmas`` from :func:`peak_sigma_px` (flat, H * W). The white terms use
+    independent normals, the correlated terms one field of :func:`correlated_field`;
+    quantisation to steps of q at a uniform random phase comes last.
+    """
+    draws = _draws(rng)
     n = shape[0] * shape[1]
-    white = rng.standard_normal(n, dtype=np.float32)
-    field = correlated_field(rng, shape, corr_px).reshape(-1).astype(np.float32, copy=False)
-    phase = rng.random(n, dtype=np.float32)
+    xp = _ops(sigmas["white"])
+    white = draws.white(n)
+    field = xp.f32(draws.field(shape, corr_px))
+    phase = draws.uniform(n)
     error = sigmas["white"] * white + sigmas["correlated"] * field
     if quantization_px > 0:
         offset = phase * quantization_px  # where the true peak sits on the quantiser grid
-        error = quantization_px * np.round((offset + error) / quantization_px) - offset
+        error = quantization_px * xp.round((offset + error) / quantization_px) - offset
     return error
 
 
@@ -336,15 +443,18 @@ def detection_probability(signal: np.ndarray, min_signal: float, contrast: float
     return special.gammaincc(k, x)
 
 
-def draw_detected(rng: np.random.Generator, shape: tuple[int, int], probability: np.ndarray,
+def draw_detected(rng, shape: tuple[int, int], probability: np.ndarray,
                   corr_px: tuple[float, float]) -> np.ndarray:
     """Flat (H * W,) bool: detected where a correlated uniform draw falls below ``probability``.
 
     The uniform draws are Phi of a :func:`correlated_field`, so they are uniform in every
     cell and correlated like the speckle; certain outcomes (p = 0 or 1) use no randomness.
+    ``rng`` as in :func:`draw_peak_error_px`.
     """
-    u = special.ndtr(correlated_field(rng, shape, corr_px)).reshape(-1)
-    return u < np.asarray(probability, np.float64)
+    xp = _ops(probability)
+    if xp is _NP:
+        probability = np.asarray(probability, np.float64)
+    return xp.ndtr(_draws(rng).field(shape, corr_px)) < probability
 
 
 def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0, 1.0),
@@ -384,7 +494,15 @@ def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0
     out[np.flatnonzero(~m.reshape(-1))] = 0.0
     if ask.size == 0:
         return out
-    border = ~m & ndimage.binary_dilation(m, structure=np.ones((3, 3), bool))
+    # unmeasurable cells with a measurable 8-neighbour (slice ORs: a fraction of binary_dilation's time)
+    near = m.copy()
+    for rows, cols in (((slice(1, None), slice(None)), (slice(None, -1), slice(None))),
+                       ((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
+                       ((slice(1, None), slice(1, None)), (slice(None, -1), slice(None, -1))),
+                       ((slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None)))):
+        near[rows] |= m[cols]
+        near[cols] |= m[rows]
+    border = ~m & near
     bi, bj = np.nonzero(border)
     tree = cKDTree(np.c_[bi * sampling[0], bj * sampling[1]])
     qi, qj = np.divmod(ask, m.shape[1])
@@ -412,7 +530,7 @@ class StripeDraw:
     detected: np.ndarray
 
 
-def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int], *, candidate: np.ndarray,
+def simulate(noise: StripeNoise, rng: "np.random.Generator | NumPyDraws | PixelDraws", shape: tuple[int, int], *, candidate: np.ndarray,
              signal: np.ndarray, cos_incidence: np.ndarray, amplitude: np.ndarray, magnification: np.ndarray,
              reference_magnification: float, speckle_px: np.ndarray, border_mm: "np.ndarray | Callable",
              corr_px: tuple[float, float]) -> StripeDraw:
@@ -421,9 +539,11 @@ def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int
     Parameters
     ----------
     noise : StripeNoise
-    rng : numpy.random.Generator
+    rng : numpy.random.Generator, NumPyDraws or PixelDraws
         Draws in a fixed order: dropout field (only when ``noise.signal_contrast`` > 0), then
-        the white normals, the correlated field and the quantiser phases.
+        the white normals, the correlated field and the quantiser phases. With Dr.Jit arrays
+        as inputs (the geometric scanner) pass a :class:`PixelDraws`: the arithmetic and the
+        white draws then stay lazy Dr.Jit expressions that fuse into the scan's kernels.
     shape : (H, W)
     candidate : (N,) bool
         Cells that would be measured before the dropout draw (lit, seen, in range).
@@ -443,14 +563,16 @@ def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int
         Correlation std of the correlated terms, cells.
     """
     n = shape[0] * shape[1]
-    candidate = np.asarray(candidate, bool).reshape(-1)
+    draws = _draws(rng)
+    xp = _ops(signal, candidate)
+    if xp is _NP:
+        candidate = np.asarray(candidate, bool).reshape(-1)
+        signal = np.asarray(signal, np.float32)
     s = noise.stripe_width_mm
-    signal = np.asarray(signal, np.float32)
     # a stripe cut by an outline or shadow border is dimmer: the detector sees S Phi(t) with
     # Phi >= 1/2, so only returns below twice the threshold can be tipped over by it
-    need_border = s > 0 and (noise.edge_gain > 0 or (
-        noise.min_signal > 0 and bool(np.any(candidate & (signal < 2 * noise.min_signal)))) or
-        noise.signal_contrast > 0)
+    need_border = s > 0 and (noise.edge_gain > 0 or noise.signal_contrast > 0 or (
+        noise.min_signal > 0 and xp.any(candidate & (signal < 2 * noise.min_signal))))
     border = None
     if need_border:
         if callable(border_mm):
@@ -461,24 +583,28 @@ def simulate(noise: StripeNoise, rng: np.random.Generator, shape: tuple[int, int
         else:
             border = border_mm
     if border is not None:
-        signal = signal * partial_stripe_fraction(border, cos_incidence, s).astype(np.float32)
+        signal = signal * xp.f32(partial_stripe_fraction(border, cos_incidence, s))
     if noise.signal_contrast > 0 and noise.min_signal > 0:
-        p = detection_probability(signal, noise.min_signal, noise.signal_contrast)
-        detected = candidate & draw_detected(rng, shape, np.where(candidate, p, 0.0), corr_px)
+        # the regularised gamma function has no Dr.Jit counterpart: P(valid) is made in NumPy
+        p = detection_probability(xp.numpy(signal), noise.min_signal, noise.signal_contrast)
+        p = xp.like(np.where(xp.numpy(candidate), p, 0.0), signal)
+        detected = candidate & draw_detected(draws, shape, p, corr_px)
     else:
         detected = candidate & (signal >= noise.min_signal)
     if s > 0:
         w = stripe_width_px(cos_incidence, magnification, s, noise.psf_px)
         w0 = float(stripe_width_px(np.ones(1), reference_magnification, s, noise.psf_px)[0])
-        ratio = (w / w0).astype(np.float32)
+        ratio = xp.f32(w / w0)
     else:  # no footprint: the imaged stripe is the blur alone, whatever the incidence
-        ratio = np.ones(n, np.float32)
+        ratio = xp.full_like(signal, 1.0) if xp is _DR else np.ones(n, np.float32)
     if noise.edge_gain > 0 and s > 0:
-        edge_px = (partial_stripe_shift_mm(border, cos_incidence, s) * magnification).astype(np.float32)
+        # erfcx (a stable phi / Phi) has no Dr.Jit counterpart either
+        edge_px = partial_stripe_shift_mm(xp.numpy(border), xp.numpy(cos_incidence), s) * xp.numpy(magnification)
+        edge_px = xp.like(edge_px.astype(np.float32), signal)
     else:
-        edge_px = np.zeros(n, np.float32)
+        edge_px = xp.full_like(signal, 0.0) if xp is _DR else np.zeros(n, np.float32)
     sigmas = peak_sigma_px(noise, width_ratio=ratio, amplitude=amplitude, speckle_px=speckle_px, edge_px=edge_px)
-    sigmas = {k: np.where(candidate, v, np.float32(0)) for k, v in sigmas.items()}
-    error = draw_peak_error_px(rng, shape, sigmas, noise.quantization_px, corr_px)
-    return StripeDraw(error_px=np.where(detected, error, np.float32(0)),
-                      sigma_px=np.where(detected, sigmas["total"], np.float32(np.nan)), detected=detected)
+    sigmas = {k: xp.where(candidate, v, np.float32(0)) for k, v in sigmas.items()}
+    error = draw_peak_error_px(draws, shape, sigmas, noise.quantization_px, corr_px)
+    return StripeDraw(error_px=xp.where(detected, error, np.float32(0)),
+                      sigma_px=xp.where(detected, sigmas["total"], np.float32(np.nan)), detected=detected)
