@@ -1,6 +1,7 @@
 """A baseline from the wider field: PCL's OrganizedEdgeFromNormals, in NumPy."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -8,11 +9,12 @@ import numpy as np
 from scipy import ndimage
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 from rangesim.edges._differences import central_difference, dot3, measured_normals
-from rangesim.edges._discontinuities import find_discontinuities
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, find_discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
 from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold
-from rangesim.edges._scan_access import pixel_geometry, scan_depth, scan_points
+from rangesim.edges._scan_access import PixelGeometry, pixel_geometry, scan_depth, scan_points
 from rangesim.edges._thinning import nearest_axis, nonmax_suppress
 from rangesim.edges.edgemap import EdgeMap
 
@@ -85,6 +87,42 @@ def _hysteresis(strength: np.ndarray, low: float, high: float) -> np.ndarray:
     return strong[labels]
 
 
+def _depth_threshold(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, geo: PixelGeometry, relative: float,
+                     distance_mm: float | np.ndarray | None) -> np.ndarray:
+    """(H, W) float32 jump threshold, mm: ``relative`` times the distance to the sensor.
+
+    The distance is ``distance_mm`` where given, ``|xyz|`` for camera-frame points (a
+    pinhole at the origin sees every point at positive depth); a grid in a scanner frame
+    has no distance to its sensor: then :data:`JUMP_THRESHOLD` pixel footprints, with a
+    warning (PCL's rule on such a grid, ``relative * z`` about 0, would flood it).
+    """
+    if distance_mm is not None:
+        d = np.asarray(distance_mm, dtype=np.float32)
+        if d.ndim == 0:
+            d = np.full(z.shape, d, np.float32)
+        if d.shape != z.shape:
+            raise RangesimError(f"distance_mm must be a number or an {z.shape} array, got shape {d.shape}")
+        if not np.all(d[valid] > 0):
+            raise RangesimError("distance_mm must be positive (mm from the sensor) at every valid pixel")
+        return np.float32(relative) * d
+    zv = z[valid]
+    if geo.perspective and zv.size and np.all(zv > 0):
+        return np.float32(relative) * np.sqrt(dot3(xyz, xyz))
+    warnings.warn(
+        "pcl_organized: the scan's depth is not the distance to the sensor (a grid in the scanner's frame); "
+        f"jump threshold {JUMP_THRESHOLD:.2f} pixel footprints instead of {relative} x distance "
+        "(pass distance_mm= to use PCL's rule)", RuntimeWarning, stacklevel=3)
+    return np.float32(JUMP_THRESHOLD) * geo.footprint
+
+
+def _distance_source(z: np.ndarray, valid: np.ndarray, geo: PixelGeometry, distance_mm: Any) -> str:
+    """What the jump threshold was relative to (for ``params``): given, |xyz| or footprints."""
+    if distance_mm is not None:
+        return "distance_mm"
+    zv = z[valid]
+    return "|xyz|" if geo.perspective and zv.size and np.all(zv > 0) else "footprints"
+
+
 def pcl_organized(
     scan: Any,
     depth_discontinuity: float = 0.02,
@@ -92,12 +130,14 @@ def pcl_organized(
     curvature_threshold: tuple[float, float] | None = None,
     edge_types: tuple[str, ...] = EDGE_TYPES,
     normal_window: int | None = None,
+    distance_mm: float | np.ndarray | None = None,
 ) -> OrganizedEdgeMap:
     """Organized-cloud edges as in PCL's ``OrganizedEdgeFromNormals``, written in NumPy.
 
     Depth edges follow ``OrganizedEdgeBase::extractEdges``: where all 8 neighbours are
     valid, the dominant depth difference decides (farther neighbour by more than
-    ``depth_discontinuity * z``: *occluding*; nearer: *occluded*); where some are NaN, the
+    ``depth_discontinuity * d``: *occluding*; nearer: *occluded*, with ``d`` the distance
+    from the sensor to the point, see ``distance_mm``); where some are NaN, the
     first valid pixel along the mean direction of the NaN neighbours, up to ``max_search``
     pixels away, is compared instead, and a pixel with none is a *NaN boundary* (see
     :func:`~rangesim.edges._discontinuities.find_discontinuities` with ``rule="dominant"``; that
@@ -122,14 +162,22 @@ def pcl_organized(
     pixels CONVEX or CONCAVE from the sign of ``(P_B - P_A) . (n_A - n_B)`` across the edge
     (as in :func:`~rangesim.edges.normal`), 0 where that is too weak to tell.
 
+    The depth threshold is relative to the distance from the sensor: PCL's ``0.02 z`` holds
+    for camera-frame points (z the depth from the viewpoint), where it fires on a surface
+    seen beyond ``atan(0.02 f)`` slant; on a grid in another frame (the Cyberware's scanner
+    frame, whose range axis is centred on 0) ``0.02 z`` is about 0 and floods the scan.
+    So the distance is ``|xyz|`` on camera-frame scans (a pinhole at the origin, all depths
+    positive), ``distance_mm`` where given, and otherwise, with a warning, the threshold
+    falls back to the other detectors' rule,
+    :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` pixel footprints.
+
     Parameters
     ----------
     scan : RangeScan
-        Uses ``xyz``, ``depth``, ``valid`` (mm). Like PCL it expects camera-frame points
-        (z = depth from the viewpoint); on grids in another frame (the Cyberware's scanner
-        frame, z around 0) the relative threshold is meaningless.
+        Uses ``xyz``, ``depth``, ``valid`` (mm).
     depth_discontinuity : float
-        Relative depth-discontinuity threshold (PCL's ``th_depth_discon``, 0.02).
+        Relative depth-discontinuity threshold (PCL's ``th_depth_discon``, 0.02): a
+        fraction of the distance to the sensor.
     max_search : int
         PCL's ``max_search_neighbors``: pixels searched across NaN gaps (50).
     curvature_threshold : (float, float), optional
@@ -146,6 +194,10 @@ def pcl_organized(
         Odd stencil size of the normal estimate, pixels (>= 3). Default (None): 3 on
         noise-free scans, else as :func:`~rangesim.edges.normal`'s window
         (``2 ceil(12 noise) + 1`` clipped to 3..9).
+    distance_mm : float or (H, W) float array, optional
+        Distance from the sensor to each point, mm (one number: the same for every pixel,
+        e.g. a scanner's stand-off). Default: ``|xyz|`` on camera-frame scans; none on
+        grids in a scanner frame (see above).
 
     Returns
     -------
@@ -177,17 +229,23 @@ def pcl_organized(
         if normal_window < 3 or normal_window % 2 == 0:
             raise ValueError(f"normal_window must be an odd integer >= 3, got {normal_window}")
     z, valid = scan_depth(scan)
+    geo = pixel_geometry(scan, z)
     noise = None
     if normal_window is None or curvature_threshold is None:
-        noise = estimate_depth_noise(scan, z=z, fp=pixel_geometry(scan, z).footprint)
+        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
     if normal_window is None:
         normal_window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3
     auto_threshold = curvature_threshold is None
     low, high = (0.4, 1.1) if auto_threshold else (float(t) for t in curvature_threshold)
     xyz = scan_points(scan, valid, component_major=True)
-    disc = find_discontinuities(z, depth_discontinuity, max_search, rule="dominant")
+    threshold = _depth_threshold(xyz, z, valid, geo, float(depth_discontinuity), distance_mm)
+    disc = find_discontinuities(z, threshold, max_search, rule="dominant", perspective=geo.perspective)
     n = measured_normals(xyz, disc.pairs, normal_window // 2)
+    if _distance_source(z, valid, geo, None) != "|xyz|":
+        # not a camera frame: n . p <= 0 flips wherever the range axis crosses 0, a false
+        # crease; the grid looks along +z (smaller z is nearer), so turn every normal to -z
+        np.multiply(n, np.where(n[2] > 0, np.float32(-1), np.float32(1)), out=n)
 
     # PCL's Canny: 3 x 3 Gaussian (sigma 1), then Sobel of each normal component (central
     # difference along, [1 2 1] across, times 8 for raw Sobel units)
@@ -237,6 +295,7 @@ def pcl_organized(
             labels[classes[name]] = EdgeLabel.JUMP
     params = {
         "depth_discontinuity": float(depth_discontinuity), "max_search": int(max_search),
+        "distance": _distance_source(z, valid, geo, distance_mm),
         "curvature_threshold": [low, high], "edge_types": list(edge_types),
         "normal_window": normal_window, "noise": None if noise is None else float(noise),
     }
