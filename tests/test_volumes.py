@@ -13,7 +13,7 @@ from rangesim.cli import volume_commands
 from rangesim.core.errors import RangesimError
 from rangesim.volumes import decompose, generalized_cylinders, sections_intersect
 from rangesim.volumes.csg import boolean_expression, volumetric_model
-from rangesim.volumes.shapes import bent_tube, deformed_ellipsoid
+from rangesim.volumes.shapes import bent_tube, deformed_ellipsoid, swept_tube
 
 
 def _check_sections(gc):
@@ -46,6 +46,54 @@ def test_bent_tube_axis_and_sections():
     # interior sections are circles of the tube's radius
     r = np.array([s.radii for s in gc.sections[1:-1]])
     assert np.allclose(r, 8.0, rtol=0.03)
+
+
+def _against_centre_line(gc, centre_line, radius, t_range, n_around):
+    """Per section: angle (deg) between its normal and the true tangent at the nearest centre
+    line point, its area over the true n-gon's, and its centroid's distance to the line (mm)."""
+    t = np.linspace(*t_range, 200001)
+    p = centre_line(t)
+    tangent = np.gradient(p, t, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1)[:, None]
+    out = []
+    for s in gc.sections:
+        k = int(np.argmin(np.linalg.norm(p - s.centroid, axis=1)))
+        r = radius(t[k]) if callable(radius) else radius
+        ngon = 0.5 * n_around * r ** 2 * np.sin(2 * np.pi / n_around)
+        out.append((np.degrees(np.arccos(min(1.0, abs(s.normal @ tangent[k])))), s.area / ngon,
+                    np.linalg.norm(p[k] - s.centroid)))
+    return np.array(out)
+
+
+def test_bent_tube_end_sections_perpendicular_at_their_centroids():
+    # issue 14 item 7: the first cuts near the extremes are 45 deg off a quarter arc's ends,
+    # and step 5 must turn them (and the split's cuts beside them) perpendicular too
+    mesh, _, bend = bent_tube(radius=9.0, bend_radius=80.0, angle_deg=90.0)
+    gc = generalized_cylinders(mesh, resolution=5.0)[0]
+    m = _against_centre_line(gc, lambda t: np.column_stack([bend * np.cos(t), bend * np.sin(t), 0 * t]), 9.0,
+                             (0.0, np.pi / 2), 32)
+    assert m[:, 0].max() < 2.0  # deg, ends included
+    assert np.abs(m[:, 1] - 1).max() < 0.01
+    assert m[:, 2].max() < 0.1  # mm
+    _check_sections(gc)
+
+
+def test_tapered_helix_end_sections_perpendicular():
+    # a shape of another kind (space curve, tapered), not used for tuning
+    def helix(t):
+        return np.column_stack([40 * np.cos(t), 40 * np.sin(t), 15 * t])
+
+    def taper(t):
+        return 8.0 - 1.5 * t
+
+    mesh = swept_tube(helix, taper, (0.0, 2.0), n_around=64, n_along=120)
+    gc = generalized_cylinders(mesh, resolution=5.0)[0]
+    m = _against_centre_line(gc, helix, taper, (0.0, 2.0), 64)
+    assert m[:, 0].max() < 2.0
+    assert np.abs(m[:, 1] - 1).max() < 0.01
+    assert m[:, 2].max() < 0.1
+    assert np.ptp(gc.sweep["area"]) > 0.5 * gc.sweep["area"].max()  # the taper is seen
+    _check_sections(gc)
 
 
 def test_cylinder():

@@ -6,12 +6,15 @@ moment of inertia gives the first axis between the centroids of two cross-sectio
 extremes; the cross-section through the mid-point of an axis segment, perpendicular to it,
 splits the segment and the surface in two, recursively, until a segment is no longer than the
 resolution or a new cross-section is not closed or crosses another; then every cross-section
-is moved to its centroid and turned perpendicular to the local axis; (3) junctions between the
-generalized cylinders of neighbouring sub-parts.
+is moved to its centroid and turned perpendicular to the local axis (step 5 of the paper),
+the end sections included: they are re-cut perpendicular to the axis extrapolated from the
+interior, never steering it; (3) junctions between the generalized cylinders of neighbouring
+sub-parts.
 
 Each split only cuts the triangles of its own piece, and the pieces of one level share out
 the surface, so a level costs O(m) and the n cross-sections come in O(log n) levels:
-O(m log n) in all.
+O(m log n) in all. The adjustment re-cuts the whole solid (a turned plane leaves the split's
+pieces), O(m n) per pass, a few passes.
 
 Sub-parts as closed solids: from a part tree (a :class:`~rangesim.cad.part.BuiltPart`), each
 material leaf's own design solid (closed, exact); from face labels or the crease
@@ -175,7 +178,9 @@ def axis_and_sections(mesh: trimesh.Trimesh, resolution: float, max_recursions: 
     end_offset : float
         The first two cross-sections lie this fraction of the extent inside the extremes.
     adjust_passes : int
-        Passes of the final adjustment (0: keep the sections as split).
+        Passes of the final adjustment (0: keep the sections as split): the first from the
+        middle outwards, the others re-centring every section (see :func:`_adjust_pass`);
+        it stops early once nothing moves.
 
     Returns
     -------
@@ -223,50 +228,171 @@ def axis_and_sections(mesh: trimesh.Trimesh, resolution: float, max_recursions: 
         sb, pb = split(right, new, s1, depth + 1)
         return sa + sb[1:], pa + pb
 
-    sections, pieces = split(_Piece(tris), ends[0], ends[1], 0)
+    sections, _ = split(_Piece(tris), ends[0], ends[1], 0)
 
-    # -- adjust: each section through its centroid, perpendicular to the local axis --
-    for _ in range(adjust_passes):
-        n_sec = len(sections)
-        # interior sections first; an end section then takes its neighbour's (adjusted) normal,
-        # since the first end cut near an extreme may be a sliver off the true axis
-        for i in [*range(1, n_sec - 1), 0, n_sec - 1]:
-            pts = np.array([s.centroid for s in sections])
-            if i == 0:
-                tangent = sections[1].normal.copy() if n_sec > 2 else pts[1] - pts[0]
-                local = pieces[0].tris
-            elif i == n_sec - 1:
-                tangent = sections[-2].normal.copy() if n_sec > 2 else pts[-1] - pts[-2]
-                local = pieces[-1].tris
-            elif n_sec > 3 and i in (1, n_sec - 2):  # one-sided: the ends are the least reliable
-                tangent = pts[2] - pts[1] if i == 1 else pts[-2] - pts[-3]
-                local = np.concatenate([pieces[i - 1].tris, pieces[i].tris])
-            else:
-                tangent = pts[i + 1] - pts[i - 1]
-                local = np.concatenate([pieces[i - 1].tris, pieces[i].tris])
-            norm = np.linalg.norm(tangent)
-            if norm == 0:
-                continue
-            tangent /= norm
-            # an end section: step back from its neighbour along the neighbour's normal (the end
-            # stays where it was along the axis), sliding inwards until the cut is closed
-            nb = 1 if i == 0 else n_sec - 2
-            step = pts[i] - pts[nb]
-            step = tangent * (step @ tangent)
-            for frac in ((0.0,) if 0 < i < n_sec - 1 else (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)):
-                origin = pts[i] if 0 < i < n_sec - 1 else pts[nb] + (1 - frac) * step
-                new, closed = cut_section(local, origin, tangent, near=origin, tol=tol)
-                if new is None or not closed:
-                    continue
-                if (i > 0 and sections_intersect(new, sections[i - 1])) or (
-                        i < len(sections) - 1 and sections_intersect(new, sections[i + 1])):
-                    continue
-                sections[i] = new
-                break
+    # -- adjust (step 5): each section through its centroid, perpendicular to the local axis --
+    for k in range(adjust_passes):
+        if not _adjust_pass(tris, sections, tol, outwards=k == 0) and k > 0:
+            break
     for s in sections:
         s.origin = s.centroid.copy()
     axis = np.array([s.centroid for s in sections])
     return axis, sections, deepest
+
+
+#: an end section may not cut a face whose normal is within this angle of the axis (deg): such
+#: a face is an end cap (a smooth tip 3 % of the length from its extreme is about 45 deg off)
+END_CAP_DEG = 30.0
+#: an end section may slide inwards to this fraction of its distance from its neighbour
+END_MIN_FRACTION = 0.5
+
+
+def _tangent(pts: np.ndarray, i: int, lo: int, hi: int) -> np.ndarray:
+    """Unit axis direction at ``pts[i]``: the derivative of the quadratic through three
+    consecutive points of ``pts[lo:hi + 1]`` (centred on ``i`` where it can be), in arc length.
+
+    Second-order accurate on an unevenly spaced axis, where the chord of the two neighbours is
+    only first-order accurate; with two points, the chord.
+    """
+    if hi - lo < 2:
+        t = pts[min(i + 1, hi)] - pts[max(i - 1, lo)]
+        return t / max(np.linalg.norm(t), 1e-300)
+    j = min(max(i - 1, lo), hi - 2)
+    p = pts[j:j + 3]
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    if s[1] <= 0 or s[2] <= s[1]:
+        t = p[2] - p[0]
+    else:
+        x = s[i - j]
+        w = [(2 * x - s[1] - s[2]) / ((s[0] - s[1]) * (s[0] - s[2])),
+             (2 * x - s[0] - s[2]) / ((s[1] - s[0]) * (s[1] - s[2])),
+             (2 * x - s[0] - s[1]) / ((s[2] - s[0]) * (s[2] - s[1]))]
+        t = w[0] * p[0] + w[1] * p[1] + w[2] * p[2]
+    return t / max(np.linalg.norm(t), 1e-300)
+
+
+def _rotate(v: np.ndarray, k: np.ndarray, angle: float) -> np.ndarray:
+    """``v`` turned by ``angle`` (rad) about the unit axis ``k`` (Rodrigues)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return v * c + np.cross(k, v) * s + k * (k @ v) * (1 - c)
+
+
+def _extrapolated_section(tris: np.ndarray, old: Section, nb: Section, nb2: Section | None, tol: float,
+                          end: bool) -> Section | None:
+    """A section re-cut perpendicular to the axis extrapolated outwards from its two inner
+    neighbours ``nb`` (next to it) and ``nb2``.
+
+    The axis beyond ``nb`` is continued as a circular arc with the turning rate (rad/mm) of
+    the normals from ``nb2`` to ``nb`` (a straight line without ``nb2``), and the section
+    keeps the distance of its old centroid from ``nb`` along ``nb``'s normal. Any closed cut
+    beyond ``nb`` is taken, except for an ``end`` section: that one slides inwards (down to
+    ``END_MIN_FRACTION`` of the distance) until it cuts no face turned towards the axis
+    (within ``END_CAP_DEG``): such a face is an end cap, and a section through it is not a
+    section of the sweep. None when no cut qualifies.
+    """
+    c1 = nb.centroid
+    n1 = nb.normal * np.sign((old.centroid - c1) @ nb.normal or 1.0)  # pointing outwards
+    dist = float((old.centroid - c1) @ n1)
+    if dist <= tol:
+        return None
+    k, rate = np.zeros(3), 0.0
+    if nb2 is not None:
+        n2 = nb2.normal * np.sign(nb2.normal @ n1 or 1.0)
+        cross = np.cross(n2, n1)
+        sin = float(np.linalg.norm(cross))
+        d12 = float(np.linalg.norm(c1 - nb2.centroid))
+        if sin > 1e-12 and d12 > tol:
+            k, rate = cross / sin, float(np.arctan2(sin, n2 @ n1)) / d12
+    for frac in (np.linspace(1.0, END_MIN_FRACTION, 6) if end else (1.0,)):
+        length = frac * dist
+        tangent = _rotate(n1, k, rate * length)
+        chord = _rotate(n1, k, rate * length / 2)  # the chord of an arc bisects its end tangents
+        origin = c1 + length * chord
+        sec, closed = cut_section(tris, origin, tangent, near=origin, tol=tol)
+        if sec is None or not closed or (sec.centroid - c1) @ n1 <= tol:
+            continue
+        if not end or not _cuts_cap(tris, sec, tol):
+            return sec
+    return None
+
+
+def _cuts_cap(tris: np.ndarray, sec: Section, tol: float) -> bool:
+    """Whether the plane of ``sec`` cuts, within its loop's reach, a face whose normal is
+    within ``END_CAP_DEG`` of the section's normal."""
+    d = (tris - sec.origin) @ sec.normal
+    crossing = (d.min(axis=1) < -tol) & (d.max(axis=1) > tol)
+    if not crossing.any():
+        return False
+    t = tris[crossing]
+    reach = np.linalg.norm(sec.points - sec.centroid, axis=1).max() + tol
+    near = np.linalg.norm(t.mean(axis=1) - sec.centroid, axis=1) <= reach
+    n = np.cross(t[near, 1] - t[near, 0], t[near, 2] - t[near, 0])
+    length = np.linalg.norm(n, axis=1)
+    cos = np.abs(n @ sec.normal)[length > 0] / length[length > 0]
+    return bool(np.any(cos > np.cos(np.radians(END_CAP_DEG))))
+
+
+def _adjust_pass(tris: np.ndarray, sections: list[Section], tol: float, outwards: bool) -> bool:
+    """One pass of step 5 on the whole solid ``tris``: the sections re-cut perpendicular to
+    the local axis at their centroids, in place. Returns whether anything moved.
+
+    ``outwards``: the three middle sections take the axis direction of the quadratic through
+    their neighbours' centroids, and the others, from the middle out, are re-cut
+    perpendicular to the axis extrapolated from their two (already adjusted) inner
+    neighbours (:func:`_extrapolated_section`): the first cuts near the extremes, and the
+    split's cuts next to them, may be far off the axis, and must not steer it. Otherwise
+    every interior section takes the quadratic's direction (Jacobi) and the two end sections
+    are extrapolated. The cuts are of the whole solid, not of the pieces of the split, whose
+    borders are the split's own (possibly oblique) planes. A new section that would cross
+    another (the next or the one after) is not taken.
+    """
+    n = len(sections)
+    if n < 2:
+        return False
+    new = list(sections)
+    pts = np.array([s.centroid for s in sections])
+
+    def central(i: int) -> None:
+        t = _tangent(pts, i, 0, n - 1)
+        sec, closed = cut_section(tris, pts[i], t, near=pts[i], tol=tol)
+        if sec is not None and closed:
+            new[i] = sec
+
+    def extrapolate(i: int, step: int) -> None:
+        nb2 = new[i - 2 * step] if 0 <= i - 2 * step < n else None
+        sec = _extrapolated_section(tris, sections[i], new[i - step], nb2, tol, end=i in (0, n - 1))
+        if sec is not None:
+            new[i] = sec
+
+    if n == 2:
+        for i in (0, 1):
+            central(i)
+    elif outwards:
+        mid = n // 2
+        core = [i for i in (mid - 1, mid, mid + 1) if 0 < i < n - 1]
+        for i in core:
+            central(i)
+        for i in range(max(core) + 1, n):
+            extrapolate(i, 1)
+        for i in range(min(core) - 1, -1, -1):
+            extrapolate(i, -1)
+    else:
+        for i in range(1, n - 1):
+            central(i)
+        extrapolate(n - 1, 1)
+        extrapolate(0, -1)
+    # the paper's sections never cross: a new one that crosses a neighbour keeps its old cut
+    for _ in range(n):
+        crossing = {k for i in range(n - 1) for j in (i + 1, i + 2) if j < n and sections_intersect(new[i], new[j])
+                    for k in (i, j) if new[k] is not sections[k]}
+        if not crossing:
+            break
+        for k in crossing:
+            new[k] = sections[k]
+    moved = max(float(np.linalg.norm(a.centroid - b.centroid) + np.linalg.norm(np.cross(a.normal, b.normal)))
+                for a, b in zip(new, sections))
+    sections[:] = new
+    return moved > tol
 
 
 # -- steps 1 and 3 --------------------------------------------------------------------------

@@ -71,3 +71,53 @@ def bent_tube(radius: float = 8.0, bend_radius: float = 60.0, angle_deg: float =
     if mesh.volume < 0:
         mesh.invert()
     return mesh, np.zeros(3), bend_radius
+
+
+def swept_tube(centre_line, radius, t_range: tuple[float, float] = (0.0, 1.0), n_around: int = 48,
+               n_along: int = 96) -> trimesh.Trimesh:
+    """A closed tube of circular section swept along a space curve, flat caps at both ends.
+
+    Parameters
+    ----------
+    centre_line : callable
+        ``centre_line(t)`` -> (len(t), 3) points of the centre line, mm.
+    radius : float or callable
+        Section radius, mm, or ``radius(t)`` -> (len(t),) for a tapered tube.
+    t_range : (float, float)
+        Parameter interval swept.
+    n_around, n_along : int
+        Vertices around each ring and rings along the curve.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Outward-facing; ring ``j`` lies in the plane perpendicular to the curve's tangent at
+        its ``t_j`` (parallel-transported frames, so the tube does not twist).
+    """
+    t = np.linspace(*t_range, n_along)
+    c = np.asarray(centre_line(t), float)
+    r = np.broadcast_to(np.asarray(radius(t) if callable(radius) else radius, float), t.shape)
+    tangent = np.gradient(c, t, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1)[:, None]
+    u = np.cross(tangent[0], np.eye(3)[np.argmin(np.abs(tangent[0]))])
+    frames = []
+    for tj in tangent:  # parallel transport: remove the tangential part, renormalise
+        u = u - (u @ tj) * tj
+        u /= np.linalg.norm(u)
+        frames.append((u, np.cross(tj, u)))
+    th = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
+    rings = np.array([cj + rj * (np.cos(th)[:, None] * fu + np.sin(th)[:, None] * fv)
+                      for cj, rj, (fu, fv) in zip(c, r, frames)])
+    verts = np.vstack([rings.reshape(-1, 3), c[[0, -1]]])
+    j, i = np.meshgrid(np.arange(n_along - 1), np.arange(n_around), indexing="ij")
+    a = (j * n_around + i).ravel()
+    b = (j * n_around + (i + 1) % n_around).ravel()
+    faces = [np.stack([a, a + n_around, b], 1), np.stack([b, a + n_around, b + n_around], 1)]
+    e0, e1, last = n_along * n_around, n_along * n_around + 1, (n_along - 1) * n_around
+    ring = np.arange(n_around)
+    faces += [np.stack([np.full(n_around, e0), ring, (ring + 1) % n_around], 1),
+              np.stack([np.full(n_around, e1), last + (ring + 1) % n_around, last + ring], 1)]
+    mesh = trimesh.Trimesh(verts, np.vstack(faces), process=False)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
