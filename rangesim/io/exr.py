@@ -59,8 +59,9 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"{type(obj).__name__} is not JSON-serialisable")
 
 
-#: meta keys not written to files: wall-clock timings and Dr.Jit kernel-cache counts of a run
-VOLATILE_META = ("seconds", "kernels")
+#: meta keys not written to files: wall-clock timings and Dr.Jit kernel-cache counts of a run,
+#: and the number of row bands a big geometric scan was made in (it depends on the free memory)
+VOLATILE_META = ("seconds", "kernels", "bands")
 
 
 def encode_meta(meta: dict[str, Any], source: str | Path | None = None) -> str:

@@ -9,9 +9,10 @@ import numpy as np
 
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
-from rangesim.core.memory import check_memory
+from rangesim.core.memory import check_memory, memory_budget
 from rangesim.core.rangescan import RangeScan
 from rangesim.scene.scene import Scene, load_scene
+from rangesim.sensor.bands import RESULT_BYTES_PER_PIXEL, band_rows
 from rangesim.sensor.config import Sensor, load_sensor
 
 
@@ -187,8 +188,21 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
     if sensor.mode not in ("geometric", "rendered", "structured_light"):
         raise RangesimError(f"sensor mode {sensor.mode!r} is not available", source=sensor.source)
     estimate, what = scan_memory_estimate(sensor, keep_frames)
-    check_memory(estimate, what, source=sensor.source)
-    if sensor.mode == "geometric":
+    rows_per_band = None
+    budget, _ = memory_budget()
+    if sensor.mode == "geometric" and budget is not None and estimate > budget:
+        # too big in one piece: in bands of rows, when a band fits next to the result
+        rows_per_band = band_rows(sensor, budget, BASE_BYTES, BYTES_PER_PIXEL["geometric"])
+        if rows_per_band is None:
+            minimum = BASE_BYTES + sensor.width * sensor.height * RESULT_BYTES_PER_PIXEL
+            check_memory(max(estimate, minimum), what + " (even in bands of rows)", source=sensor.source)
+    else:
+        check_memory(estimate, what, source=sensor.source)
+    if rows_per_band is not None:
+        from rangesim.sensor.bands import scan_in_bands
+
+        output = scan_in_bands(scene, sensor, pose, int(seed), rows_per_band)
+    elif sensor.mode == "geometric":
         from rangesim.sensor.geometric import scan_geometric
 
         output = scan_geometric(scene, sensor, pose, int(seed))

@@ -43,18 +43,27 @@ from rangesim.sensor.triangulation import triangulate
 MIN_SHEET_ANGLE = 1e-3
 
 
-def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeScan:
-    """Scan ``scene`` from camera-to-world ``pose``; see the module docstring."""
+def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows: tuple[int, int] | None = None,
+                   fields: dict | None = None) -> RangeScan:
+    """Scan ``scene`` from camera-to-world ``pose``; see the module docstring.
+
+    ``rows`` (first, stop): scan only that band of image rows (:mod:`rangesim.sensor.bands`);
+    its pixels get the rays and the white noise draws they get in the whole image, and
+    ``fields`` (a dict shared by the bands) holds any correlated noise field of the whole image.
+    """
     mi = mitsuba()
     p = sensor.params
     h, w = sensor.height, sensor.width
+    first = 0
+    if rows is not None:
+        first, h = rows[0], rows[1] - rows[0]
     K = sensor.K
     f = float(K[0, 0])
     near, far = p["range"]["near"], p["range"]["far"]
     mscene = scene.mitsuba_scene()
 
     # 1. primary rays
-    view = camera_hits(scene, sensor, pose)
+    view = camera_hits(scene, sensor, pose, rows)
     hits, points, normals = view.hits, view.points, view.normals
     hit = hits.hit
     rays = hits.rays
@@ -76,7 +85,9 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
 
     # 7a. dropouts, predicted std and peak errors: the stripe noise model (lazy Dr.Jit)
     candidate = status == int(Status.VALID)
-    draw, dz_du = _stripe_draw(noise, seed, (h, w), f, sensor.reference_distance, status, points, normals, sources,
+    draws = PixelDraws(np.random.default_rng(seed), h * w, first_index=first * w, rows=rows,
+                       image_shape=(sensor.height, w), fields=fields)
+    draw, dz_du = _stripe_draw(noise, draws, (h, w), f, sensor.reference_distance, status, points, normals, sources,
                                sheet_n, rays, signal, albedo)
     status = dr.select(candidate & ~draw.detected, int(Status.DROPOUT), status)
     valid = status == int(Status.VALID)
@@ -118,7 +129,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int) -> RangeS
     )
 
 
-def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float, z_ref: float,
+def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], f: float, z_ref: float,
                  status, points, normals, sources, sheet_n, rays, signal, albedo):
     """:func:`rangesim.sensor.stripe_noise.simulate` on the camera-frame geometry, in Dr.Jit.
 
@@ -154,7 +165,6 @@ def _stripe_draw(noise: StripeNoise, seed: int, shape: tuple[int, int], f: float
         return mi.Float(d.astype(np.float32))
 
     corr = noise.correlation_mm * f / z_ref
-    draws = PixelDraws(np.random.default_rng(seed), shape[0] * shape[1])
     draw = simulate(noise, draws, shape, candidate=candidate, signal=signal, cos_incidence=cos_i,
                     amplitude=amplitude, magnification=magnification, reference_magnification=f / z_ref,
                     speckle_px=speckle_px, border_mm=border_mm, corr_px=(corr, corr))

@@ -150,13 +150,19 @@ class CameraHits:
     normals: Any
 
 
-def camera_hits(scene, sensor, pose: np.ndarray) -> CameraHits:
+def camera_hits(scene, sensor, pose: np.ndarray, rows: tuple[int, int] | None = None) -> CameraHits:
     """Cast the pixel-centre rays of ``sensor`` from ``pose`` (see :func:`cast_primary`).
 
     Rays are as long as ``MAX_RAY_FACTOR`` times the far limit along the image corner's ray.
+    ``rows`` (first, stop): only that band of image rows (the same rays as in the whole
+    image, N = (stop - first) * W).
     """
     K, h, w = sensor.K, sensor.height, sensor.width
     corner = float(np.hypot(np.hypot(w / 2 / K[0, 0], h / 2 / K[1, 1]), 1.0))  # longest ray of unit depth
+    if rows is not None:
+        K = K.copy()
+        K[1, 2] -= rows[0]  # the band's first row is row 0 of its rays
+        h = rows[1] - rows[0]
     watertight = np.array([o.watertight for o in scene.objects])
     hits = cast_primary(scene.mitsuba_scene(), K, h, w, pose,
                         MAX_RAY_FACTOR * sensor.params["range"]["far"] * corner, watertight)

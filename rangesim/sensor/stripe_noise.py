@@ -370,16 +370,31 @@ class PixelDraws:
     ----------
     rng : numpy.random.Generator
     n : int
-        Number of pixels.
+        Number of pixels drawn for.
+    first_index : int
+        Image index of the first of them (a band of rows of a larger image: its pixels
+        draw what they would draw in the whole image).
+    rows : (first, stop), optional
+        With ``image_shape`` and ``fields``: the band's rows; correlated fields are then made
+        once over the whole image, kept in ``fields`` (shared by the bands, keyed by call
+        order) and cut to the band, so a scan in bands equals the scan in one piece.
+    image_shape : (H, W), optional
+    fields : dict, optional
     """
 
-    def __init__(self, rng: np.random.Generator, n: int):
+    def __init__(self, rng: np.random.Generator, n: int, first_index: int = 0,
+                 rows: tuple[int, int] | None = None, image_shape: tuple[int, int] | None = None,
+                 fields: dict | None = None):
         from rangesim.core.backend import mitsuba
 
         self.mi = mi = mitsuba()
         self.rng = rng
+        self.rows, self.image_shape, self.fields, self._calls = rows, image_shape, fields, 0
         state = int(rng.integers(0, 2**63))
-        self.pcg = mi.PCG32(size=n, initstate=dr.opaque(mi.UInt64, state), initseq=dr.arange(mi.UInt64, n))
+        index = dr.arange(mi.UInt64, n) + dr.opaque(mi.UInt64, int(first_index))
+        # seed() rather than the constructor, which offsets both by the band's own arange(n)
+        self.pcg = mi.PCG32(size=n)
+        self.pcg.seed(dr.opaque(mi.UInt64, state) + index, index)
 
     def white(self, n: int):
         """Standard normals (Box-Muller of two uniforms), ``mi.Float``."""
@@ -394,7 +409,13 @@ class PixelDraws:
         """A unit-variance field: white PCG normals, or a NumPy :func:`correlated_field`."""
         if max(corr_px) < 0.05:  # the same cut-off as correlated_field's white case
             return self.white(shape[0] * shape[1])
-        return self.mi.Float(correlated_field(self.rng, shape, corr_px).reshape(-1).astype(np.float32))
+        if self.rows is None:
+            return self.mi.Float(correlated_field(self.rng, shape, corr_px).reshape(-1).astype(np.float32))
+        key = self._calls
+        self._calls += 1
+        if key not in self.fields:
+            self.fields[key] = correlated_field(self.rng, self.image_shape, corr_px).astype(np.float32)
+        return self.mi.Float(np.ascontiguousarray(self.fields[key][self.rows[0]:self.rows[1]]).reshape(-1))
 
 
 def _draws(rng) -> "NumPyDraws | PixelDraws":
