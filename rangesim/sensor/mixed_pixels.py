@@ -5,14 +5,30 @@ full width at half maximum, mm, sigma_w = FWHM / 2.355). In the frame where the 
 centre passes through the point P seen by pixel (v, u), the camera sees in row v the stripe
 light reflected by every lit surface point Q near the sheet, with intensity
 signal(Q) * exp(-d^2 / (2 sigma_w^2)), d = n . (Q - P) the distance of Q from the sheet's
-centre plane. The peak detector takes the intensity centroid over a window of +-W columns
-around u. On a surface whose depth is locally linear the profile is symmetric and the
-centroid is u itself; where the window holds a depth edge, light from the foreground and
-the background mixes, the centroid moves by a fraction of a pixel to several pixels, and
-triangulating that column against the sheet puts a phantom point between the surfaces.
+centre plane (mm). The peak detector takes the intensity centroid over a window of +-W
+columns around u. On a surface whose d grows linearly along the row (by ``a`` mm per
+pixel) the profile is symmetric and the centroid is u itself; where the window holds a
+depth edge, light from the foreground and the background mixes, the centroid moves by a
+fraction of a pixel to several pixels, and triangulating that column against the sheet
+puts a phantom point between the surfaces.
 
-So the shift is evaluated only for pixels within W columns of a depth discontinuity
-(|dz| > 0.5 % of z between row neighbours) or of a lit/unlit boundary; elsewhere it is 0.
+Which pixels mix. At a step between row neighbours u, u + 1 the stripe's image jumps by
+``delta / a`` pixels, ``delta`` (mm) being how far n . (P[u+1] - P[u]) lies outside the
+range of the neighbouring increments n . (P[u] - P[u-1]) and n . (P[u+2] - P[u+1]) (so a
+crease, where the increment changes from one value to the other, is no step). For a step
+small against the stripe (delta << sigma_w), first-order perturbation of the centroid gives
+the shift of the pixel m columns from the edge as (delta / a) * T(m), T the fraction of the
+stripe image's second moment beyond the edge (T = 1/2 at the edge, falling off over
+sigma_w / a pixels): the step is blurred over the stripe's image width, with an amplitude of
+at most half the step. The centroid is computed for the pixels within W columns of a step
+whose largest shift, delta / (2 a), exceeds ``min_shift_px`` (default 0.01 px, below the
+peak resolution of every preset: 1/16 px quantisation, 0.03-0.2 px noise), in depth a step
+of about 2 * min_shift_px * dz/du (0.01-0.05 mm for the presets) -- whatever the range, and
+whatever the stripe's width, which sets how many pixels mix (about 2 sigma_w / a per row and
+edge), not whether they do. Pixels within W columns of a lit/unlit boundary (a stripe cut by
+a shadow or an outline) are computed too. Elsewhere the shift is 0 (the centroid bias of a
+smoothly curved surface, second order in the pixel size, is not modelled).
+
 All of it runs as Dr.Jit kernels: a break mask over the image, then the windowed centroid
 over the compacted list of pixels near a break.
 """
@@ -25,8 +41,13 @@ import drjit as dr
 from rangesim.core.backend import mitsuba, opaque_scalar
 
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
-JUMP_RELATIVE = 0.005
 MAX_WINDOW_PX = 16
+#: smallest centroid shift (pixels) that counts as mixing: below the peak resolution of every
+#: preset (1/16 px quantisation, 0.03-0.2 px noise)
+MIN_SHIFT_PX = 0.01
+#: steps under this fraction of the depth are float32 rounding of the points (1e-6 z is a
+#: few ulps), never a surface
+ROUNDING_RELATIVE = 1e-6
 
 
 def peak_window_px(stripe_width: float, focal_px: float, near: float) -> int:
@@ -36,20 +57,42 @@ def peak_window_px(stripe_width: float, focal_px: float, near: float) -> int:
     return int(min(max(math.ceil(2.0 * stripe_width * focal_px / near), 1), MAX_WINDOW_PX))
 
 
-def _near_break(points, lit, measured, width: int, window: int):
-    """Flat indices (mi.UInt32) of measured pixels with a depth or lit/unlit break in their window."""
+def _near_break(points, sheet_normal, lit, measured, width: int, window: int, min_shift_px: float):
+    """Flat indices (mi.UInt32) of measured pixels with a step or a lit/unlit break in their window.
+
+    A step between u and u + 1: the sheet-normal increment ``n . (P[u+1] - P[u])`` lies by
+    ``delta`` (mm) outside the range of the increments on either side, and
+    ``delta > 2 min_shift_px a`` with ``a`` the smaller of those increments (mm per pixel): the
+    largest centroid shift it causes, ``delta / (2 a)`` pixels, is above ``min_shift_px``.
+    """
     mi = mitsuba()
     n = dr.width(lit)
     index = dr.arange(mi.Int32, n)
     width = opaque_scalar(width, "Int32")  # a new image size compiles nothing
     col = index % width
-    has_right = col < width - 1
-    right = mi.UInt32(index + 1)
-    lit_right = dr.gather(mi.Bool, lit, right, has_right)
-    z, z_right = points.z, dr.gather(mi.Float, points.z, right, has_right)
-    nearer = dr.select(z < z_right, z, z_right)
-    jump = lit & lit_right & (dr.abs(z_right - z) > JUMP_RELATIVE * nearer)
-    brk = has_right & (jump | (lit ^ lit_right))  # break between a pixel and its right neighbour
+
+    def neighbour(k: int):
+        ok = (col + k >= 0) & (col + k < width)
+        ok &= dr.gather(mi.Bool, lit, mi.UInt32(index + k), ok)
+        return ok, dr.gather(mi.Vector3f, points, mi.UInt32(index + k), ok)
+
+    has_right, p_right = neighbour(1)
+    has_left, p_left = neighbour(-1)
+    has_next, p_next = neighbour(2)
+    normal = sheet_normal
+    mid = dr.dot(normal, p_right - points)
+    left = dr.dot(normal, points - p_left)
+    nxt = dr.dot(normal, p_next - p_right)
+    big = mi.Float(3.0e38)
+    lo = dr.minimum(dr.select(has_left, left, big), dr.select(has_next, nxt, big))
+    hi = dr.maximum(dr.select(has_left, left, -big), dr.select(has_next, nxt, -big))
+    delta = dr.maximum(dr.maximum(lo - mid, mid - hi), 0.0)  # how far outside the neighbours' range
+    a = dr.minimum(dr.select(has_left, dr.abs(left), big), dr.select(has_next, dr.abs(nxt), big))
+    floor = opaque_scalar(ROUNDING_RELATIVE) * dr.abs(points.z)
+    step = lit & has_right & (has_left | has_next) & (
+        delta > dr.maximum(opaque_scalar(2.0 * min_shift_px) * a, floor))
+    lit_right = dr.gather(mi.Bool, lit, mi.UInt32(index + 1), col < width - 1)
+    brk = step | ((col < width - 1) & (lit ^ lit_right))  # break between a pixel and its right neighbour
     dr.eval(brk)
     near = dr.zeros(mi.Bool, n)
     for k in range(-window, window + 1):
@@ -59,7 +102,7 @@ def _near_break(points, lit, measured, width: int, window: int):
 
 
 def stripe_mixing_shift(points, sheet_normal, lit, signal, measured, width: int,
-                        stripe_width: float, window: int):
+                        stripe_width: float, window: int, min_shift_px: float = MIN_SHIFT_PX):
     """Peak shift (pixels along the row) caused by a finite stripe width at depth edges.
 
     Parameters
@@ -80,16 +123,37 @@ def stripe_mixing_shift(points, sheet_normal, lit, signal, measured, width: int,
         FWHM of the sheet profile, mm (0: no mixing).
     window : int
         Detector window half-width, pixels.
+    min_shift_px : float
+        Smallest shift that counts as mixing, pixels: steps whose largest shift
+        (``delta / (2 a)``, see the module docstring) is below it leave the centroid alone.
 
     Returns
     -------
-    mi.Float of column shifts, 0 away from edges.
+    mi.Float of column shifts, pixels, 0 away from steps and lit/unlit boundaries.
+
+    Examples
+    --------
+    A fronto-parallel step of 0.2 mm seen through a sheet at 45 deg, 0.5 mm per pixel along
+    the row: the stripe's image jumps by 0.2 sin 45 / (0.5 cos 45) = 0.4 px, the two pixels
+    beside the step move by half that (in opposite directions), the next ones by less.
+
+    >>> import numpy as np
+    >>> from rangesim.core.backend import mitsuba
+    >>> mi = mitsuba()
+    >>> u = np.arange(16.0)
+    >>> z = np.where(u < 8, 300.0, 300.2)
+    >>> pts = mi.Vector3f(0.5 * u, 0 * u, z)
+    >>> normal = mi.Vector3f(np.full(16, 0.7071), np.zeros(16), np.full(16, 0.7071))
+    >>> lit = mi.Bool(np.ones(16, bool))
+    >>> shift = stripe_mixing_shift(pts, normal, lit, mi.Float(np.ones(16)), lit, 16, 1.5, 6)
+    >>> np.round(np.asarray(shift)[6:10], 2)
+    array([-0.16, -0.2 ,  0.2 ,  0.16], dtype=float32)
     """
     mi = mitsuba()
     shift = dr.zeros(mi.Float, dr.width(lit))
     if stripe_width <= 0 or window <= 0:
         return shift
-    pixels = _near_break(points, lit, measured, width, window)
+    pixels = _near_break(points, sheet_normal, lit, measured, width, window, min_shift_px)
     if dr.width(pixels) == 0:
         return shift
     width = opaque_scalar(width, "Int32")
