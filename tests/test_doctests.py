@@ -35,7 +35,8 @@ MODULES = _modules_with_examples()
 
 def test_the_examples_cover_the_readme_api():
     for name in ("rangesim.edges._gradient", "rangesim.features._circles", "rangesim.evaluate._edge_scores",
-                 "rangesim.curvature.hk", "rangesim.volumes.gc", "rangesim.cad.bspline"):
+                 "rangesim.curvature.hk", "rangesim.volumes.gc", "rangesim.cad.bspline",
+                 "rangesim.cad.machined", "rangesim.evaluate._visible"):
         assert name in MODULES, name
 
 
