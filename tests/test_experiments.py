@@ -434,3 +434,19 @@ def test_sweep_over_the_scanner_mode_includes_structured_light(sweep_dir, tmp_pa
     table = run.table
     assert set(table["mode"]) == {"geometric", "structured_light"}
     assert table["f1"].notna().all()
+
+
+def test_cli_sweep_logs_progress_lines_when_stderr_is_not_a_terminal(sweep_dir, tmp_path, capsys, monkeypatch):
+    from rangesim.core import progress
+
+    monkeypatch.setattr(progress, "DELAY_S", 0.0)  # the 8 tiny tasks end within the usual delay
+    code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(tmp_path / "logged"), "--workers", "0",
+                 "--no-plots"])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 0
+    lines = [x for x in err if x.startswith("rangesim: sweep ")]
+    assert len(lines) >= 4 and "8/8 tasks (100 %)" in lines[-1], err
+    assert progress._default == "auto"  # the command line's setting does not outlive the command
+    code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(tmp_path / "quiet"), "--workers", "0",
+                 "--no-plots", "--quiet"])
+    assert code == 0 and not [x for x in capsys.readouterr().err.splitlines() if x.startswith("rangesim: sweep")]

@@ -38,10 +38,12 @@ from rangesim import __version__
 from rangesim.cli.common import MESH_UNITS, check_suffix, load_scene_arg, writing
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
+from rangesim.core.memory import check_memory
 from rangesim.core.rangescan import RangeScan
 from rangesim.io import atomic_path, load_scan, save_scan
 from rangesim.sensor import intensity_image, load_sensor, preset_names, scan
-from rangesim.sensor._scan import EmptyScanWarning
+from rangesim.sensor._scan import BASE_BYTES, EmptyScanWarning
+from rangesim.sensor.bands import RESULT_BYTES_PER_PIXEL
 from rangesim.viz import save_preview
 from rangesim.viz.intensity import save_intensity_image
 
@@ -145,6 +147,11 @@ def _load_pose(path: Path) -> np.ndarray:
     return pose
 
 
+#: memory (bytes per pixel) the scan writers take beyond the scan: float32 planes of the
+#: vector and integer fields (OpenEXR's channels; measured 47 at 3000 x 3000 px)
+WRITE_BYTES_PER_PIXEL = 56
+
+
 def _save_outputs(result: RangeScan, out: Path, preview: Path | None) -> None:
     """Write the scan and its preview: both, or neither (an old file stays as it was)."""
     if preview is None:
@@ -195,6 +202,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if args.keep_frames and sensor.mode != "rendered":
         raise RangesimError("--keep-frames needs the rendered mode (--set mode=rendered, or "
                             "mode = \"rendered\" in the sensor file)", source=sensor.source)
+    # the scan runs in bands when it must, but its result and the file's copy of it must fit
+    pixels = float(sensor.width) * sensor.height
+    check_memory(BASE_BYTES + pixels * (RESULT_BYTES_PER_PIXEL + WRITE_BYTES_PER_PIXEL),
+                 f"camera.width x camera.height = {sensor.width:,} x {sensor.height:,} px "
+                 f"(the scan and its {Path(args.out).suffix or 'output'} file)", source=sensor.source)
     scene = load_scene_arg(args.scene, args.units)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", EmptyScanWarning)
@@ -348,6 +360,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse has printed the usage or the help
         return exc.code if isinstance(exc.code, int) else EXIT_USER
+    from rangesim.core import progress
+
+    before = progress._default
+    # long work shows progress: a bar on a terminal, log lines in CI logs and nohup files
+    progress.set_progress("off" if getattr(args, "quiet", False) else "log")
     try:
         return args.func(args)
     except KeyboardInterrupt:
@@ -367,6 +384,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _error(f"internal error ({type(exc).__name__}: {exc}); "
                "run with RANGESIM_DEBUG=1 for a traceback")
         return EXIT_INTERNAL
+    finally:
+        progress.set_progress(before)
 
 
 if __name__ == "__main__":

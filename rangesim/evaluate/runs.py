@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.progress import Progress
 from rangesim.evaluate._edge_scores import edge_scores
 from rangesim.evaluate._visible import visible_truth
 from rangesim.evaluate.regions import region_boundaries
@@ -105,6 +106,8 @@ def run_detectors(scan, methods, truth: EdgeTruth | None = None, tolerance_px: f
     from rangesim.edges import DETECTORS
 
     results = {}
+    methods = list(methods)
+    bar = Progress(len(methods), "edge detectors", unit="detector")
     for method in methods:
         start = time.perf_counter()
         edge_map = DETECTORS[method](scan, **(params or {}).get(method, {}))
@@ -117,4 +120,6 @@ def run_detectors(scan, methods, truth: EdgeTruth | None = None, tolerance_px: f
                 gt_labels=truth.labels if labelled else None,
             )
         results[method] = entry
+        bar.update()
+    bar.close()
     return results

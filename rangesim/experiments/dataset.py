@@ -40,8 +40,9 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.errors import RangesimError
+from rangesim.core.progress import Progress
 from rangesim.core.version import __version__
-from rangesim.experiments.executors import Executor, progress_bar
+from rangesim.experiments.executors import Executor
 from rangesim.experiments.grid import derive_seed, task_key
 from rangesim.experiments.poses import DEFAULT_CAP_DEG, check_pose_table, resolve_pose_table, sample_view
 from rangesim.experiments.results import write_json
@@ -220,7 +221,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     executor = Executor(workers, scheduler, max_tasks=len(todo))
     where = executor.describe() if todo else "nowhere (every view was finished)"
     if todo:
-        with executor, progress_bar(views, views - len(todo), "dataset", progress) as bar:
+        with executor, Progress(views, "dataset", unit="view", initial=views - len(todo), enabled=progress) as bar:
             for i, result, error in executor.run(run_dataset_view, todo):
                 if error is not None:
                     failures.append((todo[i], error))

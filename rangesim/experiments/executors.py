@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
@@ -242,12 +241,3 @@ class Executor:
             for f in futures:
                 if not f.done():
                     f.cancel()
-
-
-def progress_bar(total: int, initial: int = 0, desc: str = "tasks", enabled: bool | None = None):
-    """A tqdm bar on stderr with rate and ETA; ``enabled=None`` shows it only on a terminal."""
-    from tqdm import tqdm
-
-    disable = (not sys.stderr.isatty()) if enabled is None else (not enabled)
-    return tqdm(total=total, initial=initial, desc=desc, unit="task", disable=disable, dynamic_ncols=True,
-                smoothing=0.1, file=sys.stderr)

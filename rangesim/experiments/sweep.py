@@ -7,8 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from rangesim.core.errors import RangesimError
+from rangesim.core.progress import Progress
 from rangesim.core.version import __version__
-from rangesim.experiments.executors import Executor, progress_bar
+from rangesim.experiments.executors import Executor
 from rangesim.experiments.grid import SweepTask, plan_sweep
 from rangesim.experiments.results import (
     build_table,
@@ -82,7 +83,8 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
         ``local:N`` (a Dask LocalCluster of N workers) or ``tcp://HOST:PORT`` (a running
         Dask scheduler); default: the local process pool.
     progress : bool, optional
-        Progress bar on stderr; default: when stderr is a terminal.
+        Progress on stderr (:class:`rangesim.core.progress.Progress`): True shows it (a bar on a
+        terminal, log lines elsewhere), False hides it; default: as ``set_progress`` says.
     plots : bool
         Draw the plots (F1 against SNR, F1 against each swept parameter).
 
@@ -108,7 +110,7 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
     failures: list[tuple[SweepTask, BaseException]] = []
     where = executor.describe() if todo else "nowhere (every task was finished)"
     if todo:
-        with executor, progress_bar(len(tasks), len(tasks) - len(todo), f"sweep {spec.name}", progress) as bar:
+        with executor, Progress(len(tasks), f"sweep {spec.name}", initial=len(tasks) - len(todo), enabled=progress) as bar:
             for i, result, error in executor.run(run_sweep_task, [t.payload for t in todo]):
                 task = todo[i]
                 if error is not None:

@@ -40,6 +40,7 @@ import numpy as np
 from rangesim.core.backend import mitsuba
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
+from rangesim.core.progress import Progress
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.frames import FWHM_PER_SIGMA, PROFILE_CUTOFF, expose, pixel_speckle_contrast, splat_frames
@@ -220,6 +221,7 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()  # clear
     first_tile = later = (0, 0)
+    bar = Progress(-(-h // rows_per_tile), f"rendered scan {w}x{h}", unit="tile")
     try:
         for tile, row0 in enumerate(range(0, h, rows_per_tile)):
             rows = min(rows_per_tile, h - row0)
@@ -248,7 +250,9 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
             if frames_out is not None:
                 frames_out[:, row0:row0 + rows, :] = electrons.T.reshape(n_frames, rows, w)
             lap("peaks")
+            bar.update()
     finally:
+        bar.close()
         dr.set_flag(dr.JitFlag.KernelHistory, history_flag)
 
     # 5. triangulation against the sheet at the sub-frame peak

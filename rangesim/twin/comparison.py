@@ -25,6 +25,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from rangesim.core.progress import Progress
 from rangesim.core.rangescan import RangeScan
 from rangesim.twin.calibration import calibrate, mask_iou, range_residuals
 from rangesim.twin.realism import dropout_by_bin, incidence_deg, realism_stats, residual_grid, robust_std
@@ -160,21 +161,27 @@ def compare(recorded: RangeScan, mesh: Any, sensor: Any = None, *, params: dict[
         :func:`compare_scans` metrics plus ``params`` (the twin's parameters) and
         ``calibration`` (the fit's IoU and fitted names, when fitted).
     """
-    if stage is None:
-        stage = TwinStage(recorded, mesh, sensor)
-    values = stage.params(**(params or {}))
-    calibration = None
-    if isinstance(fit, str) and fit == "auto":
-        calibrated = stage.sensor is not None and stage.sensor.params.get("twin", {}).get("theta_deg") is not None
-        fit = None if calibrated else ("theta_deg", "alpha_deg", "sigma_mm")
-    if fit:
-        result = calibrate(recorded, mesh, sensor, params=fit, initial=params, stage=stage)
-        values = {k: result[k] for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")}
-        calibration = {"iou": result["iou"], "fitted": result["fitted"],
-                       "recorded_noise_mm": result["recorded_noise_mm"]}
-    twin_scan = twin(recorded, mesh, sensor, seed=seed, stage=stage, **values)
-    edge_maps: dict = {}
-    metrics = compare_scans(recorded, twin_scan, detectors=detectors, edge_maps=edge_maps)
+    bar = Progress(4, "compare", unit="step")  # stage, calibration, twin scan, metrics
+    with bar:
+        if stage is None:
+            stage = TwinStage(recorded, mesh, sensor)
+        bar.update()
+        values = stage.params(**(params or {}))
+        calibration = None
+        if isinstance(fit, str) and fit == "auto":
+            calibrated = stage.sensor is not None and stage.sensor.params.get("twin", {}).get("theta_deg") is not None
+            fit = None if calibrated else ("theta_deg", "alpha_deg", "sigma_mm")
+        if fit:
+            result = calibrate(recorded, mesh, sensor, params=fit, initial=params, stage=stage)
+            values = {k: result[k] for k in ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")}
+            calibration = {"iou": result["iou"], "fitted": result["fitted"],
+                           "recorded_noise_mm": result["recorded_noise_mm"]}
+        bar.update()
+        twin_scan = twin(recorded, mesh, sensor, seed=seed, stage=stage, **values)
+        bar.update()
+        edge_maps: dict = {}
+        metrics = compare_scans(recorded, twin_scan, detectors=detectors, edge_maps=edge_maps)
+        bar.update()
     metrics["params"] = {**{k: None if v is None else float(v) for k, v in values.items()}, "side": int(stage.side),
                          "seed": int(seed), "noise": twin_scan.meta["twin"]["noise"]}
     if calibration is not None:
