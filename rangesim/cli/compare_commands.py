@@ -14,7 +14,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.evaluate.runs import load_scan_with_labels
 
 
-def _detectors_only(scan, labels, args, out: Path) -> dict:
+def _detectors_only(scan, labels, args, out: Path) -> tuple[dict, dict, Any]:
     from rangesim.edges import DETECTORS
     from rangesim.evaluate.runs import run_detectors, scan_truth
 
@@ -23,13 +23,14 @@ def _detectors_only(scan, labels, args, out: Path) -> dict:
         "recorded": str(args.recorded), "mesh": None, "valid": int(scan.valid.sum()),
         "truth": None if truth is None else truth.kind, "edges": {},
     }
-    for name, result in run_detectors(scan, DETECTORS, truth, tolerance_px=args.tolerance).items():
+    results = run_detectors(scan, DETECTORS, truth, tolerance_px=args.tolerance)
+    for name, result in results.items():
         entry: dict[str, Any] = {"edges": int(result["edge_map"].mask.sum())}
         if truth is not None:
             s = result["scores"]
             entry.update(precision=float(s["precision"]), recall=float(s["recall"]), f1=float(s["f1"]))
         metrics["edges"][name] = entry
-    return metrics
+    return metrics, {name: r["edge_map"] for name, r in results.items()}, truth
 
 
 def _structured_light(name: str) -> bool:
@@ -89,13 +90,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.mesh is None and labels is not None and _structured_light(args.sensor):
         return _kinect_twin(scan, labels, args, out)
     if args.mesh is None:
-        metrics = _detectors_only(scan, labels, args, out)
+        from rangesim.viz.edge_overlay import save_edge_panels
+
+        metrics, edge_maps, truth = _detectors_only(scan, labels, args, out)
         make_out_dir(out)
         write_json(metrics, out / "metrics.json")
+        # no twin to compare with: the picture shows the recording and what each detector finds in it
+        save_edge_panels(scan, edge_maps, out / "compare.png", truth=truth, scores=metrics["edges"],
+                         title=f"{path.name}: edges (no mesh, so no twin)")
         for name, e in metrics["edges"].items():
             score = f"  F1 {e['f1']:.3f}" if "f1" in e else ""
             print(f"{name:<15}{e['edges']:>9,}{score}")
-        print(f"wrote {out}/metrics.json")
+        print(f"wrote {out}/metrics.json and {out}/compare.png")
         return 0
 
     from rangesim.twin.comparison import compare

@@ -100,6 +100,8 @@ def decode_pose(text: str) -> np.ndarray:
 # -- exact float32 <-> bool/int conversion ---------------------------------------------------
 def _exact_cast(values: np.ndarray, dtype: Any, what: str, source: str | Path) -> np.ndarray:
     """``values.astype(dtype)``, refusing any element the conversion would change."""
+    if values.dtype == np.dtype(dtype):
+        return values  # nothing to convert: no copy (a 10000^2 scan's fields are GBs)
     with np.errstate(invalid="ignore", over="ignore"):  # bad casts are caught just below
         out = values.astype(dtype)
         back = out.astype(values.dtype)

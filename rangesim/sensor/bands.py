@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 
 from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan
@@ -77,7 +78,7 @@ def scan_in_bands(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows_per_b
         stop = min(h, first + rows_per_band)
         lo, hi = max(0, first - MARGIN_ROWS), min(h, stop + MARGIN_ROWS)
         band = scan_geometric(scene, sensor, pose, seed, rows=(lo, hi), fields=fields)
-        for name, dtype, trailing in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
+        for name, _, _ in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
             value = getattr(band, name)
             if value is None:
                 continue
@@ -88,4 +89,7 @@ def scan_in_bands(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows_per_b
         meta = band.meta
         del band
     meta = dict(meta, recast_rays=recast, bands=len(starts))
+    # Dr.Jit keeps freed buffers for reuse: a band's worth of GBs the caller (writing the
+    # result, say) needs now
+    dr.flush_malloc_cache()
     return RangeScan(pose=np.asarray(pose, np.float64), meta=meta, **out)

@@ -48,8 +48,9 @@ def save_points_preview(
     normal_length : float, optional
         Length of the drawn normals, mm. Default 4 % of the largest extent.
     max_normals : int
-        Draw the normals of at most this many points (a fixed random subset), so a
-        dense cloud stays readable.
+        Draw the normals of at most this many points, spread over the surface
+        (:func:`spread_subset`: one per cell of a grid a normal long), so a
+        cloud dense in places (threads, fillets) stays readable.
     title : str, optional
         Default ``"<N> surface points"``.
     elev, azim : float
@@ -57,7 +58,7 @@ def save_points_preview(
     dpi : int
         Resolution of the PNG.
     seed : int
-        Seed of the subset whose normals are drawn.
+        Seed of the subset whose normals are drawn (when the grid still leaves too many).
 
     Returns
     -------
@@ -95,9 +96,8 @@ def save_points_preview(
         ax.scatter(*points.T, c=colors, s=size, depthshade=False, linewidths=0)
         if normals is not None:
             length = 0.04 * extent if normal_length is None else float(normal_length)
-            pick = np.arange(len(points))
-            if len(points) > max_normals:
-                pick = np.sort(np.random.default_rng(seed).choice(len(points), max_normals, replace=False))
+            pick = spread_subset(points, length, max_normals, seed)
+            shown = len(pick)
             segments = np.stack([points[pick], points[pick] + length * normals[pick]], axis=1)
             ax.add_collection3d(Line3DCollection(segments, colors=[(0.85, 0.25, 0.15)], linewidths=0.5))
         # equal scale on all axes: a cube around the centre
@@ -112,7 +112,45 @@ def save_points_preview(
     ax.set_ylabel("y [mm]", fontsize=8)
     ax.set_zlabel("z [mm]", fontsize=8)
     ax.tick_params(labelsize=7)
-    ax.set_title(f"{len(points):,} surface points" if title is None else title, fontsize=10)
+    if title is None:
+        title = f"{len(points):,} surface points"
+        if normals is not None and len(points) and shown < len(points):
+            title += f" (normals of {shown:,} spread over the surface)"
+    ax.set_title(title, fontsize=10)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": "rangesim"})
     return path
+
+
+def spread_subset(points: np.ndarray, cell: float, limit: int, seed: int = 0) -> np.ndarray:
+    """Indices of at most ``limit`` points spread over the cloud: the first point of each cubic cell.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    cell : float
+        Cell size, the unit of ``points`` (a dense patch keeps one point per cell).
+    limit : int
+        At most this many (a fixed random subset of the cells' points beyond it).
+    seed : int
+
+    Returns
+    -------
+    (M,) int, sorted, M <= min(N, limit)
+
+    Examples
+    --------
+    >>> dense = np.c_[np.zeros((1000, 2)), np.linspace(0, 1, 1000)]   # 1000 points within 1 mm
+    >>> sparse = np.c_[np.arange(10.0) * 5 + 10, np.zeros((10, 2))]
+    >>> len(spread_subset(np.r_[dense, sparse], 2.0, 100))             # one for the dense patch
+    11
+    """
+    points = np.asarray(points, np.float64)
+    if len(points) == 0:
+        return np.zeros(0, int)
+    keys = np.floor((points - points.min(axis=0)) / max(float(cell), 1e-12)).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    pick = np.sort(first)
+    if len(pick) > limit:
+        pick = np.sort(np.random.default_rng(seed).choice(pick, limit, replace=False))
+    return pick

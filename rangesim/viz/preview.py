@@ -307,6 +307,21 @@ def default_title(scan: RangeScan) -> str:
     return f"{name} — {w} × {h} px (W × H), {n_valid:,} valid ({100.0 * n_valid / max(h * w, 1):.1f} %)"
 
 
+#: a scan wider or taller than this (pixels) is previewed from every k-th pixel (a PNG of
+#: 10000 x 10000 pixels would take GBs to draw and shows no more on a screen)
+MAX_PREVIEW_PX = 2048
+
+
+def _thinned(scan: RangeScan) -> RangeScan:
+    """``scan`` itself, or every k-th row and column of it when it exceeds :data:`MAX_PREVIEW_PX`."""
+    k = -(-max(scan.shape) // MAX_PREVIEW_PX)
+    if k <= 1:
+        return scan
+    fields = {f: None if getattr(scan, f) is None else getattr(scan, f)[::k, ::k]
+              for f in ("depth", "xyz", "valid", "normal", "intensity", "part", "face", "status", "xyz_true", "sigma")}
+    return RangeScan(pose=scan.pose, meta=scan.meta, **fields)
+
+
 def save_preview(
     scan: RangeScan,
     path: str | Path,
@@ -320,7 +335,8 @@ def save_preview(
     """Write a labelled PNG preview of the scan's depth.
 
     The picture is :func:`depth_rgb` drawn pixel for pixel (nearest neighbour, square
-    pixels, integer magnification for small scans), with a colour bar of the depth, a
+    pixels, integer magnification for small scans; scans larger than
+    :data:`MAX_PREVIEW_PX` from every k-th pixel), with a colour bar of the depth, a
     legend of the invalid statuses present and their pixel counts, and a title. The
     figure's proportions follow the scan's. Written atomically: a failure leaves no
     partial file.
@@ -368,13 +384,14 @@ def save_preview(
         raise RangesimError("preview must be a .png file", source=path)
 
     h, w = scan.shape
-    lo, hi = depth_limits(scan) if limits is None else (float(limits[0]), float(limits[1]))
-    rgb = depth_rgb(scan, cmap=cmap, limits=(lo, hi), shade=shade)
+    view = _thinned(scan)
+    lo, hi = depth_limits(view) if limits is None else (float(limits[0]), float(limits[1]))
+    rgb = depth_rgb(view, cmap=cmap, limits=(lo, hi), shade=shade)
     legend = [
         (status_color(c), f"{_status_label(c)}: {n:,} px ({_percent(n, h * w)})")
         for c, n in _status_counts(scan).items()
     ]
-    valid_d = scan.depth[_valid_depth_mask(scan)]
+    valid_d = view.depth[_valid_depth_mask(view)]
     below, above = bool((valid_d < lo).any()), bool((valid_d > hi).any())
     extend = {(False, False): "neither", (True, False): "min", (False, True): "max"}.get(
         (below, above), "both"

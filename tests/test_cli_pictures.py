@@ -1,0 +1,53 @@
+"""The pictures the README promises (issue 16 item 7): compare without a mesh, readable point previews,
+previews of scans larger than a screen."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+import rangesim as rs
+from rangesim.cli.main import main
+from rangesim.viz import preview
+from rangesim.viz.points import spread_subset
+
+
+def _png_size(path) -> tuple[int, int]:
+    from PIL import Image
+
+    with Image.open(path) as im:
+        assert im.format == "PNG"
+        return im.size
+
+
+def test_compare_without_mesh_writes_the_edge_picture(tmp_path, capsys):
+    scan_path = tmp_path / "plate.exr"
+    rs.datasets.plate_scan().save(scan_path)
+    out = tmp_path / "cmp"
+    assert main(["compare", str(scan_path), "--out", str(out)]) == 0
+    assert "compare.png" in capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["mesh"] is None and set(metrics["edges"]) == set(rs.edges.DETECTORS)
+    w, h = _png_size(out / "compare.png")
+    assert w > 600 and h > 400  # a panel per detector and the scan
+
+
+def test_point_preview_spreads_the_normals_over_a_dense_cloud():
+    rng = np.random.default_rng(0)
+    dense = rng.normal(0, 0.05, (5000, 3))  # a thread-like clump
+    sparse = np.c_[np.mgrid[0:20, 0:20].reshape(2, -1).T * 5.0 + 10, np.zeros(400)]
+    pick = spread_subset(np.r_[dense, sparse], 4.0, 4000)
+    assert (pick < 5000).sum() <= 8  # the clump gets a handful, not 4000 x 5000 / 5400 of them
+    assert (pick >= 5000).sum() == 400  # every sparse point keeps its normal
+
+
+def test_preview_of_a_large_scan_is_drawn_from_every_kth_pixel(tmp_path, monkeypatch):
+    scan = rs.datasets.plate_scan()
+    monkeypatch.setattr(preview, "MAX_PREVIEW_PX", 40)
+    thin = preview._thinned(scan)
+    k = -(-max(scan.shape) // 40)
+    assert thin.shape == scan.depth[::k, ::k].shape and max(thin.shape) <= 40
+    np.testing.assert_array_equal(thin.status, scan.status[::k, ::k])
+    path = preview.save_preview(scan, tmp_path / "p.png")
+    assert "128" in preview.default_title(scan)  # the title still gives the full size
+    assert _png_size(path)[0] > 100
