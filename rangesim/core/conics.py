@@ -234,3 +234,66 @@ def sampson_distance_batched(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:
     gx = 2 * a * x + b * y + d
     gy = b * x + 2 * c * y + e
     return np.abs(q) / np.maximum(np.hypot(gx, gy), 1e-12)
+
+
+def fit_circles_batched(xy: np.ndarray, group: np.ndarray, n_groups: int, center: np.ndarray,
+                        radius: np.ndarray, *, iterations: int = 2, max_step: float = 3.0,
+                        min_points: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Geometric least-squares circles of many point groups at once (Gauss-Newton).
+
+    Parameters
+    ----------
+    xy : (N, 2) float, pixels
+        Points; point k belongs to group ``group[k]`` (0 <= group < n_groups).
+    group : (N,) int
+    n_groups : int
+    center : (n_groups, 2) float, radius : (n_groups,) float, pixels
+        Starting circles.
+    iterations : int
+        Gauss-Newton steps on the sum of squared geometric distances ``|p - c| - r``.
+    max_step : float, pixels
+        A group whose step would move its centre or radius further keeps its start.
+    min_points : int
+        Groups with fewer points (or a singular system) keep their start.
+
+    Returns
+    -------
+    center : (n_groups, 2) float, radius : (n_groups,) float
+    rms : (n_groups,) float
+        RMS geometric residual at the returned circle, pixels (inf for an empty group).
+    """
+    c = np.array(center, float, copy=True).reshape(n_groups, 2)
+    r = np.array(radius, float, copy=True).reshape(n_groups)
+    n = np.bincount(group, minlength=n_groups)
+
+    def s(w):
+        return np.bincount(group, weights=w, minlength=n_groups)
+
+    for _ in range(iterations):
+        if len(xy) == 0:
+            break
+        d = xy - c[group]
+        rho = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+        ux, uy, e = d[:, 0] / rho, d[:, 1] / rho, rho - r[group]
+        # J = [-ux, -uy, -1]; normal equations J^T J step = -J^T e
+        jtj = np.empty((n_groups, 3, 3))
+        jtj[:, 0, 0], jtj[:, 1, 1], jtj[:, 2, 2] = s(ux * ux), s(uy * uy), n
+        jtj[:, 0, 1] = jtj[:, 1, 0] = s(ux * uy)
+        jtj[:, 0, 2] = jtj[:, 2, 0] = s(ux)
+        jtj[:, 1, 2] = jtj[:, 2, 1] = s(uy)
+        jte = np.column_stack([s(ux * e), s(uy * e), s(e)])
+        good = n >= min_points
+        good &= np.abs(np.linalg.det(jtj)) > 1e-9 * np.maximum(n, 1) ** 3
+        if not good.any():
+            break
+        step = np.linalg.solve(jtj[good], jte[good][..., None])[..., 0]  # = -(J^T J)^-1 J^T (-e)
+        ok = np.abs(step).max(1) <= max_step
+        idx = np.nonzero(good)[0][ok]
+        c[idx] += step[ok, :2]
+        r[idx] += step[ok, 2]
+    d = xy - c[group]
+    e = np.hypot(d[:, 0], d[:, 1]) - r[group] if len(xy) else np.zeros(0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(s(e * e) / n)
+    rms[n == 0] = np.inf
+    return c, r, rms

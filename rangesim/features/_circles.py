@@ -3,14 +3,18 @@ point votes only along its edge normal, both senses, at each radius."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from rangesim.core.conics import fit_circle
+from rangesim.core.conics import fit_circles_batched
 from rangesim.core.memory import check_memory
+from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._edge_points import angular_coverage, edge_points
+
+DIRECTION_TOL_DEG = 15.0  # an inlier's edge normal is radial within this, degrees
+REL_CELL = 1 / 4  # accumulator cell over the band's smallest radius (radius_bands)
 
 
 @dataclass(frozen=True)
@@ -45,162 +49,178 @@ def circle_hypotheses(
     band_px: float = 1.0,
     keep: np.ndarray | None = None,
     max_hypotheses: int = 200,
-    cell_px: float = 2.0,
-    radius_step: float = 2.0,
+    cell_px: float = 1.0,
+    radius_step: float = 1.0,
+    rel_cell: float | None = None,
 ) -> list[tuple[np.ndarray, float, int, np.ndarray]]:
     """Directional Hough accumulator, peaks and least-squares refinement (no support test).
 
-    Each edge point p with edge-normal angle t votes, for every integer radius r, at
-    p +- r (cos a, sin a) for a = t + k / r, |k / r| <= ``angle_tol_deg``: the angular step
-    is 1 / r (one vote per pixel of arc at the centre), so the window is the same at every
-    radius. A circle of radius r collects about 2 pi r votes, so the acceptance threshold is
-    ``threshold * 2 pi r`` (proportional to r). The accumulator is 3D (radius, centre cells of
-    ``cell_px`` pixels, with the angular step ``cell_px / r``), filled by one ``np.bincount``;
-    votes are summed over 3 x 3 cells. Peaks are 3D local maxima over (r, y, x) above the
-    threshold; each is refined (batched algebraic circle fits, three passes with a narrowing
-    band) on the edge points within ``band_px`` (+0.5) of it whose direction is radial within
-    20 degrees.
+    The paper's transform, made sparse: each edge point p with edge-normal angle t votes at
+    p +- r (cos a, sin a), a = t + k c / r, |k c / r| <= ``angle_tol_deg``, for radius samples
+    r every c px: the angular step is c / r (prop. to 1 / r, one vote per cell of arc). The
+    radii are cut into octave bands, each with its own 2D centre accumulator of cells
+    c = max(``cell_px``, ``rel_cell`` * r_lo) px (:func:`~._circle_votes.radius_bands`), so
+    the work is proportional to the edge pixels times the octaves, with no dense 3D array.
+    A circle of radius r collects about 2 pi r votes, so the thresholds are ``threshold *
+    2 pi r`` (proportional to r), first on 2 x 2 cell sums (centre candidates), then on each
+    candidate's histogram of voter distances (``radius_step`` px bins; every peak is a
+    hypothesis, so concentric rims each get one). The centre of a candidate starts at the
+    least-squares intersection of its voters' normal lines; each hypothesis is refined by
+    batched geometric fits (:func:`~rangesim.core.conics.fit_circles_batched`) on the edge
+    points of a ring around it whose direction is radial within 25 degrees, the ring
+    narrowing to ``band_px`` (+0.5) over three passes.
 
     Returns
     -------
-    list of (center (2,), radius, votes, inlier indices into the edge points), best first.
+    list of (center (2,), radius, votes, inlier indices into the edge points), best first
+    (largest fraction of 2 pi r in inliers).
     """
     xy, theta = edge_points(edge_map, keep)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
-    H, W = mask.shape
+    h = _hypotheses(xy, theta, mask.shape, radii, angle_tol_deg, threshold, band_px,
+                    max_hypotheses, cell_px, radius_step, REL_CELL if rel_cell is None else rel_cell)
+    if h is None:
+        return []
+    c, r, votes, ph, pp = h
+    n_in = np.bincount(ph, minlength=len(r))
+    order = np.argsort(-n_in / (2 * np.pi * r), kind="stable")
+    by_h = np.split(pp[np.argsort(ph, kind="stable")], np.cumsum(n_in)[:-1])
+    return [(c[j], float(r[j]), int(votes[j]), by_h[j]) for j in order if n_in[j] >= 6]
+
+
+def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii, angle_tol_deg: float,
+                threshold: float, band_px: float, max_hypotheses: int, cell_px: float,
+                radius_step: float, rel_cell: float):
+    """Refined circle hypotheses as arrays: centres (K, 2), radii (K,), votes (K,), and the
+    (hypothesis, point) pairs of their inliers; None when there are none."""
     if len(xy) < 5:
-        return []
-    cell = float(cell_px)
-    Hc, Wc = int(np.ceil(H / cell)), int(np.ceil(W / cell))
-    r_bins = np.arange(max(2.0, float(radii[0])), float(radii[1]) + radius_step, radius_step)
+        return None
+    bands = radius_bands(shape, radii, cell_px, rel_cell)
     tol = np.deg2rad(angle_tol_deg)
-    # every vote at once: (point, radius, angle offset), angle step cell / r (prop. to 1 / r).
-    # float32 throughout; cos/sin of (theta + k) from per-point and per-offset tables (angle
-    # addition), no trig over the (point, offset) grid; cells by truncation in a padded grid
-    # (no bounds masks), integer accumulation with one np.bincount on flat indices.
-    n_k = np.maximum(np.ceil(tol * r_bins / cell), 0).astype(int)
-    r_of = np.repeat(r_bins, 2 * n_k + 1)
-    k_of = np.concatenate([np.arange(-k, k + 1) for k in n_k]) * cell / r_of
-    b_of = np.repeat(np.arange(len(r_bins)), 2 * n_k + 1)
-    nr = len(r_bins)
-    pad = int(np.ceil(r_bins[-1] / cell)) + 2
-    Hp, Wp = Hc + 2 * pad, Wc + 2 * pad
-    _check_accumulator(nr, Hp, Wp, len(xy) * len(r_of), radii)
-    rc = (r_of * np.cos(k_of) / cell).astype(np.float32)
-    rs_ = (r_of * np.sin(k_of) / cell).astype(np.float32)
-    ct, st = np.cos(theta).astype(np.float32), np.sin(theta).astype(np.float32)
-    dxc = ct[:, None] * rc[None, :]
-    dxc -= st[:, None] * rs_[None, :]
-    dyc = st[:, None] * rc[None, :]
-    dyc += ct[:, None] * rs_[None, :]
-    xs = ((xy[:, 0] + 0.5) / cell + pad).astype(np.float32)[:, None]
-    ys = ((xy[:, 1] + 0.5) / cell + pad).astype(np.float32)[:, None]
-    base = (b_of * (Hp * Wp)).astype(np.int32)[None, :]
-    flat = np.empty((2,) + dxc.shape, np.int32)
-    np.add((ys + dyc).astype(np.int32) * Wp + (xs + dxc).astype(np.int32), base, out=flat[0])
-    np.add((ys - dyc).astype(np.int32) * Wp + (xs - dxc).astype(np.int32), base, out=flat[1])
-    acc = np.bincount(flat.ravel(), minlength=nr * Hp * Wp)
-    acc = acc.reshape(nr, Hp, Wp)[:, pad:pad + Hc, pad:pad + Wc].astype(np.float32)
-    # 3 x 3 cell sums (zero outside the image), separable
-    box = acc.copy()
-    box[:, :, 1:] += acc[:, :, :-1]
-    box[:, :, :-1] += acc[:, :, 1:]
-    acc = box.copy()
-    acc[:, 1:, :] += box[:, :-1, :]
-    acc[:, :-1, :] += box[:, 1:, :]
-    score = acc / (2 * np.pi * r_bins[:, None, None])  # threshold proportional to r
-    # 3D local maxima (3 radii x 5 x 5 cells): a separable maximum filter picks the cells not
-    # below any neighbour; the exact test (ties: the first cell in scan order wins) then runs
-    # only on those
-    mx = acc
-    for axis, passes in ((2, 2), (1, 2), (0, 1)):  # widths 5, 5, 3 (zero outside, acc >= 0)
-        for _ in range(passes):
-            mx = _max3(mx, axis)
-    bi, yi, xi = np.nonzero((score >= threshold) & (acc >= mx))
-    if len(bi) == 0:
-        return []
-    v = acc[bi, yi, xi]
-    is_max = np.ones(len(bi), bool)
-    for ob in (-1, 0, 1):
-        for oy in range(-2, 3):
-            for ox in range(-2, 3):
-                if (ob, oy, ox) >= (0, 0, 0):
-                    continue  # later cells: v >= them holds already
-                b2, y2, x2 = bi + ob, yi + oy, xi + ox
-                inside = (b2 >= 0) & (b2 < nr) & (y2 >= 0) & (y2 < Hc) & (x2 >= 0) & (x2 < Wc)
-                nbv = np.zeros(len(bi), np.float32)
-                nbv[inside] = acc[b2[inside], y2[inside], x2[inside]]
-                is_max &= v > nbv
-    bi, yi, xi = bi[is_max], yi[is_max], xi[is_max]
-    order = np.argsort(-score[bi, yi, xi])[:max_hypotheses]
-    bi, yi, xi = bi[order], yi[order], xi[order]
-    c = np.column_stack([xi, yi]).astype(float) * cell + (cell - 1) / 2
-    r = r_bins[bi].astype(float)
-    votes = acc[bi, yi, xi].astype(int)
-    # batched refinement: algebraic circle fits to the in-band, radially oriented edge points,
-    # on (hypothesis, point) pairs from a k-d tree (only the points near each circle)
-    tree = cKDTree(xy)
-    reach = r + band_px + cell + 1
-    lists = tree.query_ball_point(c, reach)
-    hyp = np.repeat(np.arange(len(c)), [len(l) for l in lists])
-    pts = np.fromiter((i for l in lists for i in l), np.int64, count=len(hyp))
-    cos20 = np.cos(np.deg2rad(20))
-    ct, st = np.cos(theta[pts]), np.sin(theta[pts])
-    for band in (band_px + cell, band_px + 0.5, band_px + 0.5):
-        d = xy[pts] - c[hyp]
-        rho = np.hypot(d[:, 0], d[:, 1])
-        radial = np.abs((d[:, 0] * ct + d[:, 1] * st) / np.maximum(rho, 1e-9))
-        sel = (np.abs(rho - r[hyp]) <= band) & (radial >= cos20)
-        c, r = _batched_kasa(xy[pts[sel]], hyp[sel], len(c), c, r)
-    n_in = np.bincount(hyp[sel], minlength=len(c))
-    out = []
-    for j in np.nonzero(n_in >= 6)[0]:
-        out.append((c[j], float(r[j]), int(votes[j]), pts[sel & (hyp == j)]))
-    return out
-
-
-def _max3(a: np.ndarray, axis: int) -> np.ndarray:
-    """Running maximum of width 3 along ``axis`` (non-negative input, zero outside)."""
-    out = a.copy()
-    lo = [slice(None)] * a.ndim
-    hi = [slice(None)] * a.ndim
-    lo[axis], hi[axis] = slice(1, None), slice(None, -1)
-    np.maximum(out[tuple(lo)], a[tuple(hi)], out=out[tuple(lo)])
-    np.maximum(out[tuple(hi)], a[tuple(lo)], out=out[tuple(hi)])
-    return out
-
-
-def _batched_kasa(xy: np.ndarray, hyp: np.ndarray, m_hyp: int, c0: np.ndarray,
-                  r0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Kasa circle fits of many point subsets at once: point k belongs to hypothesis
-    ``hyp[k]``; keeps ``c0``/``r0`` where a subset has fewer than 6 points, the system is
-    singular or the fit moves more than 3 px."""
-    c, r = c0.copy(), r0.copy()
-    if len(xy) == 0:
-        return c, r
-    m = c0[hyp]  # centre each subset on its current estimate (conditioning)
-    x, y = (xy - m).T
-    z = x * x + y * y
+    _check_accumulator(n_cells(bands), len(xy) * 2 * sum(
+        np.ceil((b.hi - b.lo) / b.cell) * (2 * np.floor(tol * b.hi / b.cell) + 1) for b in bands), radii)
+    flat, acc, m = cast_votes(xy, theta, bands, tol)
+    cen, band, votes, cells = peaks(acc, bands, shape, threshold)
+    if len(cen) == 0:
+        return None
+    lo = np.array([b.lo for b in bands])[band]
+    cap = np.argsort(-votes / lo, kind="stable")[:max_hypotheses]
+    cen, band, votes, cells, lo = cen[cap], band[cap], votes[cap], cells[cap], lo[cap]
+    cell = np.array([b.cell for b in bands])[band]
+    hi = np.array([b.hi for b in bands])[band]
+    k, i = voters(flat, cells, len(acc), len(xy), m)
+    del flat
+    K = len(cen)
+    # centre: least-squares intersection of the voters' normal lines (t = tangent), which
+    # needs no radius; kept near the block (a clutter of unrelated voters can pull it away)
+    tx, ty = -np.sin(theta[i]), np.cos(theta[i])
+    px, py = xy[i, 0], xy[i, 1]
 
     def s(w):
-        return np.bincount(hyp, weights=w, minlength=m_hyp)
+        return np.bincount(k, weights=w, minlength=K)
 
-    n = np.bincount(hyp, minlength=m_hyp).astype(float)
-    Sx, Sy, Sxx, Syy, Sxy, Sz, Sxz, Syz = (s(w) for w in (x, y, x * x, y * y, x * y, z, x * z, y * z))
-    A = np.stack([np.stack([2 * Sxx, 2 * Sxy, Sx], -1), np.stack([2 * Sxy, 2 * Syy, Sy], -1),
-                  np.stack([2 * Sx, 2 * Sy, n], -1)], 1)
-    rhs = np.stack([Sxz, Syz, Sz], -1)
-    good = n >= 6
-    good &= np.abs(np.linalg.det(A)) > 1e-9 * np.maximum(n, 1) ** 3
-    if good.any():
-        sol = np.linalg.solve(A[good], rhs[good][..., None])[..., 0]
-        cc = sol[:, :2]
-        rr = np.sqrt(np.maximum(sol[:, 2] + (cc ** 2).sum(1), 0))
-        cc = cc + c0[good]
-        jump = (np.hypot(*(cc - c0[good]).T) > 3) | (np.abs(rr - r0[good]) > 3)
-        idx = np.nonzero(good)[0][~jump]
-        c[idx], r[idx] = cc[~jump], rr[~jump]
-    return c, r
+    a11, a12, a22 = s(tx * tx), s(tx * ty), s(ty * ty)
+    b1 = s(tx * tx * px + tx * ty * py)
+    b2 = s(tx * ty * px + ty * ty * py)
+    det = a11 * a22 - a12 * a12
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c0 = np.column_stack([(a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det])
+    bad = ~(np.abs(det) > 1e-6 * np.maximum(s(np.ones(len(k))), 1) ** 2)
+    bad |= ~np.isfinite(c0).all(1) | (np.abs(c0 - cen).max(1) > 1.5 * cell)
+    c0[bad] = cen[bad]
+    # radius: peaks of each candidate's histogram of voter distances (1 px bins; a bin plus
+    # its larger neighbour at least threshold * 2 pi r), within the band (+- 1 px): the
+    # band's voters are the points at that range, so a concentric rim of another band (a
+    # hole's wall inside its rim) is left to that band
+    step = float(radius_step)
+    rho = np.hypot(px - c0[k, 0], py - c0[k, 1])
+    nb = int(np.ceil((hi.max() + cell.max()) / step)) + 3
+    b = np.minimum((rho / step).astype(np.int64), nb - 1)
+    hist = np.bincount(k * nb + b, minlength=K * nb).reshape(K, nb).astype(float)
+    rb = (np.arange(nb) + 0.5) * step
+    left = np.concatenate([np.full((K, 1), -1.0), hist[:, :-1]], 1)
+    right = np.concatenate([hist[:, 1:], np.full((K, 1), -1.0)], 1)
+    pair = hist + np.maximum(left, right)
+    ok = (hist > left) & (hist >= right) & (pair >= threshold * 2 * np.pi * rb[None])
+    ok &= (rb[None] >= (lo - 1)[:, None]) & (rb[None] <= (hi + 1)[:, None])
+    hk, hb = np.nonzero(ok)
+    if len(hk) == 0:
+        return None
+    # sub-bin radius: centroid of the 3 bins
+    w0, w1, w2 = np.maximum(left[hk, hb], 0), hist[hk, hb], np.maximum(right[hk, hb], 0)
+    r0 = rb[hb] + step * (w2 - w0) / np.maximum(w0 + w1 + w2, 1)
+    c, r, votes = c0[hk].copy(), r0, votes[hk]
+    # refinement on a ring of edge points around each hypothesis, narrowing
+    index = np.full(shape[0] * shape[1], -1, np.int32)
+    index[xy[:, 1].astype(np.int64) * shape[1] + xy[:, 0].astype(np.int64)] = np.arange(len(xy), dtype=np.int32)
+    # the first ring is as wide as the candidate's cell (its centre is known to about that)
+    hcell = cell[hk]
+    reach = band_px + 1.0 + 0.5 * hcell
+    ph, pp = ring_points(c, r, reach, index, shape)
+    cos_tol = np.cos(np.deg2rad(DIRECTION_TOL_DEG))
+    ct, st = np.cos(theta[pp]), np.sin(theta[pp])
+    for width in (reach, np.full(len(r), band_px + 0.5), np.full(len(r), band_px + 0.5)):
+        d = xy[pp] - c[ph]
+        dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+        radial = np.abs(d[:, 0] * ct + d[:, 1] * st) >= cos_tol * dist
+        sel = radial & (np.abs(dist - r[ph]) <= width[ph])
+        c, r, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=2,
+                                      max_step=float(hcell.max()) + 3.0)
+    d = xy[pp] - c[ph]
+    dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    sel = (np.abs(d[:, 0] * ct + d[:, 1] * st) >= cos_tol * dist) & (np.abs(dist - r[ph]) <= band_px)
+    return c, r, votes, ph[sel], pp[sel]
+
+
+@lru_cache(maxsize=4)
+def _offsets(r_max: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Integer pixel offsets within ``r_max`` px, sorted by length: (length, dx, dy)."""
+    g = np.arange(-r_max, r_max + 1)
+    dx, dy = np.meshgrid(g, g)
+    d = np.hypot(dx, dy).ravel()
+    o = np.argsort(d, kind="stable")
+    out = d[o], dx.ravel()[o].astype(np.int64), dy.ravel()[o].astype(np.int64)
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+def ring_points(c: np.ndarray, r: np.ndarray, width: float | np.ndarray, index: np.ndarray,
+                shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Edge points within ``width`` px of each circle, by looking up the pixels of its ring.
+
+    Parameters
+    ----------
+    c : (K, 2) float, r : (K,) float
+        Circles, pixels.
+    width : float or (K,) float, pixels
+    index : (H * W,) int32
+        Edge point number of each pixel (row-major), -1 off the edges.
+    shape : (H, W)
+
+    Returns
+    -------
+    hyp, point : (P,) int
+        (circle, edge point) pairs; work proportional to the rings' areas, not the image's.
+    """
+    H, W = shape
+    if len(r) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    width = np.broadcast_to(np.asarray(width, float), r.shape)
+    d, ox, oy = _offsets(int(np.ceil(max(float((r + width).max()), 0) + 2)))
+    ci = np.rint(c).astype(np.int64)
+    s0 = np.searchsorted(d, np.maximum(r - width - 0.75, 0), "left")  # 0.75: the rounding of c
+    s1 = np.searchsorted(d, r + width + 0.75, "right")
+    n = s1 - s0
+    hyp = np.repeat(np.arange(len(r)), n)
+    j = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n - s0, n)
+    x = ci[hyp, 0] + ox[j]
+    y = ci[hyp, 1] + oy[j]
+    inside = (x >= 0) & (x < W) & (y >= 0) & (y < H)
+    hyp, x, y = hyp[inside], x[inside], y[inside]
+    pt = index[y * W + x]
+    on = pt >= 0
+    return hyp[on], pt[on].astype(np.int64)
 
 
 def _support(xy: np.ndarray, c: np.ndarray, r: float) -> tuple[np.ndarray, float, float, float, float]:
@@ -222,13 +242,12 @@ def _dedupe(items: list, key_c, key_r, dist_px: float) -> list:
     return kept
 
 
-def _check_accumulator(n_radii: int, rows: int, cols: int, n_votes: int, radii) -> None:
+def _check_accumulator(cells: int, n_votes: float, radii) -> None:
     """Refuse (one line, naming the radius range) a Hough accumulator that would not fit in memory."""
-    cells = float(n_radii) * rows * cols
-    estimate = cells * 28 + float(n_votes) * 40  # int64 counts + float32 copies; int32/float32 vote tables
+    ring = (2 * float(radii[1]) + 7) ** 2  # the ring lookup's offset table (ring_points)
+    estimate = float(cells) * 8 + n_votes * 16 + ring * 24  # int64 counts; int32 cells + lookups
     check_memory(estimate, f"circle radii {radii[0]:g}..{radii[1]:g} px (--rmin/--rmax, a Hough accumulator of "
-                           f"{cells:,.0f} cells)")
-
+                           f"{cells:,.0f} cells and {n_votes:,.0f} votes)")
 
 def circles(
     edge_map: Any,
@@ -283,16 +302,50 @@ def circles(
     .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
-    xy, _ = edge_points(edge_map, keep)
+    xy, theta = edge_points(edge_map, keep)
+    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
+    h = _hypotheses(xy, theta, mask.shape, radii, angle_tol_deg, threshold, 1.0, 200, 1.0, 1.0, REL_CELL)
+    if h is None:
+        return []
+    c, r, votes, ph, pp = h
+    cov, rms = _coverage(xy, c, r, ph, pp)
+    order = np.argsort(-cov, kind="stable")
+    order = order[(cov[order] >= min_support) & (rms[order] <= max_residual)]
+    # each edge point supports one circle: a candidate that is left with too little support
+    # once the points of stronger circles are taken (a ghost made of two rims, a crescent
+    # inside a rim) is dropped; this also removes near-duplicates
+    by_h = np.split(pp[np.argsort(ph, kind="stable")], np.cumsum(np.bincount(ph, minlength=len(r)))[:-1])
+    used = np.zeros(len(xy), bool)
     found = []
-    for c, r, votes, _ in circle_hypotheses(edge_map, radii, angle_tol_deg=angle_tol_deg,
-                                            threshold=threshold, keep=keep):
-        on, cov, _, _, rms = _support(xy, c, r)
-        if cov >= min_support and rms <= max_residual:
-            c2, r2, _ = fit_circle(xy[on])  # final geometric fit on the supporting pixels
-            if np.hypot(*(c2 - c)) <= 1.5 and abs(r2 - r) <= 1.5:
-                c, r = c2, r2
-                _, cov, _, _, rms = _support(xy, c, r)
-            found.append(Circle((float(c[0]), float(c[1])), float(r), votes, cov, rms))
-    found.sort(key=lambda k: -k.support)
-    return _dedupe(found, lambda k: np.array(k.center), lambda k: k.radius, 2.0)
+    for j in order:
+        pts = by_h[j]
+        free = pts[~used[pts]]
+        if len(free) < len(pts):
+            d = xy[free] - c[j]
+            if angular_coverage(np.arctan2(d[:, 1], d[:, 0]), round(2 * np.pi * r[j]))[0] < min_support:
+                continue
+        used[pts] = True
+        found.append(Circle((float(c[j, 0]), float(c[j, 1])), float(r[j]), int(votes[j]), float(cov[j]),
+                            float(rms[j])))
+    return found
+
+
+def _coverage(xy: np.ndarray, c: np.ndarray, r: np.ndarray, ph: np.ndarray,
+              pp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coverage (fraction of about 2 pi r angular bins holding an inlier) and RMS distance of
+    the inliers, of many circles at once; inliers are the (circle, point) pairs ``ph, pp``."""
+    K = len(r)
+    n_bins = np.maximum(np.rint(2 * np.pi * r).astype(np.int64), 8)
+    start = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
+    d = xy[pp] - c[ph]
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)
+    b = np.minimum((ang / (2 * np.pi) * n_bins[ph]).astype(np.int64), n_bins[ph] - 1)
+    occ = np.zeros(int(n_bins.sum()), bool)
+    occ[start[ph] + b] = True
+    cov = np.add.reduceat(occ, start) / n_bins
+    e = np.hypot(d[:, 0], d[:, 1]) - r[ph]
+    n = np.bincount(ph, minlength=K)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(np.bincount(ph, weights=e * e, minlength=K) / n)
+    rms[n == 0] = np.inf
+    return cov, rms
