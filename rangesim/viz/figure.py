@@ -39,6 +39,7 @@ def save_labelled_image(
     legend: list[tuple[tuple[float, float, float], str]] = (),
     colorbar: ColorbarSpec | None = None,
     dpi: int = 150,
+    image_size: tuple[int, int] | None = None,
 ) -> Path:
     """Write an (H, W, 3) RGB image in [0, 1] as a labelled PNG.
 
@@ -53,6 +54,9 @@ def save_labelled_image(
     colorbar : ColorbarSpec, optional
     dpi : int
         Resolution; fonts and margins scale with it.
+    image_size : (W, H), optional
+        Size of the image ``rgb`` was thinned from (a picture of a large scan from every
+        k-th pixel): the axes count its pixels. Default ``rgb``'s own.
     """
     path = Path(path)
     if path.suffix.lower() != ".png":
@@ -90,8 +94,9 @@ def save_labelled_image(
     img_y = bottom + (body_h - img_h) // 2
     ax = fig.add_axes((x0 / fig_w, img_y / fig_h, img_w / fig_w, img_h / fig_h))
     # extent on pixel edges: pixel (i, j) covers [j, j+1] x [i, i+1], like the K convention
+    full_w, full_h = image_size or (w, h)
     ax.imshow(np.clip(rgb, 0, 1), interpolation="nearest", aspect="equal", origin="upper",
-              extent=(0, w, h, 0), resample=False)
+              extent=(0, full_w, full_h, 0), resample=False)
     ax.set_xlabel("column [px]", fontsize=fontsize)
     ax.set_ylabel("row [px]", fontsize=fontsize)
     ax.tick_params(labelsize=fontsize - 1, length=3)

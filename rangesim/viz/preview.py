@@ -399,5 +399,5 @@ def save_preview(
     colorbar = ColorbarSpec(_cmap(cmap), lo, hi, "depth z [mm]", extend)
     return save_labelled_image(
         rgb, path, title=default_title(scan) if title is None else title,
-        legend=legend, colorbar=colorbar, dpi=dpi,
+        legend=legend, colorbar=colorbar, dpi=dpi, image_size=(w, h),
     )
