@@ -9,8 +9,8 @@ Mitsuba variant's backend, LLVM on the CPU or CUDA on a GPU):
    laser is behind the visible surface.
 4. ``signal``: Lambertian return with inverse-square falloff.
 5. working range on the true depth -> status 4 outside [near, far].
-6. ``mixed_pixels`` (NumPy, near depth edges only): centroid shift where a finite-width
-   stripe straddles a depth edge.
+6. ``mixed_pixels`` (Dr.Jit, near depth steps and lit/unlit boundaries only): centroid
+   shift where a finite-width stripe straddles a depth step.
 7. ``stripe_noise`` (one mechanism with the twin of a recording; here in Dr.Jit, with a
    PCG32 stream per pixel): status 3 where the
    return, dimmed where the stripe is cut by an outline or shadow border, is below
