@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cpu_info, timed  # noqa: E402
+from _common import cpu_info, interleaved  # noqa: E402
 
 #: the target: a full scan within this factor of Open3D's bare depth
 TARGET_RATIO = 1.5
@@ -355,8 +355,13 @@ def cprofile_scan(scene, sensor, pose, top: int = 25) -> str:
     return out.getvalue()
 
 
-def open3d_depth(o3d, scene, origin, dirs, n_rays, results, repeat):
-    """Time Open3D's bare ``cast_rays`` on the same rays; returns its t_hit."""
+def open3d_runs(o3d, scene, origin, dirs, n_rays, laser_world=None) -> dict:
+    """Open3D's bare ``cast_rays`` of the same rays (t_hit to NumPy), as a timed function.
+
+    With ``laser_world`` (3,) also the cast followed by one shadow ray per hit towards that
+    point (``test_occlusions``: any hit, like Mitsuba's ``ray_test``): the ray-casting work
+    of a laser-stripe scan, the fair baseline of the full scan's physics.
+    """
     o3d_scene = o3d.t.geometry.RaycastingScene()
     for obj in scene.objects:
         o3d_scene.add_triangles(
@@ -371,9 +376,21 @@ def open3d_depth(o3d, scene, origin, dirs, n_rays, results, repeat):
     def run_open3d():
         return o3d_scene.cast_rays(o3d_rays)["t_hit"].numpy()
 
-    cold, med, times, t_hit = timed(run_open3d, repeat)
-    results["open3d cast_rays (t_hit)"] = {"cold_s": cold, "median_s": med, "times_s": times}
-    return t_hit
+    runs = {"open3d cast_rays (t_hit)": run_open3d}
+    if laser_world is not None:
+        def run_open3d_shadow():
+            t = o3d_scene.cast_rays(o3d_rays)["t_hit"].numpy()
+            hit = np.isfinite(t)
+            p = origin + dirs[hit] * t[hit, None]
+            to_laser = laser_world - p
+            dist = np.linalg.norm(to_laser, axis=1)
+            shadow = np.empty((len(p), 6), np.float32)
+            shadow[:, :3] = p
+            shadow[:, 3:] = to_laser / dist[:, None]
+            return o3d_scene.test_occlusions(o3d.core.Tensor(shadow), tnear=1e-3, tfar=float(dist.max())).numpy()
+
+        runs["open3d cast + shadow rays"] = run_open3d_shadow
+    return runs
 
 
 # -- main ------------------------------------------------------------------------------------
@@ -450,19 +467,17 @@ def main(argv=None) -> int:
 
     results: dict[str, dict] = {}
 
-    # 1. rangesim full scan (the cold run builds the Mitsuba scene/BVH and compiles kernels)
+    # every contender as a function, then timed in turns (interleaved, so a busy moment of
+    # the machine hits them all alike); the cold rangesim run builds the Mitsuba scene/BVH and
+    # compiles kernels, the cold Open3D run its BVH
     def run_scan():
         return rs.scan(scene, sensor, pose=pose, seed=0)
 
-    cold, med, times, scan = timed(run_scan, args.repeat)
-    results["rangesim.scan (full)"] = {"cold_s": cold, "median_s": med, "times_s": times}
-    mscene = scene.mitsuba_scene()
-
-    # 2. Open3D bare depth
+    runs = {"rangesim.scan (full)": run_scan}
     if o3d is not None:
-        t_o3d = open3d_depth(o3d, scene, origin, dirs, n_rays, results, args.repeat)
-
-    # 3. Mitsuba bare ray_intersect / ray_intersect_preliminary on the same rays
+        laser_world = (pose @ np.r_[sensor.laser_origin, 1.0])[:3]
+        runs.update(open3d_runs(o3d, scene, origin, dirs, n_rays, laser_world))
+    mscene = scene.mitsuba_scene()
     d32 = np.ascontiguousarray(dirs.T, dtype=np.float32)
     mi_ray = mi.Ray3f(mi.Point3f(*(float(c) for c in origin)), mi.Vector3f(d32[0], d32[1], d32[2]))
     dr.eval(mi_ray.d)
@@ -475,10 +490,14 @@ def main(argv=None) -> int:
         pi = mscene.scene.ray_intersect_preliminary(mi_ray)
         return np.array(pi.t, dtype=np.float32)
 
-    cold, med, times, t_mi = timed(run_mitsuba, args.repeat)
-    results["mitsuba ray_intersect (t)"] = {"cold_s": cold, "median_s": med, "times_s": times}
-    cold, med, times, t_mi_pre = timed(run_mitsuba_pre, args.repeat)
-    results["mitsuba preliminary (t)"] = {"cold_s": cold, "median_s": med, "times_s": times}
+    runs["mitsuba ray_intersect (t)"] = run_mitsuba
+    runs["mitsuba preliminary (t)"] = run_mitsuba_pre
+    outputs = {}
+    for name, (cold, med, times, out) in interleaved(runs, args.repeat).items():
+        results[name] = {"cold_s": cold, "median_s": med, "times_s": times}
+        outputs[name] = out
+    scan, t_mi = outputs["rangesim.scan (full)"], outputs["mitsuba ray_intersect (t)"]
+    t_o3d = outputs.get("open3d cast_rays (t_hit)")
 
     # agreement with Open3D ------------------------------------------------------------------
     t_true = np.linalg.norm(scan.xyz_true.reshape(-1, 3).astype(np.float64), axis=1)  # NaN on miss
@@ -530,6 +549,9 @@ def main(argv=None) -> int:
     cores = cpu.get("affinity", cpu["os.cpu_count"])
     print(f"target: full scan within {TARGET_RATIO}x of Open3D bare depth on 2 CPU cores: "
           f"{verdict} (ratio {ratio:.2f}; this machine: {cores} usable cores)")
+    if "open3d cast + shadow rays" in results:
+        same = results["rangesim.scan (full)"]["median_s"] / results["open3d cast + shadow rays"]["median_s"]
+        print(f"same ray-casting work: full scan / Open3D cast + shadow rays = {same:.2f}")
 
     profile = None
     if args.profile:
