@@ -7,7 +7,7 @@ Run: ``python examples/curvature_maps.py [--out DIR] [--small]``
 from __future__ import annotations
 
 import numpy as np
-from _common import SCENES, parse_args, rangesim
+from _gallery import SCENES, parse_args, rangesim
 
 import rangesim as rs
 

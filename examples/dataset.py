@@ -7,7 +7,7 @@ Run: ``python examples/dataset.py [--out DIR] [--small]``
 from __future__ import annotations
 
 import numpy as np
-from _common import SCENES, parse_args, rangesim, small_camera, workdir
+from _gallery import SCENES, parse_args, rangesim, small_camera, workdir
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure

@@ -11,7 +11,7 @@ Run: ``python examples/edges_and_scores.py [--out DIR] [--small]``
 """
 from __future__ import annotations
 
-from _common import SCENES, keep, need_data, parse_args, rangesim, workdir
+from _gallery import SCENES, keep, need_data, parse_args, rangesim, workdir
 
 import rangesim as rs
 from rangesim.viz.edge_overlay import save_edge_overlay

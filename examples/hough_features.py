@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 
-from _common import SCENES, keep, parse_args, rangesim, small_camera, workdir
+from _gallery import SCENES, keep, parse_args, rangesim, small_camera, workdir
 
 
 def main(argv=None) -> None:

@@ -14,10 +14,10 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-if str(HERE) not in sys.path:  # the scripts import _common from this folder
+if str(HERE) not in sys.path:  # the scripts import _gallery from this folder
     sys.path.insert(0, str(HERE))
 
-from _common import DEFAULT_OUT  # noqa: E402
+from _gallery import DEFAULT_OUT  # noqa: E402
 
 #: script -> the figures it writes (those behind a "needs" are skipped without it)
 EXAMPLES: dict[str, tuple[str, ...]] = {

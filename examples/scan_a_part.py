@@ -5,7 +5,7 @@ Run: ``python examples/scan_a_part.py [--out DIR] [--small]``
 """
 from __future__ import annotations
 
-from _common import SCENES, parse_args, rangesim, small_camera, workdir
+from _gallery import SCENES, parse_args, rangesim, small_camera, workdir
 
 import rangesim as rs
 from rangesim.viz import save_preview

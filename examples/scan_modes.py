@@ -9,7 +9,7 @@ Run: ``python examples/scan_modes.py [--out DIR] [--small]``
 """
 from __future__ import annotations
 
-from _common import SCENES, parse_args, rangesim, small_camera, workdir
+from _gallery import SCENES, parse_args, rangesim, small_camera, workdir
 
 from rangesim.core.errors import RangesimError
 from rangesim.sensor import rendered

@@ -17,7 +17,7 @@ from __future__ import annotations
 import re
 import shutil
 
-from _common import SCENES, keep, parse_args, rangesim, workdir
+from _gallery import SCENES, keep, parse_args, rangesim, workdir
 
 from rangesim.viz.sweep_plots import plot_snr_definition
 

@@ -6,7 +6,7 @@ Run: ``python examples/structured_light.py [--out DIR] [--small]``
 """
 from __future__ import annotations
 
-from _common import SCENES, parse_args, rangesim, small_camera, workdir
+from _gallery import SCENES, parse_args, rangesim, small_camera, workdir
 
 
 def main(argv=None) -> None:

@@ -8,7 +8,7 @@ Run: ``python examples/surface_points.py [--out DIR] [--small]``
 from __future__ import annotations
 
 import numpy as np
-from _common import parse_args, rangesim, workdir
+from _gallery import parse_args, rangesim, workdir
 
 import rangesim as rs
 

@@ -11,7 +11,7 @@ Run: ``python examples/twin_of_a_recording.py [--out DIR] [--small]``
 """
 from __future__ import annotations
 
-from _common import keep, need_data, parse_args, rangesim, workdir
+from _gallery import keep, need_data, parse_args, rangesim, workdir
 
 
 def main(argv=None) -> None:

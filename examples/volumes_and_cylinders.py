@@ -8,7 +8,7 @@ Run: ``python examples/volumes_and_cylinders.py [--out DIR] [--small]``
 """
 from __future__ import annotations
 
-from _common import parse_args, rangesim, workdir
+from _gallery import parse_args, rangesim, workdir
 
 import rangesim as rs
 from rangesim.viz.volumes import save_gc_figure, save_gc_recursions

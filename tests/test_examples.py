@@ -44,7 +44,7 @@ def png_size(path: Path) -> tuple[int, int]:
 
 
 def test_every_script_is_listed_and_every_readme_figure_has_a_script():
-    scripts = {p.stem for p in EXAMPLES_DIR.glob("*.py")} - {"_common", "make_figures"}
+    scripts = {p.stem for p in EXAMPLES_DIR.glob("*.py")} - {"_gallery", "make_figures"}
     assert scripts == set(make_figures.EXAMPLES)
     readme = (EXAMPLES_DIR.parent / "README.md").read_text(encoding="utf-8")
     made = {f for figures in make_figures.EXAMPLES.values() for f in figures}
@@ -63,7 +63,7 @@ def test_example_writes_its_figures(name, tmp_path, monkeypatch):
         except RangesimError as exc:  # .ci/run installs Debian's libllvm19
             pytest.skip(str(exc))
     if name == "twin_of_a_recording":
-        data = make_figures.load("_common").need_data("mosd-kinect/test31.pcd")
+        data = make_figures.load("_gallery").need_data("mosd-kinect/test31.pcd")
         if data is None:
             pytest.skip("shared data not found (set RANGESIM_DATA)")
     monkeypatch.chdir(tmp_path)  # nothing may land in the working directory
