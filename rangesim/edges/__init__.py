@@ -3,7 +3,9 @@
 Every detector takes a RangeScan (synthetic or recorded, NaN holes allowed) and returns an
 :class:`EdgeMap`; :data:`DETECTORS` names them for the CLI, sweeps and benchmarks.
 :func:`estimate_depth_noise` measures a scan's depth noise in pixel footprints, the level
-the detectors' noise-adaptive defaults key on.
+the detectors' noise-adaptive defaults key on. Labels are
+:class:`~rangesim.core.constants.EdgeLabel` values plus :data:`RIM` (4): where the measured
+surface ends against pixels that saw nothing.
 
 The detectors live in private modules (``_gradient``, ``_normal``, ``_curvature``,
 ``_line_fit``, ``_pcl_organized``; chains in ``_link``), the pieces they share in
@@ -17,7 +19,7 @@ from rangesim.edges._link import EdgeChain, link
 from rangesim.edges._noise import estimate_depth_noise
 from rangesim.edges._normal import normal
 from rangesim.edges._pcl_organized import OrganizedEdgeMap, pcl_organized
-from rangesim.edges.edgemap import EdgeMap
+from rangesim.edges.edgemap import RIM, EdgeMap
 
 #: name -> detector(scan, **params) -> EdgeMap
 DETECTORS = {
@@ -29,6 +31,6 @@ DETECTORS = {
 }
 
 __all__ = [
-    "DETECTORS", "EdgeChain", "EdgeMap", "OrganizedEdgeMap", "curvature", "estimate_depth_noise",
+    "DETECTORS", "RIM", "EdgeChain", "EdgeMap", "OrganizedEdgeMap", "curvature", "estimate_depth_noise",
     "gradient", "line_fit", "line_fit_points", "link", "normal", "pcl_organized",
 ]

@@ -10,7 +10,7 @@ from rangesim.curvature import curvature_edges, curvature_scan
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import pad_last2, padded_view
 from rangesim.edges._scan_access import scan_depth
-from rangesim.edges.edgemap import EdgeMap
+from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["curvature"]
 
@@ -111,6 +111,7 @@ def curvature(
     with np.errstate(invalid="ignore"):
         labels = np.where(mean > 0, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
     jump = disc.occluding
+    labels[disc.rim] = RIM
     labels[jump] = EdgeLabel.JUMP
     strength = np.fmin(np.abs(k1), np.abs(k2))
     params = {
@@ -118,5 +119,5 @@ def curvature(
         "relative_threshold": DEFAULT_RELATIVE_THRESHOLD if threshold is None else None,
         "window": window, "jump_threshold": float(jump_threshold), "max_search": int(max_search),
     }
-    return EdgeMap(mask=(points | jump) & valid, labels=labels, strength=strength,
+    return EdgeMap(mask=(points | jump | disc.rim) & valid, labels=labels, strength=strength,
                    method="curvature", params=params)

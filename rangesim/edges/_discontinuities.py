@@ -1,12 +1,15 @@
-"""Depth discontinuities (jump edges): the detectors' jump rule, and the broken neighbour
-pairs that finite differences must not cross.
+"""Depth discontinuities (jump edges), rims of the measured surface, and the broken
+neighbour pairs that finite differences must not cross.
 
 Analysis layer: pure NumPy over arrays. :func:`find_discontinuities` is the rule of PCL's
 ``OrganizedEdgeBase`` (neighbours whose depths differ by more than a threshold), with a
-search across NaN gaps against the pixel's own surface continued across them;
-:func:`discontinuities` applies it with :data:`JUMP_THRESHOLD` pixel footprints, the rule
-every detector uses by default. :func:`segment_broken` tells whether a run of steps along
-an axis crosses a discontinuity.
+search across NaN gaps against the pixel's own surface continued across them, an optional
+*fold* test (a steep but continuous surface is not a jump) and *rims* (the measured
+surface ending against pixels that saw nothing); :func:`discontinuities` applies it the
+way every detector does by default: :data:`JUMP_THRESHOLD` pixel footprints plus the
+depth quantum of quantised scans, folds on, rims from the scan's status.
+:func:`segment_broken` tells whether a run of steps along an axis crosses a
+discontinuity.
 """
 from __future__ import annotations
 
@@ -15,12 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.edges._grid import AXES, NEIGHBOURS, pad_last2, padded_view, shift
+from rangesim.edges._grid import AXES, NEIGHBOURS, pad_last2, padded_view
+from rangesim.edges._noise import depth_quantum
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
 
 __all__ = [
-    "JUMP_THRESHOLD", "Discontinuities", "discontinuities", "find_discontinuities",
-    "segment_broken",
+    "JUMP_THRESHOLD", "QUANTUM_STEPS", "Discontinuities", "discontinuities", "empty_pixels",
+    "find_discontinuities", "segment_broken",
 ]
 
 #: the detectors' default jump rule, in pixel footprints: a step between neighbours deeper
@@ -31,15 +35,73 @@ __all__ = [
 #: fixed 0.02 z is 0.02 f footprints (10.5 for a Kinect), blind to shallow steps.
 JUMP_THRESHOLD = float(1.0 / np.tan(np.radians(15.0)))
 
+#: quanta added to the jump threshold of quantised scans (:func:`discontinuities`): rounding
+#: moves two neighbours apart by up to one quantum, and structured-light matching errs by
+#: whole disparity levels, correlated over its window, so smooth faces step by up to ~3
+#: quanta (measured on a flat table by the kinect_v1 preset and on the PCL / mOSD Kinect
+#: frames: 0.4-1 % of horizontal neighbour steps exceed 2.5 quanta, 0.1-0.4 % exceed 3.5)
+QUANTUM_STEPS = 3.0
+
+#: RangeScan.status code of a pixel whose camera ray hit no surface
+#: (:class:`rangesim.core.constants.Status` ``MISS``; the value, so that this analysis
+#: module needs nothing from the sensor layer)
+_STATUS_MISS = 1
+
+
+def empty_pixels(scan: Any, valid: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Invalid pixels that saw no surface at all: where a rim of the measured surface can be.
+
+    A synthetic scan says why a pixel has no point (``scan.status``): ``MISS`` (the camera
+    ray hit nothing: the view through a through-hole, past a part's silhouette) is empty;
+    ``SHADOW``, ``DROPOUT`` and ``OUT_OF_RANGE`` pixels saw a surface that was not measured,
+    possibly the neighbour's own surface continued, and are not. Recorded readers mark
+    every missing return ``MISS``, and a scan without ``status`` says nothing: there every
+    invalid pixel counts as empty (what a depth image can tell, as PCL's NaN boundary).
+
+    Parameters
+    ----------
+    scan : RangeScan or any object with ``status`` (H, W) uint8, optional attribute
+    valid : (H, W) bool
+        Pixels with a measured point.
+
+    Returns
+    -------
+    empty : (H, W) bool
+    certain : bool
+        True when the status tells causes apart (a synthetic scan: no ``meta["source"]``,
+        which recorded readers set): a pixel that saw nothing is then known to, and its
+        neighbour is a rim whatever a search across the gap finds beyond.
+    """
+    status = getattr(scan, "status", None)
+    if status is None or np.shape(status) != valid.shape:
+        return ~valid, False
+    recorded = "source" in (getattr(scan, "meta", None) or {})
+    return ~valid & (np.asarray(status) == _STATUS_MISS), not recorded
+
 
 def discontinuities(
     scan: Any, z: np.ndarray, jump_threshold: float, max_search: int,
 ) -> tuple["Discontinuities", PixelGeometry]:
-    """The detectors' jump rule: :func:`find_discontinuities` with ``jump_threshold`` pixel
-    footprints, and the scan's :class:`~rangesim.edges._scan_access.PixelGeometry`."""
+    """The detectors' jump rule, and the scan's :class:`~rangesim.edges._scan_access.PixelGeometry`.
+
+    :func:`find_discontinuities` with a per-pixel threshold of ``jump_threshold`` pixel
+    footprints plus :data:`QUANTUM_STEPS` depth quanta
+    (:func:`~rangesim.edges._noise.depth_quantum`; nothing on scans whose depths are not
+    quantised). Rounding moves each of two neighbours by at most half a quantum, so their
+    difference by at most one, and a structured-light matcher errs by whole disparity
+    levels on top of that: a Kinect's quantised table (steps of 1.5-3 footprints at 1-2 m)
+    is then no band of jump dashes, while real depth edges (tens of quanta) stay. Folds
+    are on (a steep continuous surface such as a lit hole wall is not a band of jumps),
+    rims come from :func:`empty_pixels`.
+    """
     geo = pixel_geometry(scan, z)
-    disc = find_discontinuities(z, np.float32(jump_threshold) * geo.footprint, max_search,
-                                perspective=geo.perspective)
+    thr = np.float32(jump_threshold) * geo.footprint
+    quantum = depth_quantum(z)
+    if quantum is not None:
+        thr = thr + np.float32(QUANTUM_STEPS) * quantum
+    empty, certain = empty_pixels(scan, np.isfinite(z))
+    disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
+                                empty=empty, empty_certain=certain)
     return disc, geo
 
 
@@ -62,6 +124,12 @@ class Discontinuities:
     direction : (H, W) float32
         At occluding/occluded pixels: angle in [0, pi) of the (x, y) vector across the
         discontinuity; NaN elsewhere.
+    rim : (H, W) bool
+        Valid pixels next to an *empty* pixel (one that saw no surface, ``empty`` of
+        :func:`find_discontinuities`) that are not occluding (nor, unless the emptiness is
+        certain, occluded): the measured
+        surface ends there against nothing measured (a through-hole's rim over an absent
+        floor, a part's silhouette against empty space). All False when ``empty`` is None.
     """
 
     occluding: np.ndarray
@@ -69,14 +137,66 @@ class Discontinuities:
     nan_boundary: np.ndarray
     pairs: np.ndarray
     direction: np.ndarray
+    rim: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.rim is None:
+            self.rim = np.zeros(self.occluding.shape, bool)
 
     @property
     def touching(self) -> np.ndarray:
         """Pixels on either side of a discontinuity between valid neighbours."""
         t = np.zeros(self.pairs.shape[1:], bool)
         for a, (dr, dc) in enumerate(AXES):
-            t |= self.pairs[a] | shift(self.pairs[a], -dr, -dc, False)
+            t |= self.pairs[a]
+            _or_shifted(t, self.pairs[a], dr, dc)
         return t
+
+
+def _or_shifted(dst: np.ndarray, src: np.ndarray, dr: int, dc: int) -> None:
+    """``dst[i + dr, j + dc] |= src[i, j]`` where both are inside the image (in place)."""
+    h, w = src.shape
+    r0, r1 = max(dr, 0), h + min(dr, 0)
+    c0, c1 = max(dc, 0), w + min(dc, 0)
+    dst[r0:r1, c0:c1] |= src[r0 - dr:r1 - dr, c0 - dc:c1 - dc]
+
+
+def _unfold(broken: np.ndarray, inv_flat: np.ndarray | None, zt_flat: np.ndarray, w2: int,
+            off_near: int, off_far: int, perspective: bool, z_flat: np.ndarray,
+            thr_flat: np.ndarray) -> None:
+    """Clear the pairs of ``broken`` that are folds of one continuous surface, not jumps.
+
+    ``broken`` (H, W) marks pairs (near pixel n, far pixel f) by the pixel ``p`` they are
+    stored at; on the arrays padded by 2 (row length ``w2``) the near pixel is at flat
+    offset ``off_near`` from ``p`` and the far pixel at ``off_far``. Each side's surface is
+    continued linearly one step across the pair (from the pixel and the one behind it; in
+    inverse depth when ``perspective``, exact for planes): the pair is a fold if the far
+    surface continued back reaches the near pixel (``pred <= z_n + t_n``: a face below a
+    convex rim, e.g. a lit hole wall) or the near surface continued forward reaches the far
+    one (``pred >= z_f - t_n``: the foot of a steep face on a floor, a concave crease).
+    Sparse: only the broken pairs are looked at.
+    """
+    h, w = broken.shape
+    idx = np.flatnonzero(broken)
+    if idx.size == 0:
+        return
+    r, c = np.divmod(idx, w)
+    p = (r + 2) * w2 + (c + 2)
+    n = p + off_near
+    f = p + off_far
+    beyond = f + (off_far - off_near)            # behind the far pixel, on its side
+    behind = n - (off_far - off_near)            # behind the near pixel, on its side
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        if perspective:
+            far_back = 2 * inv_flat[f] - inv_flat[beyond]        # 1 / (far surface at n)
+            fold = far_back * zt_flat[n] >= 1                    # pred <= zt_n, pred > 0
+            near_fwd = 2 * inv_flat[n] - inv_flat[behind]        # 1 / (near surface at f)
+            # pred >= z_f - t_n; a surface receding to infinity (1 / pred <= 0) reaches it
+            fold |= near_fwd * (z_flat[f] - thr_flat[n]) <= 1
+        else:
+            fold = 2 * z_flat[f] - z_flat[beyond] <= zt_flat[n]
+            fold |= 2 * z_flat[n] - z_flat[behind] >= z_flat[f] - thr_flat[n]
+    broken.ravel()[idx[fold]] = False
 
 
 def find_discontinuities(
@@ -87,8 +207,11 @@ def find_discontinuities(
     extrapolate: bool = True,
     connectivity: int | None = None,
     perspective: bool = True,
+    folds: bool = False,
+    empty: np.ndarray | None = None,
+    empty_certain: bool = False,
 ) -> Discontinuities:
-    """Jump edges: neighbours whose depths differ by more than a threshold.
+    """Jump edges: neighbours whose depths differ by more than a threshold; and rims.
 
     The rule of PCL's ``OrganizedEdgeBase`` (depth-discontinuity threshold proportional to
     depth, default 0.02 z): a pixel ``p`` is *occluding* when a neighbour ``q`` is farther,
@@ -96,14 +219,45 @@ def find_discontinuities(
     with ``t = threshold * z`` (or a given per-pixel threshold); the nearer pixel's
     threshold applies, so every broken pair has one occluding and one occluded pixel.
 
+    With ``folds`` a step is not a jump where one side's own surface, continued linearly
+    one pixel across it (from the pixel and the one behind it; in inverse depth with
+    ``perspective``, exact for planes), reaches the other side: the far surface continued
+    back comes within ``t`` of the near pixel (a hole's wall seen at grazing incidence
+    below its rim, a convex fold), or the near surface continued forward gets within
+    ``t`` of the far pixel (the foot of that wall on the floor, a concave one). The two are
+    one continuous surface that folds. Without it every pixel pair of a face steeper than
+    ``atan(t / footprint)`` is a jump and the face becomes a band of jump pixels; with it
+    only the face's end, where it meets an occluder or nothing, is one, and its creases
+    are left to the crease operators. A true occlusion stays a jump: the hidden surface
+    continued towards the occluder passes behind it, and the occluder continued forward
+    stays in front of the hidden one.
+
     Across invalid (NaN) pixels, as in PCL, a valid pixel with invalid neighbours searches
     for the first valid pixel along the mean direction of those neighbours (normalised to
     one pixel per step along its larger axis, so every step moves; PCL's floor() can stay
     put) for up to ``max_search`` steps and compares depths with it. Unlike PCL, with
     ``extrapolate`` the comparison is against the pixel's own surface continued across
     the gap (inverse depth, or depth without ``perspective``, extrapolated linearly from
-    the pixel behind it: exact for planes), so a hole in a tilted plane is not a jump.
+    the pixels behind it, up to 3 back: exact for planes), so a hole in a tilted plane is
+    not a jump.
     A pixel whose search finds nothing is a *NaN boundary*.
+
+    Rims (``empty`` given): a valid pixel next to an empty pixel (one whose camera ray saw
+    no surface) that the rules above leave not occluding (see ``empty_certain``). Why this rule:
+    a rim is where the measured surface ends. It ends at a depth discontinuity (the
+    jump rule and the search across gaps find those: occluding, when the far side was
+    measured somewhere along the search), or against nothing at all. A pixel that saw
+    nothing cannot hide the neighbour's surface continued (its ray would have hit it), so
+    the neighbour is the near side of a step to infinity, even when the search across the
+    gap finds the same surface again beyond it (the other side of a through-hole over an
+    absent floor). A gap that saw a surface (a laser shadow, a signal dropout, a pixel out
+    of the working range) may be the neighbour's own surface continued, and only the
+    search decides: a farther surface beyond is a jump, the same surface continued is a
+    dropout and no edge (a speckle hole in a face), a nearer surface makes the pixel the
+    far side of an occluder (the end of a shadow on a floor: the occluder is the edge),
+    and a search that finds nothing leaves it untyped (the outline of a shadow on a
+    floor, which is no edge of anything). PCL has no such split: its NaN boundary is every
+    search that finds nothing, whatever the gap saw.
 
     Parameters
     ----------
@@ -126,12 +280,23 @@ def find_discontinuities(
         Compare with the extrapolated depth across gaps (see above) instead of the raw one.
     connectivity : {4, 8}, optional
         Neighbours that make a pixel occluding / occluded (and that start a search when
-        invalid). Default 8 for ``"dominant"`` (PCL), 4 for ``"any"``: the near side of a
-        jump is then a thin 8-connected line, as the ground truth marks it, instead of a
-        4-connected staircase. ``pairs`` always covers all 8 directions.
+        invalid, and that make a rim). Default 8 for ``"dominant"`` (PCL), 4 for
+        ``"any"``: the near side of a jump is then a thin 8-connected line, as the ground
+        truth marks it, instead of a 4-connected staircase. ``pairs`` always covers all 8
+        directions.
     perspective : bool
         Extrapolate inverse depth (pinhole camera at the origin) or depth (grids of
-        constant spacing) across gaps.
+        constant spacing) across gaps and folds.
+    folds : bool
+        Apply the fold test above (the detectors do; PCL does not).
+    empty : (H, W) bool, optional
+        Invalid pixels that saw no surface (:func:`empty_pixels`); None: no rims.
+    empty_certain : bool
+        ``empty`` is known (a synthetic scan's status), not merely "no return": a pixel
+        next to it is a rim even where the search across the gap calls it occluded (the
+        search extrapolates the pixel's surface from one neighbour, so on noisy scans a
+        long gap can make it look occluded). Otherwise (recorded data) an occluded pixel
+        is the far end of a shadow and no rim.
 
     Returns
     -------
@@ -143,7 +308,7 @@ def find_discontinuities(
         connectivity = 8 if rule == "dominant" else 4
     if connectivity not in (4, 8):
         raise ValueError(f"connectivity must be 4 or 8, got {connectivity}")
-    z = np.asarray(z, dtype=np.float32)
+    z = np.ascontiguousarray(z, dtype=np.float32)
     h, w = z.shape
     valid = np.isfinite(z)
     if np.ndim(threshold) == 0:
@@ -151,78 +316,114 @@ def find_discontinuities(
     else:
         thr = np.asarray(threshold, dtype=np.float32)
     zt = z + thr                                  # a neighbour beyond zt_p is a jump away
-    zp = np.pad(z, 1, constant_values=np.nan)
-    ztp = np.pad(zt, 1, constant_values=np.nan)
-    # an out-of-image neighbour is not an invalid one (PCL skips the border instead)
-    vp = np.pad(valid, 1, constant_values=True)
+    # padded by 2 (NaN: never a jump) for the fold test's second neighbour
+    zp = np.pad(z, 2, constant_values=np.nan)
+    ztp = np.pad(zt, 2, constant_values=np.nan)
+    w2 = w + 4
+    zp_flat, ztp_flat = zp.ravel(), ztp.ravel()
+    thp_flat = np.pad(thr, 2, constant_values=np.nan).ravel() if folds else None
+    inv_flat = None
+    if folds and perspective:
+        with np.errstate(divide="ignore"):
+            inv_flat = (np.float32(1) / zp).ravel()
     occluding = np.zeros((h, w), bool)
     occluded = np.zeros((h, w), bool)
-    has_invalid = np.zeros((h, w), bool)
     pairs = np.zeros((4, h, w), bool)
-    far = np.full((h, w), -np.inf, np.float32) if rule == "dominant" else None
-    near = np.full((h, w), -np.inf, np.float32) if rule == "dominant" else None
-    occl = np.empty((h, w), bool)
-    occd = np.empty((h, w), bool)
-    for dr, dc in NEIGHBOURS:
-        view = (slice(1 + dr, 1 + dr + h), slice(1 + dc, 1 + dc + w))
-        zq = zp[view]
-        np.greater(zq, zt, out=occl)                 # NaN compares False
-        np.greater(z, ztp[view], out=occd)
-        if (dr, dc) in AXES:
-            np.logical_or(occl, occd, out=pairs[AXES.index((dr, dc))])
+    dominant = rule == "dominant"
+    far = np.full((h, w), -np.inf, np.float32) if dominant else None
+    near = np.full((h, w), -np.inf, np.float32) if dominant else None
+    # each axis pair (p, p + d) once: "fwd" p near / p + d far, "bwd" the other way round
+    fwd = np.empty((h, w), bool)
+    bwd = np.empty((h, w), bool)
+    for a, (dr, dc) in enumerate(AXES):
+        view = (slice(2 + dr, 2 + dr + h), slice(2 + dc, 2 + dc + w))
+        np.greater(zp[view], zt, out=fwd)                # NaN compares False
+        np.greater(z, ztp[view], out=bwd)
+        if folds:
+            step = dr * w2 + dc
+            _unfold(fwd, inv_flat, ztp_flat, w2, 0, step, perspective, zp_flat, thp_flat)
+            _unfold(bwd, inv_flat, ztp_flat, w2, step, 0, perspective, zp_flat, thp_flat)
+        np.logical_or(fwd, bwd, out=pairs[a])
         if connectivity == 4 and dr != 0 and dc != 0:
             continue
-        occluding |= occl
-        occluded |= occd
-        has_invalid |= ~vp[view]
-        if far is not None:
-            e = zq - z
+        occluding |= fwd
+        occluded |= bwd
+        _or_shifted(occluding, bwd, dr, dc)
+        _or_shifted(occluded, fwd, dr, dc)
+        if dominant:
+            e = zp[view] - z                              # neighbour minus pixel
             np.fmax(far, e, out=far)
             np.fmax(near, -e, out=near)
+            back = np.full((h, w), np.nan, np.float32)    # at p + d: neighbour p minus p + d
+            r0, r1, c0, c1 = max(dr, 0), h + min(dr, 0), max(dc, 0), w + min(dc, 0)
+            back[r0:r1, c0:c1] = -e[r0 - dr:r1 - dr, c0 - dc:c1 - dc]
+            np.fmax(far, back, out=far)
+            np.fmax(near, -back, out=near)
+    # valid pixels with an invalid neighbour (an out-of-image neighbour is not one: PCL
+    # skips the border instead)
+    invp = np.pad(~valid, 1, constant_values=False)
+    nbrs = NEIGHBOURS if connectivity == 8 else ((-1, 0), (0, -1), (0, 1), (1, 0))
+    has_invalid = np.zeros((h, w), bool)
+    for dr, dc in nbrs:
+        has_invalid |= invp[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
     has_invalid &= valid
-    if rule == "dominant":
+    if dominant:
         # PCL: one label from the dominant difference; only the search where a neighbour is NaN
         occluding &= (far >= near) & ~has_invalid
         occluded &= (near > far) & ~has_invalid
     direction = np.full((h, w), np.nan, np.float32)
     nan_boundary = np.zeros((h, w), bool)
+    rim = np.zeros((h, w), bool)
 
     ii, jj = np.nonzero(has_invalid)
+    if ii.size:
+        vpad = np.pad(valid, 1, constant_values=True)
+        if empty is not None:
+            epad = np.pad(np.asarray(empty, bool), 1, constant_values=False)
+            near_empty = np.zeros(ii.size, bool)
+            for dr, dc in nbrs:
+                near_empty |= epad[ii + 1 + dr, jj + 1 + dc]
     if ii.size and max_search > 0:
         # mean offset of the invalid neighbours: the direction to search along
         vx = np.zeros(ii.size, np.float32)
         vy = np.zeros(ii.size, np.float32)
-        vpad = np.pad(valid, 1, constant_values=True)
         for dr, dc in NEIGHBOURS:
             inv = ~vpad[ii + 1 + dr, jj + 1 + dc]
             vx += inv * dc
             vy += inv * dr
         scale = np.maximum(np.abs(vx), np.abs(vy))
         moving = scale > 0
-        ii, jj, vx, vy, scale = ii[moving], jj[moving], vx[moving], vy[moving], scale[moving]
+        si, sj = ii[moving], jj[moving]
+        vx, vy, scale = vx[moving], vy[moving], scale[moving]
         sx, sy = vx / scale, vy / scale
-        z0 = z[ii, jj].astype(np.float64)
-        t0 = thr[ii, jj].astype(np.float64)
-        # the pixel behind: continues the pixel's own surface across the gap
-        bi = ii - np.rint(sy).astype(np.intp)
-        bj = jj - np.rint(sx).astype(np.intp)
-        inside = (bi >= 0) & (bi < h) & (bj >= 0) & (bj < w)
-        zb = np.full(ii.size, np.nan)
-        zb[inside] = z[bi[inside], bj[inside]]
-        slope = np.zeros(ii.size)        # per step, of 1 / z (perspective) or z
+        z0 = z[si, sj].astype(np.float64)
+        t0 = thr[si, sj].astype(np.float64)
+        # the pixels behind continue the pixel's own surface across the gap: the slope
+        # from the farthest of 3, 2, 1 steps back that is valid and on the same surface
+        # (within k thresholds; a longer base divides the noise of the slope by k, which
+        # the search multiplies by the gap's width)
+        slope = np.zeros(si.size)        # per step, of 1 / z (perspective) or z
         if extrapolate:
-            smooth = np.isfinite(zb) & (np.abs(zb - z0) <= t0)
-            if perspective:
-                slope[smooth] = 1.0 / z0[smooth] - 1.0 / zb[smooth]
-            else:
-                slope[smooth] = z0[smooth] - zb[smooth]
-        found_z = np.full(ii.size, np.nan)
-        found_t = np.full(ii.size, np.nan)
-        found_s = np.zeros(ii.size)
-        active = np.arange(ii.size)
+            todo = np.ones(si.size, bool)
+            for k in (3, 2, 1):
+                bi = si - np.rint(k * sy).astype(np.intp)
+                bj = sj - np.rint(k * sx).astype(np.intp)
+                inside = todo & (bi >= 0) & (bi < h) & (bj >= 0) & (bj < w)
+                zb = np.full(si.size, np.nan)
+                zb[inside] = z[bi[inside], bj[inside]]
+                smooth = np.isfinite(zb) & (np.abs(zb - z0) <= k * t0)
+                if perspective:
+                    slope[smooth] = (1.0 / z0[smooth] - 1.0 / zb[smooth]) / k
+                else:
+                    slope[smooth] = (z0[smooth] - zb[smooth]) / k
+                todo &= ~smooth
+        found_z = np.full(si.size, np.nan)
+        found_t = np.full(si.size, np.nan)
+        found_s = np.zeros(si.size)
+        active = np.arange(si.size)
         for s in range(1, int(max_search) + 1):
-            ri = ii[active] + np.rint(sy[active] * s).astype(np.intp)
-            rj = jj[active] + np.rint(sx[active] * s).astype(np.intp)
+            ri = si[active] + np.rint(sy[active] * s).astype(np.intp)
+            rj = sj[active] + np.rint(sx[active] * s).astype(np.intp)
             inside = (ri >= 0) & (ri < h) & (rj >= 0) & (rj < w)
             active, ri, rj = active[inside], ri[inside], rj[inside]
             zq = z[ri, rj]
@@ -242,28 +443,32 @@ def find_discontinuities(
                 pred = z0 + found_s * slope
         occl = ok & (found_z - pred > t0)
         occd = ok & (pred - found_z > found_t)
-        occluding[ii[occl], jj[occl]] = True
-        occluded[ii[occd], jj[occd]] = True
-        nan_boundary[ii[~ok], jj[~ok]] = True
+        occluding[si[occl], sj[occl]] = True
+        occluded[si[occd], sj[occd]] = True
+        nan_boundary[si[~ok], sj[~ok]] = True
         jump = occl | occd
-        direction[ii[jump], jj[jump]] = np.mod(np.arctan2(sy[jump], sx[jump]), np.pi)
+        direction[si[jump], sj[jump]] = np.mod(np.arctan2(sy[jump], sx[jump]), np.pi)
+    if ii.size and empty is not None:
+        # the measured surface ends against nothing: see the docstring
+        e_i, e_j = ii[near_empty], jj[near_empty]
+        keep = ~occluding[e_i, e_j]
+        if not empty_certain:
+            keep &= ~occluded[e_i, e_j]
+        rim[e_i[keep], e_j[keep]] = True
 
     # direction across the jump from the broken neighbour pairs (gradient of "is far")
     ei, ej = np.nonzero((occluding | occluded) & np.isnan(direction))
     if ei.size:
-        zpad = np.pad(z, 1, constant_values=np.nan)
         gx = np.zeros(ei.size, np.float32)
         gy = np.zeros(ei.size, np.float32)
-        ztpad = np.pad(zt, 1, constant_values=np.nan)
         zc, ztc = z[ei, ej], zt[ei, ej]
         for dr, dc in NEIGHBOURS:
-            zq = zpad[ei + 1 + dr, ej + 1 + dc]
-            step = (zq > ztc).astype(np.float32) - (zc > ztpad[ei + 1 + dr, ej + 1 + dc])
+            zq = zp[ei + 2 + dr, ej + 2 + dc]
+            step = (zq > ztc).astype(np.float32) - (zc > ztp[ei + 2 + dr, ej + 2 + dc])
             gx += step * dc
             gy += step * dr
         direction[ei, ej] = np.mod(np.arctan2(gy, gx), np.pi)
-    return Discontinuities(occluding, occluded, nan_boundary, pairs, direction)
-
+    return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim)
 
 
 def segment_broken(pairs: np.ndarray, axis: int, k0: int, k1: int) -> np.ndarray:

@@ -12,7 +12,7 @@ from rangesim.edges._grid import shift
 from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_GRADIENT, estimate_depth_noise, noise_threshold
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
-from rangesim.edges.edgemap import EdgeMap
+from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["gradient", "OPERATORS"]
 
@@ -403,14 +403,16 @@ def gradient(
     if nms:
         crease &= thin
     jump = disc.occluding
-    # the crest beside an occluding jump is the jump itself (a mixed or half-seen pixel
-    # next to it): no crease within JUMP_CLEARANCE px of one
+    rim = disc.rim
+    # the crest beside an occluding jump (or a rim) is the jump itself (a mixed or
+    # half-seen pixel next to it): no crease within JUMP_CLEARANCE px of one
     if jump_clearance > 0:
-        crease &= ~near_mask(crease, jump | disc.occluded, jump_clearance)
+        crease &= ~near_mask(crease, jump | disc.occluded | rim, jump_clearance)
     if nms:
         # 1 px diagonals: NMS leaves 4-connected staircases, the truth is 8-connected
-        crease = thin_staircases(crease | jump, crease)
+        crease = thin_staircases(crease | jump | rim, crease)
     labels = np.where(dominant_positive, EdgeLabel.CONVEX, EdgeLabel.CONCAVE).astype(np.uint8)
+    labels[rim] = RIM
     labels[jump] = EdgeLabel.JUMP
     jd = np.isfinite(disc.direction)
     direction[jd] = disc.direction[jd]
@@ -419,5 +421,5 @@ def gradient(
         "sigma": float(sigma), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=(crease | jump) & valid, labels=labels, strength=bend, direction=direction,
+    return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=bend, direction=direction,
                    method="gradient", params=params)

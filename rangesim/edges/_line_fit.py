@@ -12,7 +12,7 @@ from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import NEIGHBOURS
 from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise
 from rangesim.edges._scan_access import scan_depth, scan_points
-from rangesim.edges.edgemap import EdgeMap
+from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["line_fit", "line_fit_points"]
 
@@ -184,8 +184,9 @@ def line_fit(
     for dr, dc in NEIGHBOURS:
         cut |= ~vpad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
     cut &= valid
-    edge[cut] = disc.occluding[cut]
+    edge[cut] = disc.occluding[cut] | disc.rim[cut]
     labels = np.where(disc.occluding, EdgeLabel.JUMP, EdgeLabel.NONE).astype(np.uint8)
+    labels[disc.rim & ~disc.occluding] = RIM
     strength = np.where(valid, edge.astype(np.float32), np.float32(np.nan))
     params = {
         "k": int(k), "angle_tol_deg": float(angle_tol_deg), "line_sep_deg": float(line_sep_deg),

@@ -9,7 +9,9 @@ the centre's footprint), times 1.4826 (MAD to sigma of a Gaussian) over sqrt(6) 
 difference of i.i.d. noise has variance 6 sigma^2).
 Planes, smooth surfaces and the few percent of pixels on edges barely move the median, so
 a noise-free scan measures ~0 and the White Scanner preset (0.25 footprints) its true
-noise within a few percent. Below :data:`NOISE_FLOOR` a scan counts as noise-free and the
+noise within a few percent. Quantised depth (a Kinect's disparity steps) is recognised by
+:func:`depth_quantum` and measured as what it is, a rounding error (see
+:func:`estimate_depth_noise`). Below :data:`NOISE_FLOOR` a scan counts as noise-free and the
 detectors use their noise-free defaults unchanged; above it they smooth / widen their
 stencils (each documents how) and raise their threshold to
 ``max(noise-free default, k * median of the strength over valid pixels)``
@@ -26,7 +28,7 @@ import numpy as np
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
-    "estimate_depth_noise", "noise_threshold", "NOISE_FLOOR", "NOISE_K_GRADIENT",
+    "depth_quantum", "estimate_depth_noise", "noise_threshold", "NOISE_FLOOR", "NOISE_K_GRADIENT",
     "NOISE_K_NORMAL", "NOISE_K_PCL",
 ]
 
@@ -44,20 +46,106 @@ NOISE_K_NORMAL = 4.5
 NOISE_K_PCL = 4.0
 
 
+#: sampled pixels for the quantisation test of :func:`depth_quantum`
+_QUANTUM_SAMPLES = 20_000
+#: a depth image is quantised when sampled neighbours that differ lie at most this many
+#: distinct depth levels apart (median): rounded data steps by one or two levels, while
+#: continuous depths take a new value at nearly every pixel, so that hundreds of distinct
+#: values lie between two neighbours on a slanted face
+_QUANTUM_MAX_LEVELS = 3
+#: fewest distinct depth levels a quantised image must show
+_QUANTUM_MIN_LEVELS = 20
+
+
+def _strided(z: np.ndarray, target: int) -> np.ndarray:
+    """``z`` on every k-th row and column, k chosen to leave about ``target`` pixels."""
+    k = max(1, int(np.sqrt(z.size / target)))
+    return z[::k, ::k]
+
+
+def depth_quantum(z: np.ndarray) -> np.ndarray | None:
+    """Quantisation step of a depth image at every pixel (mm), or None if it is not quantised.
+
+    Kinect-type sensors report depth on a discrete set of levels (disparity in steps of
+    1/8 px, so levels ``f b / d`` spaced ``z^2 / (8 f b)``: 3 mm at 1 m, 12 mm at 2 m;
+    then rounded to whole millimetres). The levels are the distinct values the depths
+    take; the local quantum is the larger of the two gaps beside a level (rounding to
+    uneven levels moves two neighbours apart by up to that), a running median over 9
+    levels (a level that no pixel of this image holds doubles a gap, and is outvoted),
+    interpolated at each pixel's depth. The image counts as quantised when it shows at least
+    :data:`_QUANTUM_MIN_LEVELS` levels and horizontal and vertical neighbours that differ
+    lie a level or two apart (median at most :data:`_QUANTUM_MAX_LEVELS`). Continuous
+    depths fail that (nearly every pixel is a level of its own), and so do noise-free
+    synthetic scans whose frontal planes repeat one exact depth (few levels, or slanted
+    faces between them).
+
+    Parameters
+    ----------
+    z : (H, W) float array
+        Depth, mm, NaN where invalid.
+
+    Returns
+    -------
+    (H, W) float32 or None
+        The quantum at every pixel (NaN where ``z`` is), mm; None for unquantised depth.
+    """
+    z = np.asarray(z, np.float32)
+    sub = _strided(z, _QUANTUM_SAMPLES)
+    vals = sub[np.isfinite(sub)]
+    # cheap rejection: continuous depths are (nearly) all distinct
+    head = vals[:4000]
+    if head.size < 200 or np.unique(head).size > 0.5 * head.size:
+        return None
+    levels = np.unique(z[np.isfinite(z)]).astype(np.float64)
+    if levels.size < _QUANTUM_MIN_LEVELS:
+        return None
+    # the test: neighbours that differ are a level or two apart
+    k = max(1, int(np.sqrt(z.size / _QUANTUM_SAMPLES)))
+    h, w = z.shape
+    hk, wk = (h - 1) // k * k, (w - 1) // k * k      # pairs of true neighbours, sampled
+    apart = []
+    for a, b in ((z[:hk:k, :wk:k], z[:hk:k, 1:wk + 1:k]), (z[:hk:k, :wk:k], z[1:hk + 1:k, :wk:k])):
+        differ = np.isfinite(a) & np.isfinite(b) & (a != b)
+        apart.append(np.abs(np.searchsorted(levels, a[differ]) - np.searchsorted(levels, b[differ])))
+    apart = np.concatenate(apart)
+    if apart.size < 100 or np.median(apart) > _QUANTUM_MAX_LEVELS:
+        return None
+    # rounding to uneven levels (a Kinect's millimetres over its disparity steps: gaps
+    # 1, 2, 1, 2 mm) moves a pair by up to the larger gap beside a level: the running
+    # median of that over 9 levels (a level no pixel holds doubles a gap, and is outvoted)
+    gaps = np.diff(levels)
+    wider = np.maximum(gaps[1:], gaps[:-1]) if gaps.size > 1 else gaps
+    padded = np.pad(wider, 4, mode="edge")
+    gap = np.median(np.lib.stride_tricks.sliding_window_view(padded, 9), axis=1)
+    mids = levels[1:-1] if gaps.size > 1 else 0.5 * (levels[1:] + levels[:-1])
+    out = np.interp(z, mids, gap).astype(np.float32)
+    out[~np.isfinite(z)] = np.nan
+    return out
+
+
 def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
                          fp: np.ndarray | None = None) -> float:
     """Depth noise of a scan, in pixel footprints (sigma_z / (z / f)).
 
     A scan that carries its noise model's prediction (``scan.sigma``, mm, as simulated
-    laser-stripe scans do) gives the median of ``sigma / footprint`` over its valid pixels:
-    the model knows its noise, correlated or not, which the data's second differences
-    underestimate when neighbouring errors are correlated. Otherwise, from the data itself:
-    the robust estimator of the module docstring: ``1.4826 * MAD / sqrt(6)`` of the second
-    differences of depth along rows and columns over valid triples, each divided by the
-    pixel footprint at its centre (median taken about 0: on a noise-free piecewise-smooth
-    surface almost every second difference is ~0). Works on recorded scans too (footprint
-    from :func:`~rangesim.edges._scan_access.pixel_geometry`); quantised depth (Kinect)
-    counts as noise.
+    laser-stripe scans do) gives the median of ``sigma / footprint`` over its valid pixels
+    (every 4th row and column): the model knows its noise, correlated or not, which the
+    data's second differences underestimate when neighbouring errors are correlated.
+    Otherwise, from the data itself: the robust estimator of the module docstring:
+    ``1.4826 * MAD / sqrt(6)`` of the second differences of depth along rows and columns
+    over valid triples, each divided by the pixel footprint at its centre (median taken
+    about 0: on a noise-free piecewise-smooth surface almost every second difference is
+    ~0). Works on recorded scans too (footprint from
+    :func:`~rangesim.edges._scan_access.pixel_geometry`).
+
+    Quantised depth (:func:`depth_quantum`) is different: its second differences are whole
+    numbers of quanta, mostly 0 and +-1 on a slanted plane, and their median is 0 or one
+    quantum depending on which side of 50 % the zeros fall. Rounding is an error uniform
+    over one quantum, of standard deviation ``q / sqrt(12)``, and independent roundings
+    give second differences of variance ``6 q^2 / 12``: so there the estimate is
+    ``sqrt(mean(d^2) / 6)`` over the second differences within 4 quanta (steps beyond are
+    edges), the rounding error and any noise on top of it, as the smoothing and thresholds
+    of the detectors need it.
 
     Parameters
     ----------
@@ -88,21 +176,30 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
         fp = pixel_geometry(scan, z).footprint
     predicted = getattr(scan, "sigma", None) if scan is not None else None
     if predicted is not None:
+        sub = (slice(None, None, 4), slice(None, None, 4))
         with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.asarray(predicted, np.float64) / fp
-        ratio = ratio[np.isfinite(ratio) & np.isfinite(z)]
+            ratio = np.asarray(predicted, np.float32)[sub] / fp[sub]
+        ratio = ratio[np.isfinite(ratio) & np.isfinite(z[sub])]
         if ratio.size >= 100:
             return float(np.median(ratio))
     z = np.asarray(z, np.float32)
+    quantum = depth_quantum(z)
     # every 4th column / row is plenty for a median (and 4x cheaper)
     zc, fc = z[:, ::4], fp[:, ::4]
     zr, fr = z[::4], fp[::4]
     with np.errstate(invalid="ignore", divide="ignore"):
         d0 = (zc[:-2] - 2 * zc[1:-1] + zc[2:]) / fc[1:-1]
         d1 = (zr[:, :-2] - 2 * zr[:, 1:-1] + zr[:, 2:]) / fr[:, 1:-1]
+    if quantum is not None:
+        qc, qr = quantum[:, ::4][1:-1] / fc[1:-1], quantum[::4][:, 1:-1] / fr[:, 1:-1]
+        with np.errstate(invalid="ignore"):
+            d0 = np.where(np.abs(d0) <= 4 * qc, d0, np.nan)
+            d1 = np.where(np.abs(d1) <= 4 * qr, d1, np.nan)
     d = np.concatenate([d0[np.isfinite(d0)], d1[np.isfinite(d1)]])
     if d.size < 100:
         return 0.0
+    if quantum is not None:
+        return float(np.sqrt(np.mean(d.astype(np.float64) ** 2) / 6.0))
     return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
 
 

@@ -12,7 +12,7 @@ from rangesim.edges._grid import AXES, pad_last2, padded_view
 from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_NORMAL, estimate_depth_noise, noise_threshold
 from rangesim.edges._scan_access import scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
-from rangesim.edges.edgemap import EdgeMap
+from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["normal"]
 
@@ -164,15 +164,18 @@ def normal(
         np.copyto(rank, np.nan, where=np.isnan(strength))
         crease = nonmax_suppress(rank, theta, crease)
     jump = disc.occluding
-    # as in gradient: the crest beside a jump is the jump itself, and NMS staircases are thinned
-    crease &= ~near_mask(crease, jump | disc.occluded, JUMP_CLEARANCE)
-    crease = thin_staircases(crease | jump, droppable=crease) & ~jump
+    rim = disc.rim
+    # as in gradient: the crest beside a jump (or rim) is the jump itself, and NMS
+    # staircases are thinned
+    crease &= ~near_mask(crease, jump | disc.occluded | rim, JUMP_CLEARANCE)
+    crease = thin_staircases(crease | jump | rim, droppable=crease) & ~jump & ~rim
     labels = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
+    labels[rim] = RIM
     labels[jump] = EdgeLabel.JUMP
     params = {
         "threshold_deg": float(threshold_deg), "window": window,
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=(crease | jump) & valid, labels=labels, strength=strength,
+    return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=strength,
                    method="normal", params=params)

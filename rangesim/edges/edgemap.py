@@ -1,4 +1,5 @@
-"""EdgeMap: what every edge detector returns."""
+"""EdgeMap: what every edge detector returns, and the label the detectors add to
+:class:`~rangesim.core.constants.EdgeLabel`."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -7,6 +8,20 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+
+__all__ = ["EdgeMap", "RIM", "LABEL_NAMES"]
+
+#: ``EdgeMap.labels`` value of a *rim*: a measured pixel where the measured surface ends
+#: against pixels that saw no surface (a through-hole's rim over an absent floor, a part's
+#: silhouette against empty space; PCL's NaN boundary, see
+#: :func:`~rangesim.edges._discontinuities.find_discontinuities`). It is the near side of
+#: a step to nothing, so an occluding contour, but the far side was never measured; the
+#: detectors keep it apart from JUMP (whose far side was). The value follows
+#: :class:`~rangesim.core.constants.EdgeLabel`'s 0-3, which keep theirs.
+RIM = 4
+
+#: name of every label an EdgeMap can carry
+LABEL_NAMES = {**{int(k): k.name.lower() for k in EdgeLabel}, RIM: "rim"}
 
 
 @dataclass
@@ -19,7 +34,8 @@ class EdgeMap:
         Edge pixels.
     labels : (H, W) uint8
         :class:`~rangesim.core.constants.EdgeLabel` per pixel (0 off the mask; on the mask
-        0 where the detector cannot tell the type).
+        0 where the detector cannot tell the type), or :data:`RIM` (4) where the measured
+        surface ends against pixels that saw nothing.
     strength : (H, W) float32
         The detector's response (units depend on the method; documented there), 0 off edges
         is not required: it is the raw response everywhere, NaN where undefined.
@@ -57,5 +73,6 @@ class EdgeMap:
         return self.mask & (self.labels == int(label))
 
     def __repr__(self) -> str:
-        counts = {EdgeLabel(k).name.lower(): int(np.count_nonzero(self.labels[self.mask] == k)) for k in EdgeLabel}
+        on = self.labels[self.mask]
+        counts = {name: int(np.count_nonzero(on == k)) for k, name in LABEL_NAMES.items()}
         return f"EdgeMap({self.method!r}, {self.mask.shape[0]}x{self.mask.shape[1]}, edges={int(self.mask.sum())}, {counts})"
