@@ -265,28 +265,24 @@ def fit_circles_batched(xy: np.ndarray, group: np.ndarray, n_groups: int, center
     c = np.array(center, float, copy=True).reshape(n_groups, 2)
     r = np.array(radius, float, copy=True).reshape(n_groups)
     n = np.bincount(group, minlength=n_groups)
-
-    def s(w):
-        return np.bincount(group, weights=w, minlength=n_groups)
-
     for _ in range(iterations):
         if len(xy) == 0:
             break
         d = xy - c[group]
         rho = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-        ux, uy, e = d[:, 0] / rho, d[:, 1] / rho, rho - r[group]
-        # J = [-ux, -uy, -1]; normal equations J^T J step = -J^T e
-        jtj = np.empty((n_groups, 3, 3))
-        jtj[:, 0, 0], jtj[:, 1, 1], jtj[:, 2, 2] = s(ux * ux), s(uy * uy), n
-        jtj[:, 0, 1] = jtj[:, 1, 0] = s(ux * uy)
-        jtj[:, 0, 2] = jtj[:, 2, 0] = s(ux)
-        jtj[:, 1, 2] = jtj[:, 2, 1] = s(uy)
-        jte = np.column_stack([s(ux * e), s(uy * e), s(e)])
+        u = d / rho[:, None]
+        e = rho - r[group]
+        # J = [-ux, -uy, -1]; normal equations J^T J step = -J^T e, all sums in one pass
+        w = np.column_stack([u[:, 0] * u[:, 0], u[:, 1] * u[:, 1], u[:, 0] * u[:, 1], u, e[:, None] * u, e])
+        sums = _group_sums(w, group, n_groups)
+        ones = n.astype(float)
+        jtj = np.stack([sums[:, 0], sums[:, 2], sums[:, 3], sums[:, 2], sums[:, 1], sums[:, 4],
+                        sums[:, 3], sums[:, 4], ones], 1).reshape(n_groups, 3, 3)
         good = n >= min_points
         good &= np.abs(np.linalg.det(jtj)) > 1e-9 * np.maximum(n, 1) ** 3
         if not good.any():
             break
-        step = np.linalg.solve(jtj[good], jte[good][..., None])[..., 0]  # = -(J^T J)^-1 J^T (-e)
+        step = np.linalg.solve(jtj[good], sums[good, 5:8, None])[..., 0]  # = -(J^T J)^-1 J^T (-e)
         ok = np.abs(step).max(1) <= max_step
         idx = np.nonzero(good)[0][ok]
         c[idx] += step[ok, :2]
@@ -294,6 +290,17 @@ def fit_circles_batched(xy: np.ndarray, group: np.ndarray, n_groups: int, center
     d = xy - c[group]
     e = np.hypot(d[:, 0], d[:, 1]) - r[group] if len(xy) else np.zeros(0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        rms = np.sqrt(s(e * e) / n)
+        rms = np.sqrt(np.bincount(group, weights=e * e, minlength=n_groups) / n)
     rms[n == 0] = np.inf
     return c, r, rms
+
+
+def _group_sums(w: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups, k) column sums of ``w`` (P, k) per group: one ``np.add.reduceat`` when the
+    groups are sorted (as the circle finder's pairs are), else a bincount per column."""
+    if len(group) and np.all(group[1:] >= group[:-1]):
+        starts = np.searchsorted(group, np.arange(n_groups))
+        out = np.add.reduceat(w, np.minimum(starts, len(group) - 1), axis=0)
+        out[np.bincount(group, minlength=n_groups) == 0] = 0.0
+        return out
+    return np.column_stack([np.bincount(group, weights=w[:, j], minlength=n_groups) for j in range(w.shape[1])])

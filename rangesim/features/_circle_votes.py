@@ -98,33 +98,42 @@ def cast_votes(xy: np.ndarray, theta: np.ndarray, bands: list[Band],
 
     Returns
     -------
-    flat : (2, N, M) int32
-        Cell of each vote (sense, point, column).
+    flat : (2, M, N) int32
+        Cell of each vote (sense, column, point).
     acc : (total cells,) int64
         Votes per cell, all bands back to back.
     m : int
         Columns per point and sense.
     """
-    rc, rs, inv, pad, ncols, off, _, _ = vote_table(bands, angle_tol)
+    rc, rs, _, _, _, _, band, _ = vote_table(bands, angle_tol)
     total = n_cells(bands)
     n, m = len(xy), len(rc)
-    # float32 throughout; cos/sin of (theta + a) by angle addition from per-point and
-    # per-column tables (no trig over the (point, column) grid); cells by truncation in a
-    # padded grid (no bounds masks); one np.bincount
-    ct, st = np.cos(theta).astype(np.float32)[:, None], np.sin(theta).astype(np.float32)[:, None]
-    dx = ct * rc
-    dx -= st * rs
-    dy = st * rc
-    dy += ct * rs
-    u = (xy[:, 0].astype(np.float32)[:, None] + np.float32(0.5)) * inv + pad
-    v = (xy[:, 1].astype(np.float32)[:, None] + np.float32(0.5)) * inv + pad
-    flat = np.empty((2, n, m), np.int32)
-    for s, sign in enumerate((1, -1)):
-        iu = (u + dx if sign > 0 else u - dx).astype(np.int32)
-        iv = (v + dy if sign > 0 else v - dy).astype(np.int32)
-        iv *= ncols
-        iv += off
-        np.add(iv, iu, out=flat[s])
+    # per band (scalar cell and padding), float32, laid out (column, point) so that the inner
+    # loops run over the points; cos/sin of (theta + a) by angle addition from per-point and
+    # per-column tables (no trig over the grid); the minus sense as 2 u - (u + d); cells by
+    # truncation in a padded grid (no bounds masks); then one np.bincount over all the bands
+    ct, st = np.cos(theta).astype(np.float32), np.sin(theta).astype(np.float32)
+    x = xy[:, 0].astype(np.float32) + np.float32(0.5)
+    y = xy[:, 1].astype(np.float32) + np.float32(0.5)
+    flat = np.empty((2, m, n), np.int32)
+    for b, bd in enumerate(bands):
+        cols = np.nonzero(band == b)[0]
+        sl = slice(cols[0], cols[-1] + 1)
+        inv, pad = np.float32(1 / bd.cell), np.float32(bd.pad)
+        u, v = x * inv + pad, y * inv + pad
+        rcb, rsb = rc[sl, None], rs[sl, None]
+        if np.any(rsb):
+            dx, dy = rcb * ct - rsb * st, rcb * st + rsb * ct
+        else:  # no angle offsets in this band: votes on the normal only
+            dx, dy = rcb * ct, rcb * st
+        dx += u
+        dy += v
+        for s, (fu, fv) in enumerate(((dx, dy), (2 * u - dx, 2 * v - dy))):
+            iv = fv.astype(np.int32)
+            iv *= bd.cols
+            iv += fu.astype(np.int32)
+            iv += bd.offset
+            flat[s, sl] = iv
     acc = np.bincount(flat.ravel(), minlength=total)
     return flat, acc, m
 
@@ -151,7 +160,7 @@ def peaks(acc: np.ndarray, bands: list[Band], shape: tuple[int, int],
         Flat accumulator indices of the block's cells.
     """
     H, W = shape
-    out_c, out_b, out_v, out_cells = [], [], [], []
+    blks, ts, bs = [], [], []
     for b, bd in enumerate(bands):
         a = acc[bd.offset:bd.offset + bd.rows * bd.cols]
         C = bd.cols
@@ -164,38 +173,39 @@ def peaks(acc: np.ndarray, bands: list[Band], shape: tuple[int, int],
         mark = np.zeros(len(a), bool)
         for o in (0, 1, C, C + 1):
             mark[hot - o] = True
-        blk = np.nonzero(mark)[0]
-        y, x = blk // C, blk % C
-        y0 = x0 = bd.pad - 1
         y1, x1 = bd.pad + int(np.ceil(H / bd.cell)), bd.pad + int(np.ceil(W / bd.cell))
-        blk = blk[(y >= y0) & (y < y1) & (x >= x0) & (x < x1)]
-
-        v = _box(a, blk, C)
-        keep = v >= t
-        blk, v = blk[keep], v[keep]
-        ok = np.ones(len(blk), bool)
-        for oy in (-1, 0, 1):
-            for ox in (-1, 0, 1):
-                if oy or ox:
-                    nb = _box(a, blk + oy * C + ox, C)
-                    ok &= (v > nb) if (oy, ox) < (0, 0) else (v >= nb)
-        blk, v = blk[ok], v[ok]
-        cx = (blk % C + 1 - bd.pad) * bd.cell - 0.5
-        cy = (blk // C + 1 - bd.pad) * bd.cell - 0.5
-        inside = (cx >= -0.5) & (cx <= W - 0.5) & (cy >= -0.5) & (cy <= H - 0.5)
-        blk, v, cx, cy = blk[inside], v[inside], cx[inside], cy[inside]
-        f = bd.offset + blk
-        out_c.append(np.column_stack([cx, cy]))
-        out_b.append(np.full(len(v), b))
-        out_v.append(v)
-        out_cells.append(np.column_stack([f, f + 1, f + C, f + C + 1]))
-    if not out_c:
+        mark = mark.reshape(bd.rows, C)[bd.pad - 1:y1, bd.pad - 1:x1]
+        yy, xx = np.nonzero(mark)
+        blks.append(bd.offset + (yy + bd.pad - 1) * C + xx + bd.pad - 1)
+        ts.append(np.full(len(yy), t))
+        bs.append(np.full(len(yy), b))
+    if not blks:
         return np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, int), np.zeros((0, 4), int)
-    return (np.concatenate(out_c), np.concatenate(out_b), np.concatenate(out_v).astype(int),
-            np.concatenate(out_cells))
+    # all bands at once from here: flat indices into acc, each with its band's row length
+    blk, t, band = np.concatenate(blks), np.concatenate(ts), np.concatenate(bs)
+    C = np.array([bd.cols for bd in bands])[band]
+    v = _box(acc, blk, C)
+    keep = v >= t
+    blk, v, band, C = blk[keep], v[keep], band[keep], C[keep]
+    ok = np.ones(len(blk), bool)
+    for oy in (-1, 0, 1):
+        for ox in (-1, 0, 1):
+            if oy or ox:
+                nb = _box(acc, blk + oy * C + ox, C)
+                ok &= (v > nb) if (oy, ox) < (0, 0) else (v >= nb)
+    blk, v, band, C = blk[ok], v[ok], band[ok], C[ok]
+    cell = np.array([bd.cell for bd in bands])[band]
+    pad = np.array([bd.pad for bd in bands])[band]
+    local = blk - np.array([bd.offset for bd in bands])[band]
+    cx = (local % C + 1 - pad) * cell - 0.5
+    cy = (local // C + 1 - pad) * cell - 0.5
+    inside = (cx >= -0.5) & (cx <= W - 0.5) & (cy >= -0.5) & (cy <= H - 0.5)
+    blk, v, band, C, cx, cy = blk[inside], v[inside], band[inside], C[inside], cx[inside], cy[inside]
+    return (np.column_stack([cx, cy]), band, v.astype(int),
+            np.column_stack([blk, blk + 1, blk + C, blk + C + 1]))
 
 
-def _box(a: np.ndarray, f: np.ndarray, cols: int) -> np.ndarray:
+def _box(a: np.ndarray, f: np.ndarray, cols: int | np.ndarray) -> np.ndarray:
     """Sums of the 2 x 2 blocks whose top-left cells are ``f`` (flat indices, ``cols`` wide)."""
     return a[f] + a[f + 1] + a[f + cols] + a[f + cols + 1]
 
@@ -207,10 +217,6 @@ def voters(flat: np.ndarray, cells: np.ndarray, n_cells: int, n_points: int,
     lookup[cells.ravel()] = np.repeat(np.arange(len(cells), dtype=np.int32), 4)
     lab = lookup[flat.ravel()]
     vid = np.nonzero(lab >= 0)[0]
-    k = lab[vid].astype(np.int64)
-    point = (vid % (n_points * m)) // m
-    # a point's votes into one block are consecutive columns (its ray crosses the block
-    # once), so repeats are adjacent: no sort needed
-    new = np.ones(len(k), bool)
-    new[1:] = (k[1:] != k[:-1]) | (point[1:] != point[:-1])
-    return k[new], point[new]
+    # once each: a point's ray may cross its block with two radius samples
+    key = np.unique(lab[vid].astype(np.int64) * n_points + vid % n_points)
+    return key // n_points, key % n_points

@@ -164,7 +164,7 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii
         dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
         radial = np.abs(d[:, 0] * ct + d[:, 1] * st) >= cos_tol * dist
         sel = radial & (np.abs(dist - r[ph]) <= width[ph])
-        c, r, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=2,
+        c, r, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=1 + (width is not reach),
                                       max_step=float(hcell.max()) + 3.0)
     d = xy[pp] - c[ph]
     dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
@@ -207,7 +207,8 @@ def ring_points(c: np.ndarray, r: np.ndarray, width: float | np.ndarray, index: 
     if len(r) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     width = np.broadcast_to(np.asarray(width, float), r.shape)
-    d, ox, oy = _offsets(int(np.ceil(max(float((r + width).max()), 0) + 2)))
+    reach = int(np.ceil(max(float((r + width).max()), 0) + 2))
+    d, ox, oy = _offsets(-(-reach // 32) * 32)  # a few table sizes, so the cache hits
     ci = np.rint(c).astype(np.int64)
     s0 = np.searchsorted(d, np.maximum(r - width - 0.75, 0), "left")  # 0.75: the rounding of c
     s1 = np.searchsorted(d, r + width + 0.75, "right")
