@@ -32,12 +32,14 @@ def _centred(scan):
     return dataclasses.replace(scan, xyz=xyz, depth=scan.depth - np.float32(HEIGHT_MM), meta=meta)
 
 
-@pytest.mark.parametrize("h, jumps", [(5.0, False), (14.0, True)])
+@pytest.mark.parametrize("h, jumps", [(5.0, False), (7.0, False), (9.0, True), (14.0, True)])
 def test_threshold_is_two_percent_of_the_distance(h, jumps):
-    # the box top is at 400 - h mm: the step h against 0.02 x (400 - h) = 7.7-7.9 mm
+    # the box top is at 400 - h mm: the step h against 0.02 x (400 - h) = 7.7-7.9 mm; the
+    # outline is ~200 px (a corner pixel may compare across the laser shadow beside it)
     em = rs.edges.pcl_organized(_scan(h))
     assert em.params["distance"] == "|xyz|"
-    assert bool((em.occluding | em.occluded).any()) == jumps
+    n = int((em.occluding | em.occluded).sum())
+    assert (n > 150) if jumps else (n <= 4), n
 
 
 def test_centred_range_axis_does_not_flood_and_distance_restores_pcl():

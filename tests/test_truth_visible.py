@@ -106,7 +106,7 @@ def test_data_boundary_and_bad_input():
     valid = np.ones((5, 6), bool)
     valid[2, 3] = False
     b = data_boundary(valid)
-    assert b.sum() == 4 and not b[2, 3]
+    assert b.sum() == 8 and not b[2, 3]
     assert not data_boundary(np.ones((4, 4), bool)).any()  # the image border is no boundary
     with pytest.raises(RangesimError, match="needs the scene"):
         score_edges(np.zeros((4, 4), bool), type("S", (), {"valid": valid})())

@@ -15,7 +15,7 @@ from rangesim.edges._discontinuities import JUMP_THRESHOLD, find_discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
 from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry, scan_depth, scan_points
-from rangesim.edges._thinning import nearest_axis, nonmax_suppress
+from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nearest_axis, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["pcl_organized", "OrganizedEdgeMap", "EDGE_TYPES"]
@@ -150,7 +150,11 @@ def pcl_organized(
     normal images: here a 3 x 3 Gaussian (sigma 1, as PCL's Canny) and the Sobel gradient of
     the normal field (all three components, so it does not depend on the camera's roll;
     differences never cross a depth jump or a NaN), non-maximum suppression across its
-    dominant direction, and hysteresis between ``curvature_threshold`` (8-connected).
+    dominant direction, and hysteresis between ``curvature_threshold`` (8-connected);
+    then, unlike PCL but as :func:`~rangesim.edges.gradient` and
+    :func:`~rangesim.edges.normal`, NMS staircases are thinned to 1-px diagonals and
+    high-curvature pixels within 2 px of a depth jump dropped (the crest beside an
+    occluding edge is the jump itself).
     Normals are estimated from the measured points
     (:func:`~rangesim.edges._differences.measured_normals`; PCL uses integral-image normals). A
     crease bending the normal by beta radians peaks at about 2.9 beta (raw Sobel units), so
@@ -261,6 +265,11 @@ def pcl_organized(
     axis = nearest_axis(theta)
     thin = nonmax_suppress(magnitude, theta, magnitude > low)
     high_curvature = _hysteresis(np.where(thin, magnitude, 0), low, high) & valid
+    # as gradient and normal: NMS staircases thinned to 1-px diagonals (the 8-connected
+    # truth matches one pixel per pixel), and no crease within 2 px of a depth jump (the
+    # normals bend beside an occluding edge: that crest is the jump itself)
+    high_curvature = thin_staircases(high_curvature)
+    high_curvature &= ~near_mask(high_curvature, disc.occluding | disc.occluded, JUMP_CLEARANCE)
 
     # convex / concave from the neighbours across the edge
     shape = z.shape

@@ -64,7 +64,7 @@ def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: An
 
 
 def data_boundary(valid: np.ndarray) -> np.ndarray:
-    """(H, W) bool: measured pixels with an unmeasured 4-neighbour (image borders excluded).
+    """(H, W) bool: measured pixels with an unmeasured 8-neighbour (image borders excluded).
 
     Where the data stops (a laser shadow on a flat floor, a dropout) the scan cannot tell
     whether the surface breaks; :func:`score_edges` leaves predictions there that match no
@@ -93,7 +93,7 @@ def data_boundary(valid: np.ndarray) -> np.ndarray:
         raise RangesimError(f"valid must be an (H, W) mask, got shape {valid.shape}")
     # pad with True: the image border is no boundary of the data
     missing = ndimage.binary_dilation(~np.pad(valid, 1, constant_values=True),
-                                      structure=ndimage.generate_binary_structure(2, 1))[1:-1, 1:-1]
+                                      structure=np.ones((3, 3), bool))[1:-1, 1:-1]
     return valid & missing
 
 

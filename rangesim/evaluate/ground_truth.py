@@ -516,8 +516,9 @@ def _contour_jumps(
     p = scan.xyz_true[nr, nc].astype(np.float64)
     q = np.nan_to_num(scan.xyz_true[fr, fc].astype(np.float64))
     beyond = scan.part[fr, fc] >= 0
-    step_jump, _ = _pair_jumps(p, q, beyond, float(np.cos(np.radians(jump_angle_deg))), None)
-    jump = ~beyond | step_jump
+    step_jump, p_near = _pair_jumps(p, q, beyond, float(np.cos(np.radians(jump_angle_deg))), None)
+    # the occluding side is the nearer one (sliver facets may say otherwise across a line)
+    jump = ~beyond | (step_jump & p_near)
     pts, nr, nc = pts[jump], nr[jump], nc[jump]
     seen = _unoccluded(scene, scan, pts, depth_tol_px * pts[:, 2] / K[0, 0])
     out[nr[seen], nc[seen]] = True
