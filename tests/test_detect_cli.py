@@ -50,7 +50,7 @@ def _check_edge_files(out: Path, shape: tuple[int, int]) -> None:
         with np.load(out / f"{method}_edges.npz") as npz:
             assert ARRAYS <= set(npz.files), (method, npz.files)
             assert npz["mask"].shape == shape and npz["mask"].dtype == bool
-            assert npz["labels"].shape == shape and int(npz["labels"].max(initial=0)) <= 3
+            assert npz["labels"].shape == shape and int(npz["labels"].max(initial=0)) <= 4  # EdgeLabel 0-3 or edges.RIM
             assert npz["strength"].shape == shape
             assert not npz["labels"][~npz["mask"]].any()  # labels only on edge pixels
         assert (out / f"{method}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

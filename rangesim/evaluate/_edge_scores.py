@@ -10,9 +10,17 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
 
 from rangesim.core.constants import EDGE_LABEL_NAMES, EdgeLabel
+from rangesim.edges.edgemap import RIM
 
 #: Pratt's scaling constant
 FOM_ALPHA = 1.0 / 9.0
+
+
+def _is_type(labels: np.ndarray, label: EdgeLabel) -> np.ndarray:
+    """Pixels of type ``label``; a rim (:data:`rangesim.edges.RIM`: the measured surface ends
+    where the neighbour returned nothing) is an occluding boundary, so it scores as a jump."""
+    same = labels == int(label)
+    return same | (labels == RIM) if label == EdgeLabel.JUMP else same
 
 
 def _as_mask_labels(x: Any) -> tuple[np.ndarray, np.ndarray | None]:
@@ -232,8 +240,8 @@ def edge_scores(
         return out
     per_label = {}
     for label in (EdgeLabel.JUMP, EdgeLabel.CONVEX, EdgeLabel.CONCAVE):
-        p = pred if pred_labels is None else pred & (pred_labels == label)
-        g = gt if gt_labels is None else gt & (gt_labels == label)
+        p = pred if pred_labels is None else pred & _is_type(pred_labels, label)
+        g = gt if gt_labels is None else gt & _is_type(gt_labels, label)
         s = _scores(p, g, tolerance_px)
         if pred_labels is None:  # every prediction counts for every type: only recall means anything
             s.update(precision=float("nan"), f1=float("nan"), fom=float("nan"))

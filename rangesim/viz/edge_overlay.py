@@ -1,21 +1,23 @@
-"""Edges over a scan: convex white, concave grey, jump red, on the dimmed shaded scan."""
+"""Edges over a scan: convex white, concave grey, jump red, rim orange, on the dimmed shaded scan."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from rangesim.core.constants import EDGE_LABEL_NAMES, EdgeLabel
+from rangesim.core.constants import EdgeLabel
 from rangesim.core.rangescan import RangeScan
+from rangesim.edges.edgemap import LABEL_NAMES, RIM
 from rangesim.viz.figure import save_labelled_image
 from rangesim.viz.preview import depth_rgb
 
 #: one colour per edge type, shared by every edge picture
-EDGE_COLORS: dict[EdgeLabel, tuple[float, float, float]] = {
+EDGE_COLORS: dict[int, tuple[float, float, float]] = {
     EdgeLabel.JUMP: (0.95, 0.15, 0.1),
     EdgeLabel.CONVEX: (1.0, 1.0, 1.0),
     EdgeLabel.CONCAVE: (0.62, 0.62, 0.62),
     EdgeLabel.NONE: (1.0, 0.85, 0.1),  # an edge whose type the detector cannot tell
+    RIM: (1.0, 0.55, 0.1),  # the measured surface ends where the neighbour returned nothing
 }
 #: how much the scan under the edges is dimmed, so white and grey edges stand out
 BACKGROUND_DIM = 0.45
@@ -33,10 +35,10 @@ def save_edge_overlay(scan: RangeScan, edge_map, path: str | Path, *, title: str
                       dpi: int = 150) -> Path:
     """Write the edges of ``edge_map`` over ``scan`` as a PNG with a legend of pixel counts."""
     legend = []
-    for label in (EdgeLabel.CONVEX, EdgeLabel.CONCAVE, EdgeLabel.JUMP, EdgeLabel.NONE):
+    for label in (EdgeLabel.CONVEX, EdgeLabel.CONCAVE, EdgeLabel.JUMP, RIM, EdgeLabel.NONE):
         n = int(np.count_nonzero(edge_map.mask & (edge_map.labels == int(label))))
         if n:
-            name = "edge, type unknown" if label == EdgeLabel.NONE else f"{EDGE_LABEL_NAMES[label]} edge"
+            name = "edge, type unknown" if label == EdgeLabel.NONE else f"{LABEL_NAMES[int(label)]} edge"
             legend.append((EDGE_COLORS[label], f"{name}: {n:,} px"))
     h, w = scan.shape
     default = f"{edge_map.method or 'edges'} — {w}x{h} px, {int(edge_map.mask.sum()):,} edge pixels"
@@ -104,9 +106,9 @@ def save_edge_panels(scan: RangeScan, edge_maps: dict, path: str | Path, *, trut
         ax.set_title(label, fontsize=9)
     n_valid = int(scan.valid.sum())
     fig.suptitle(title or f"edges — {w} × {h} px (W × H), {n_valid:,} valid", fontsize=11)
-    handles = [Patch(facecolor=EDGE_COLORS[label], edgecolor="0.3", label=f"{EDGE_LABEL_NAMES[label]}" if label != EdgeLabel.NONE
-                     else "type unknown") for label in (EdgeLabel.CONVEX, EdgeLabel.CONCAVE, EdgeLabel.JUMP,
-                                                        EdgeLabel.NONE)]
+    handles = [Patch(facecolor=EDGE_COLORS[label], edgecolor="0.3",
+                     label=LABEL_NAMES[int(label)] if label != EdgeLabel.NONE else "type unknown")
+               for label in (EdgeLabel.CONVEX, EdgeLabel.CONCAVE, EdgeLabel.JUMP, RIM, EdgeLabel.NONE)]
     fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8, frameon=False)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi, metadata={"Software": "rangesim"})
