@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 from scipy import ndimage
-from skimage.transform import hough_line, hough_line_peaks
+from skimage.transform import hough_line
 
 from rangesim.features._edge_points import edge_points
 
@@ -64,7 +64,7 @@ def lines(
     """Line segments of an edge map.
 
     Steps: Hough transform of the edge pixels (``skimage.transform.hough_line``, 0.5 degree
-    steps), peaks (``hough_line_peaks``); for each line, strongest first, the unused edge
+    steps), peaks (:func:`_line_peaks`: local maxima, strongest first, 3 bins apart); for each line, strongest first, the unused edge
     pixels within ``band_px`` of it whose edge direction is within ``angle_tol_deg`` of the
     line's normal are split at gaps longer than ``max_gap`` pixels; runs at least
     ``min_length`` long are refitted (total least squares) and become segments; their pixels
@@ -113,8 +113,7 @@ def lines(
         return []
     angles = np.deg2rad(np.arange(-90, 90, 0.5))
     acc, ang, dist = hough_line(mask, angles)
-    _, pa, pd = hough_line_peaks(acc, ang, dist, min_distance=3, min_angle=3,
-                                 threshold=threshold or min_length / 2, num_peaks=max_lines)
+    pa, pd = _line_peaks(acc, ang, dist, 3, 3, threshold or min_length / 2, max_lines)
     used = np.zeros(len(xy), bool)
     cos_tol = np.cos(np.deg2rad(angle_tol_deg))
     out: list[tuple[np.ndarray, np.ndarray, int, float]] = []
@@ -155,6 +154,31 @@ def lines(
     ]
     segs.sort(key=lambda s: -s.length)
     return segs
+
+
+def _line_peaks(acc: np.ndarray, angles: np.ndarray, dists: np.ndarray, min_distance: int, min_angle: int,
+                threshold: float, num_peaks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Peaks of a (distance, angle) line accumulator: local maxima over (2 min_distance + 1) x
+    (2 min_angle + 1) bins at least ``threshold``, strongest first, each at least that many bins
+    from a stronger one; at most ``num_peaks``. Returns their angles and distances.
+
+    Takes the place of ``skimage.transform.hough_line_peaks``, which labels every region above
+    the threshold (most of the run time on an edge map of a part).
+    """
+    mx = ndimage.maximum_filter(acc, size=(2 * min_distance + 1, 2 * min_angle + 1), mode="constant")
+    di, ai = np.nonzero((acc == mx) & (acc >= threshold))
+    order = np.argsort(-acc[di, ai], kind="stable")
+    di, ai = di[order], ai[order]
+    kept: list[int] = []
+    for j in range(len(di)):
+        if len(kept) == num_peaks:
+            break
+        k = np.asarray(kept, int)
+        if len(k) and np.any((np.abs(di[k] - di[j]) <= min_distance) & (np.abs(ai[k] - ai[j]) <= min_angle)):
+            continue
+        kept.append(j)
+    k = np.asarray(kept, int)
+    return angles[ai[k]], dists[di[k]]
 
 
 def segment_pairs(segments: list[Segment]) -> tuple[np.ndarray, np.ndarray]:
