@@ -222,7 +222,11 @@ def summarise(results: list[dict]) -> dict[str, Any]:
         groups.setdefault((r["sensor"], r["noisy"]), []).append(r)
         groups.setdefault(("all", r["noisy"]), []).append(r)
     out: dict[str, Any] = {}
-    for (sensor, noisy), rs_ in groups.items():
+    # the presets in run order, noise-free first, the pooled "all" last
+    order = sorted(groups, key=lambda k: (k[0] == "all", [r["sensor"] for r in results].index(k[0])
+                                          if k[0] != "all" else 0, k[1]))
+    for sensor, noisy in order:
+        rs_ = groups[(sensor, noisy)]
         key = f"{sensor}/{'noise' if noisy else 'noise-free'}"
         det = {}
         for name in rs_[0]["detectors"]:
@@ -302,6 +306,37 @@ def print_tables(summary: dict[str, Any], seeds: list[int], seed_kind: str) -> N
               f"{_fmt(seg['precision'])} | endpoints {_fmt(seg['endpoint_px_mean'])} | - |")
 
 
+def print_compact(summary: dict[str, Any]) -> None:
+    """The README's tables: F1 per detector and preset (noise-free / noise), F1 per label over
+    all presets, and the hole rims per preset."""
+    presets = list(dict.fromkeys(k.split("/")[0] for k in summary))
+    names = list(next(iter(summary.values()))["detectors"])
+
+    def cell(key, fn):
+        return " / ".join(_fmt(fn(summary[f"{key}/{n}"])) if f"{key}/{n}" in summary else "-"
+                          for n in ("noise-free", "noise"))
+
+    print("\nF1, noise-free / preset noise:\n")
+    print("| detector | " + " | ".join(presets) + " | target |")
+    print("|---" * (len(presets) + 2) + "|")
+    for name in names:
+        row = [cell(p, lambda s, name=name: s["detectors"][name]["all"]["f1"]) for p in presets]
+        print(f"| {name} | " + " | ".join(row) + f" | {' / '.join(_fmt(t) for t in TARGETS.get(name, ()))} |")
+    print("\nF1 per label, all presets, noise-free / preset noise:\n")
+    print("| detector | jump | convex | concave |")
+    print("|---|---|---|---|")
+    for name in names:
+        row = [cell("all", lambda s, name=name, lab=lab: s["detectors"][name][lab]["f1"]) for lab in LABELS]
+        print(f"| {name} | " + " | ".join(row) + " |")
+    print("\nHole rims seen >= 80 % (gradient edges, circles + ellipses), noise-free / preset noise:\n")
+    print("| preset | rims | recall | recall, centre <= 1 px | precision | centre error px (mean) | radius error px |")
+    print("|---|---|---|---|---|---|---|")
+    for p in presets:
+        print(f"| {p} | {cell(p, lambda s: s['hole_rims']['n_truth'])} | {cell(p, lambda s: s['hole_rims']['recall'])} | "
+              f"{cell(p, lambda s: s['hole_rims']['recall_1px'])} | {cell(p, lambda s: s['hole_rims']['precision'])} | "
+              f"{cell(p, lambda s: s['hole_rims']['center_px_mean'])} | {cell(p, lambda s: s['hole_rims']['radius_px_mean'])} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--parts", type=int, default=3, help="random parts (one view each) per preset")
@@ -332,6 +367,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"scan {r['case']['scan_s']:.1f} s  F1 {f1}", flush=True)
     summary = summarise(results)
     print_tables(summary, seeds, seed_kind)
+    print_compact(summary)
     total = time.perf_counter() - start
     print(f"\n{len(results)} scans in {total:.0f} s")
     if args.json:
