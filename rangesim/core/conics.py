@@ -304,3 +304,107 @@ def _group_sums(w: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
         out[np.bincount(group, minlength=n_groups) == 0] = 0.0
         return out
     return np.column_stack([np.bincount(group, weights=w[:, j], minlength=n_groups) for j in range(w.shape[1])])
+
+
+def _direct_fits(S1: np.ndarray, S2: np.ndarray, S3: np.ndarray, m: np.ndarray,
+                 s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Halir-Flusser direct ellipse fits from the (K, 3, 3) blocks of the scatter matrices of
+    points centred on ``m`` (K, 2) and scaled by ``1 / s`` (K,): unit-norm pixel conics, ok."""
+    ok = np.abs(np.linalg.det(S3)) > 1e-12
+    S3[~ok] = np.eye(3)
+    T = -np.linalg.solve(S3, np.swapaxes(S2, 1, 2))
+    M = S1 + S2 @ T
+    M = np.stack([M[:, 2] / 2, -M[:, 1], M[:, 0] / 2], 1)
+    M[~np.isfinite(M).all(axis=(1, 2))] = 0.0
+    K = len(S1)
+    _, v = np.linalg.eig(M)
+    v = np.real(v)
+    cond = 4 * v[:, 0, :] * v[:, 2, :] - v[:, 1, :] ** 2  # (K, 3): per eigenvector
+    has = cond > 0
+    ok &= has.any(1)
+    first = np.argmax(has, axis=1)
+    a1 = v[np.arange(K), :, first]  # (K, 3)
+    a2 = np.einsum("kij,kj->ki", T, a1)
+    A, B, C = (a1 / s[:, None] ** 2).T
+    D, E = (a2[:, :2] / s[:, None]).T
+    F = a2[:, 2]
+    mx, my = m[:, 0], m[:, 1]
+    conics = np.stack([
+        A, B, C,
+        D - 2 * A * mx - B * my,
+        E - 2 * C * my - B * mx,
+        F + A * mx ** 2 + B * mx * my + C * my ** 2 - D * mx - E * my,
+    ], 1)
+    nrm = np.linalg.norm(conics, axis=1)
+    ok &= np.isfinite(nrm) & (nrm > 0)
+    conics = np.where(ok[:, None], conics / np.where(ok, nrm, 1.0)[:, None], 0.0)
+    return conics, ok
+
+
+def fit_conics_grouped(xy: np.ndarray, group: np.ndarray, n_groups: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fit_conic` on many point groups at once (one scatter matrix per group).
+
+    Parameters
+    ----------
+    xy : (N, 2) float, pixels
+    group : (N,) int
+        Group of each point, sorted (0 <= group < n_groups).
+    n_groups : int
+
+    Returns
+    -------
+    conics : (n_groups, 6) float
+        Unit-norm conics in pixel coordinates (zeros where no fit: fewer than 5 points, or no
+        ellipse-specific solution).
+    ok : (n_groups,) bool
+    """
+    n = np.bincount(group, minlength=n_groups)
+    if len(xy) == 0:
+        return np.zeros((n_groups, 6)), np.zeros(n_groups, bool)
+    m = _group_sums(xy, group, n_groups) / np.maximum(n, 1)[:, None]
+    q = xy - m[group]
+    starts = np.minimum(np.searchsorted(group, np.arange(n_groups)), len(group) - 1)
+    s = np.maximum(np.maximum.reduceat(np.abs(q).max(1), starts), 1e-9)
+    s[n == 0] = 1.0
+    q = q / s[group, None]
+    x, y = q[:, 0], q[:, 1]
+    # the 15 moments sum x^i y^j (i + j <= 4) give every entry of the 6 x 6 scatter matrix
+    xp = [np.ones_like(x), x, x * x, x * x * x, x * x * x * x]
+    yp = [np.ones_like(y), y, y * y, y * y * y, y * y * y * y]
+    pows = [(i, j) for i in range(5) for j in range(5 - i)]
+    mom = _group_sums(np.column_stack([xp[i] * yp[j] for i, j in pows]), group, n_groups)
+    col = {p: k for k, p in enumerate(pows)}
+    mono = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # x^2, xy, y^2, x, y, 1
+    S = np.empty((n_groups, 6, 6))
+    for a, (i1, j1) in enumerate(mono):
+        for b, (i2, j2) in enumerate(mono):
+            S[:, a, b] = mom[:, col[(i1 + i2, j1 + j2)]]
+    conics, ok = _direct_fits(S[:, :3, :3], S[:, :3, 3:], S[:, 3:, 3:].copy(), m, s)
+    ok &= n >= 5
+    conics[~ok] = 0.0
+    return conics, ok
+
+
+def real_ellipses(conics: np.ndarray) -> np.ndarray:
+    """(K,) bool: which conics are real ellipses (as :func:`ellipse_from_conic` accepts)."""
+    a, b, c, d, e, f = conics.T
+    sgn = np.where(a < 0, -1.0, 1.0)
+    a, b, c, d, e, f = a * sgn, b * sgn, c * sgn, d * sgn, e * sgn, f * sgn
+    h, gx, gy = b / 2, d / 2, e / 2
+    det = a * c - h * h
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cx = (h * gy - c * gx) / det
+        cy = (h * gx - a * gy) / det
+        f0 = cx * gx + cy * gy + f
+        lo = (a + c) / 2 - np.hypot((a - c) / 2, h)
+        return (det > 0) & (lo > 0) & (f0 < 0)
+
+
+def sampson_distance_rows(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(N,) :func:`sampson_distance` of each point to its own conic (``conics`` (N, 6))."""
+    a, b, c, d, e, f = conics.T
+    x, y = xy[:, 0], xy[:, 1]
+    q = a * x * x + b * x * y + c * y * y + d * x + e * y + f
+    gx = 2 * a * x + b * y + d
+    gy = b * x + 2 * c * y + e
+    return np.abs(q) / np.maximum(np.hypot(gx, gy), 1e-12)

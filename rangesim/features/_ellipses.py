@@ -14,8 +14,11 @@ from rangesim.core.conics import (
     fit_circle,
     fit_conic,
     fit_conics_batched,
+    fit_conics_grouped,
+    real_ellipses,
     sampson_distance,
     sampson_distance_batched,
+    sampson_distance_rows,
 )
 from rangesim.features._edge_points import edge_points
 
@@ -391,13 +394,19 @@ _EIGHT = np.ones((3, 3), bool)
 def _chain_ellipses(groups: list[np.ndarray], rng: np.random.Generator, min_points: int,
                     axes_range: tuple[float, float]) -> list[Ellipse]:
     """Ellipses fitted to groups of edge points ((N, 2) x, y arrays, ordered along the
-    curve): direct least squares, RANSAC as the fallback."""
+    curve), all groups at once (:func:`_batched_ransac`; :func:`_ransac` per group only for
+    the groups where none of the stratified samples gives an ellipse)."""
     out: list[Ellipse] = []
-    for p in groups:
-        res = _ransac(p, rng)
-        if res is None:
-            continue
-        c2, inl = res
+    if not groups:
+        return out
+    conics, inliers = _batched_ransac(groups, rng)
+    for k, p in enumerate(groups):
+        if conics[k] is None:
+            res = _ransac(p, rng)
+            if res is None:
+                continue
+            conics[k], inliers[k] = res
+        c2, inl = conics[k], inliers[k]
         e2 = ellipse_from_conic(c2)
         if e2 is None or len(inl) < min_points or not (axes_range[0] <= e2[1][1] and e2[1][0] <= axes_range[1]):
             continue
@@ -407,3 +416,57 @@ def _chain_ellipses(groups: list[np.ndarray], rng: np.random.Generator, min_poin
         out.append(Ellipse((float(e2[0][0]), float(e2[0][1])), (float(e2[1][0]), float(e2[1][1])),
                            float(e2[2]), rms, len(inl)))
     return out
+
+
+def _batched_ransac(groups: list[np.ndarray], rng: np.random.Generator, tol: float = 1.0,
+                    direct_inliers: float = 0.95, local: int = 24, refits: int = 3):
+    """:func:`_ransac` on every group at once: direct fits of all groups in one batch
+    (:func:`~rangesim.core.conics.fit_conics_grouped`), kept where ``direct_inliers`` of a
+    group's points lie within ``tol`` px; for the others ``local`` stratified 6-point samples
+    per group fitted and scored (on up to 64 of the group's points) in one batch, the best real ellipse of each group then refitted
+    on its inliers (``refits`` batched passes). Returns per group the conic (None where no
+    sample gave an ellipse) and the indices of its inliers."""
+    G = len(groups)
+    n = np.array([len(p) for p in groups])
+    xy = np.concatenate(groups)
+    gid = np.repeat(np.arange(G), n)
+    start = np.concatenate([[0], np.cumsum(n)[:-1]])
+    conics, ok = fit_conics_grouped(xy, gid, G)
+    ok &= real_ellipses(conics)
+    d = sampson_distance_rows(conics[gid], xy)
+    inl = (d <= tol) & ok[gid]
+    direct = ok & (np.bincount(gid, weights=inl, minlength=G) >= direct_inliers * n)
+    # stratified samples for the rest: one point from each sixth of the ordered group
+    rest = np.nonzero(~direct & (n >= 6))[0]
+    if len(rest):
+        bounds = np.linspace(0.0, 1.0, 7)
+        u = bounds[:-1] + rng.random((len(rest), local, 6)) * np.diff(bounds)
+        idx = start[rest, None, None] + np.minimum((u * n[rest, None, None]).astype(np.intp), n[rest, None, None] - 1)
+        sc, sok = fit_conics_batched(xy[idx.reshape(-1, 6)])
+        sok &= real_ellipses(sc)
+        # score each sample on (up to 64 evenly spaced of) its own group's points
+        ns = np.minimum(n[rest], 64)
+        sub = np.repeat(start[rest], ns) + (np.arange(ns.sum()) - np.repeat(np.cumsum(ns) - ns, ns)) \
+            * np.repeat(n[rest], ns) // np.repeat(ns, ns)
+        # every (sample, scoring point) of the same group
+        per = np.repeat(ns, local)  # scoring points per sample
+        owner = np.repeat(np.arange(len(rest) * local), per)
+        first = np.repeat(np.concatenate([[0], np.cumsum(ns)[:-1]]), local)
+        pts = sub[np.repeat(first, per) + np.arange(owner.size) - np.repeat(np.cumsum(per) - per, per)]
+        hits = sampson_distance_rows(sc[owner], xy[pts]) <= tol
+        counts = np.where(sok, np.bincount(owner, weights=hits, minlength=len(rest) * local), -1).reshape(len(rest), local)
+        best = np.argmax(counts, axis=1)
+        found = counts[np.arange(len(rest)), best] >= 0
+        conics[rest[found]] = sc.reshape(len(rest), local, 6)[found, best[found]]
+        ok[rest] = found
+    ok &= n >= 5
+    # refits on the inliers, all groups together (the direct ones start from their direct fit)
+    for _ in range(max(refits, 1)):
+        inl = (sampson_distance_rows(conics[gid], xy) <= tol) & ok[gid]
+        new, nok = fit_conics_grouped(xy[inl], gid[inl], G)
+        nok &= real_ellipses(new) & (np.bincount(gid[inl], minlength=G) >= 5)
+        conics[nok & ok] = new[nok & ok]
+    inl = (sampson_distance_rows(conics[gid], xy) <= tol) & ok[gid]
+    out_c = [conics[k] if ok[k] else None for k in range(G)]
+    out_i = [np.nonzero(inl[start[k]:start[k] + n[k]])[0] for k in range(G)]
+    return out_c, out_i
