@@ -18,10 +18,17 @@ Timed (each: one warm-up run reported as "cold", then the median of --repeat run
 Targets (issue 4, on 2 CPU cores): gradient <= 0.1 s, normal <= 0.3 s, line_fit_points on
 250k points <= 5 s.
 
+``--operators`` times instead ``rs.edges.gradient`` against its own four 3x3 operators
+(:data:`rangesim.edges._gradient.OPERATORS`, one ``scipy.ndimage.correlate`` each on the
+float32 depth image, NaN set to 0) at each of ``--sizes`` (default 512 and 1024): the two
+run in turns (interleaved, so a busy moment of a shared machine hits both alike), and the
+ratio of their medians is held against the 3x target of issue 14 (item 8).
+
 Usage::
 
     python benchmarks/bench_edges.py [--size 1024] [--repeat 5] [--points 250000]
                                      [--quiet] [--json OUT.json]
+    python benchmarks/bench_edges.py --operators [--sizes 512,1024] [--repeat 15] [--quiet]
 """
 from __future__ import annotations
 
@@ -37,7 +44,7 @@ from typing import Any, Callable
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cpu_info, timed  # noqa: E402
+from _common import cpu_info, interleaved, timed  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SCENE = REPO / "scenes" / "green_piece.toml"
@@ -45,8 +52,19 @@ SCENE = REPO / "scenes" / "green_piece.toml"
 #: name of a timed row -> seconds it must not exceed on 2 cores
 TARGETS = {"gradient": 0.1, "normal": 0.3, "line_fit_points": 5.0}
 BASELINE = "scipy.ndimage.sobel (3x3)"
+#: issue 14 item 8: gradient within this many times its four 3x3 operators
+OPERATOR_RATIO_TARGET = 3.0
 
 
+
+def _loadavg() -> tuple[float, ...]:
+    """1, 5 and 15 minute load averages (NaN where the OS does not tell)."""
+    try:
+        import os
+
+        return os.getloadavg()
+    except (AttributeError, OSError):
+        return (float("nan"),) * 3
 
 
 def make_scan(size: int, quiet: bool):
@@ -80,6 +98,40 @@ def point_list(scan, n: int, seed: int = 0) -> tuple[np.ndarray, str]:
             f"the scan's {len(pts):,} valid points + {need:,} Green Piece surface points")
 
 
+def operator_ratio(sizes: list[int], repeat: int, quiet: bool) -> dict[int, dict[str, Any]]:
+    """``rs.edges.gradient`` against its four 3x3 operators, interleaved, at each size.
+
+    Per size: the Green Piece scan (:func:`make_scan`), then one cold run of each and
+    ``repeat`` rounds that run both in turn; prints the medians and their ratio against
+    :data:`OPERATOR_RATIO_TARGET`. Returns the figures per size.
+    """
+    import scipy.ndimage as ndi
+
+    import rangesim as rs
+    from rangesim.edges._gradient import OPERATORS
+
+    print(f"{'size':>6}{'operators ms':>14}{'gradient ms':>13}{'ratio':>8}{'target':>8}  verdict"
+          f"   (median of {repeat}, interleaved)")
+    out: dict[int, dict[str, Any]] = {}
+    kernels = list(OPERATORS.values())
+    for size in sizes:
+        scan = make_scan(size, quiet)
+        depth = np.asarray(scan.depth, dtype=np.float32)
+        depth0 = np.where(np.asarray(scan.valid, bool) & np.isfinite(depth), depth, np.float32(0))
+        res = interleaved({
+            "operators": lambda d=depth0: [ndi.correlate(d, k) for k in kernels],
+            "gradient": lambda s=scan: rs.edges.gradient(s),
+        }, repeat)
+        ops, grad = res["operators"][1], res["gradient"][1]
+        ratio = grad / ops
+        verdict = "PASS" if ratio <= OPERATOR_RATIO_TARGET else "FAIL"
+        print(f"{size:>6}{ops * 1e3:>14.1f}{grad * 1e3:>13.1f}{ratio:>8.2f}{OPERATOR_RATIO_TARGET:>8.1f}  {verdict}")
+        out[size] = {"operators_s": ops, "gradient_s": grad, "ratio": ratio, "pass": ratio <= OPERATOR_RATIO_TARGET,
+                     "operators_times_s": res["operators"][2], "gradient_times_s": res["gradient"][2],
+                     "edges": int(res["gradient"][3].mask.sum()), "valid_px": int(scan.valid.sum())}
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark; print the table, optionally write JSON. Returns the exit code."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -88,9 +140,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--points", type=int, default=250_000, help="points for line_fit_points")
     ap.add_argument("--quiet", action="store_true", help="scan without noise")
     ap.add_argument("--json", type=Path, help="write the figures to this JSON file")
+    ap.add_argument("--operators", action="store_true",
+                    help="only gradient against its four 3x3 operators, interleaved, at --sizes")
+    ap.add_argument("--sizes", default="512,1024", help="image sizes for --operators (comma-separated)")
     args = ap.parse_args(argv)
     if args.size < 8 or args.repeat < 1 or args.points < 16:
         ap.error("--size >= 8, --repeat >= 1, --points >= 16")
+    if args.operators:
+        sizes = [int(v) for v in args.sizes.split(",")]
+        cpu = cpu_info()
+        print("rangesim gradient vs its four 3x3 operators (issue 14 item 8)")
+        print(f"  date        {datetime.date.today().isoformat()}")
+        print(f"  machine     {cpu.get('model', platform.processor() or platform.machine())}; "
+              f"cores: os.cpu_count={cpu['os.cpu_count']}, usable={cpu.get('affinity', cpu['os.cpu_count'])}; "
+              f"load average {' '.join(f'{v:.1f}' for v in _loadavg())}")
+        print(f"  scan        Green Piece, white_scanner, {'noise off' if args.quiet else 'preset noise'}, seed 0")
+        res = operator_ratio(sizes, args.repeat, args.quiet)
+        print(f"  load average after: {' '.join(f'{v:.1f}' for v in _loadavg())}")
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps({"date": datetime.date.today().isoformat(), "cpu": cpu,
+                                             "quiet": args.quiet, "repeat": args.repeat,
+                                             "results": {str(k): v for k, v in res.items()}}, indent=2))
+            print(f"wrote {args.json}")
+        return 0
 
     import scipy
     import scipy.ndimage as ndi
