@@ -17,7 +17,8 @@ matching stay) and with the preset's noise. Per case and preset:
   concave) and overall, micro-averaged over the cases (matched and counted pixels summed);
 * round features: :func:`rangesim.features.circles` and :func:`rangesim.features.ellipses`
   (no model) on the gradient detector's map, matched one-to-one to the exact image ellipses
-  of :func:`rangesim.evaluate.ground_truth_features` seen at least 80 % (centre within
+  of :func:`rangesim.evaluate.ground_truth_features` seen at least 80 % by the camera and
+  measured by the scanner (not in laser shadow; :func:`measured_visibility`) (centre within
   3 px, mean semi-axis within 20 %); per feature type (:func:`rangesim.cad.machined.feature_type`):
   recall, recall with centre error <= 1 px, precision (a found feature counts for the type
   of the nearest true ellipse; one matching a rim seen less than 80 % counts neither way),
@@ -43,6 +44,7 @@ Default: 3 parts x 5 presets x 2 noise settings (about 5 minutes on 2 cores); ``
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import math
@@ -54,6 +56,7 @@ from typing import Any
 
 import numpy as np
 import trimesh
+from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cpu_info  # noqa: E402
@@ -116,6 +119,23 @@ def make_case(seed: int, sensor) -> tuple[Scene, np.ndarray, dict[str, Any]]:
     info = {"seed": seed, "scale": round(scale, 4), "distance_mm": round(distance, 1), "gap_mm": round(gap, 1),
             "elevation_deg": round(math.degrees(elevation), 1), "azimuth_deg": round(math.degrees(azimuth), 1)}
     return scene, look_at(eye, target), info
+
+
+def measured_visibility(ellipse, valid: np.ndarray, samples: int = 360):
+    """The truth ellipse with ``visible`` at most the fraction of its image the scan measured
+    (a measured pixel within 1 px of the sample): a rim in laser shadow is seen by the
+    camera (:func:`~rangesim.evaluate.ground_truth_features`) but not by the scanner."""
+    t = np.linspace(0, 2 * np.pi, samples, endpoint=False)
+    (a, b), phi = ellipse.axes, ellipse.angle
+    x = ellipse.center[0] + a * np.cos(t) * np.cos(phi) - b * np.sin(t) * np.sin(phi)
+    y = ellipse.center[1] + a * np.cos(t) * np.sin(phi) + b * np.sin(t) * np.cos(phi)
+    h, w = valid.shape
+    near = ndimage.binary_dilation(valid, np.ones((3, 3), bool))
+    col, row = np.rint(x).astype(int), np.rint(y).astype(int)
+    inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+    seen = np.zeros(samples, bool)
+    seen[inside] = near[row[inside], col[inside]]
+    return dataclasses.replace(ellipse, visible=min(float(ellipse.visible), float(seen.mean())))
 
 
 def _dedupe(found: list) -> list:
@@ -199,6 +219,7 @@ def run_case(seed: int, sensor_name: str, noisy: bool) -> dict[str, Any]:
         if name == "gradient":
             gradient_map = em
     feats = rs.evaluate.ground_truth_features(scan, scene)
+    feats["circles"] = [measured_visibility(t, scan.valid) for t in feats["circles"]]
     found = _dedupe([*rs.features.circles(gradient_map, CIRCLE_RADII_PX), *rs.features.ellipses(gradient_map)])
     rounds = round_feature_counts(found, feats["circles"])
     seg = rs.evaluate.feature_scores({"segments": rs.features.lines(gradient_map)}, feats, scan,

@@ -103,6 +103,9 @@ def test_benchmark_case_truth_and_feature_scoring():
     circles = rs.evaluate.ground_truth_features(scan, scene)["circles"]
     seen = [c for c in circles if c.visible >= bench.MIN_VISIBLE]
     assert any(feature_type(c.name) in bench.HOLE_RIMS for c in seen)
+    # a rim the scanner did not measure (all pixels invalid) is not seen, whatever the camera saw
+    assert bench.measured_visibility(seen[0], np.zeros(scan.shape, bool)).visible == 0.0
+    assert bench.measured_visibility(seen[0], np.ones(scan.shape, bool)).visible == seen[0].visible
     counts = bench.round_feature_counts(seen, circles)
     for kind, e in counts.items():
         assert e["matched"] == e["found"] == e["n_truth"], kind
