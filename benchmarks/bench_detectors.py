@@ -35,10 +35,10 @@ blind, seen >= 80 %) recall >= 0.95 with centre error <= 1 px, precision >= 0.9.
 
 Usage::
 
-    python benchmarks/bench_detectors.py [--parts 3] [--sensors white_scanner,...]
+    python benchmarks/bench_detectors.py [--parts 5] [--sensors white_scanner,...]
                                          [--seeds report|tune] [--quick] [--json OUT.json]
 
-Default: 3 parts x 5 presets x 2 noise settings (about 5 minutes on 2 cores); ``--quick``:
+Default: 5 parts x 5 presets x 2 noise settings (about 2.5-5 minutes on 2 cores, with the load); ``--quick``:
 1 part, white_scanner only (about 30 s).
 """
 from __future__ import annotations
@@ -360,7 +360,7 @@ def print_compact(summary: dict[str, Any]) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--parts", type=int, default=3, help="random parts (one view each) per preset")
+    ap.add_argument("--parts", type=int, default=5, help="random parts (one view each) per preset")
     ap.add_argument("--sensors", default=",".join(SENSORS), help="comma-separated presets")
     ap.add_argument("--seeds", choices=("report", "tune"), default="report",
                     help="report: seeds from 1000 (default); tune: the seeds 0-99 the settings were chosen on")
