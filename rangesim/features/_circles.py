@@ -166,10 +166,48 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii
         sel = radial & (np.abs(dist - r[ph]) <= width[ph])
         c, r, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=1 + (width is not reach),
                                       max_step=float(hcell.max()) + 3.0)
+    c, r = _thin_ring_fit(xy, theta, c, r, index, shape, cos_tol)
+    ph, pp = ring_points(c, r, band_px + 0.5, index, shape)
+    ct, st = np.cos(theta[pp]), np.sin(theta[pp])
     d = xy[pp] - c[ph]
     dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
     sel = (np.abs(d[:, 0] * ct + d[:, 1] * st) >= cos_tol * dist) & (np.abs(dist - r[ph]) <= band_px)
     return c, r, votes, ph[sel], pp[sel]
+
+
+def _thin_ring_fit(xy, theta, c, r, index, shape, cos_tol, reach: float = 3.0, thick: float = 1.5):
+    """Refit each circle on the stretches of arc where its ring is one edge thick.
+
+    Where a second edge runs beside the circle (the wall seen inside a hole's rim, a
+    crescent of edge pixels), the radially oriented pixels within ``reach`` px of it, per
+    2 px of arc, spread over more than ``thick`` px: those stretches are left out, so the
+    fit follows the thin rim rather than the middle of the band.
+    """
+    ph, pp = ring_points(c, r, reach, index, shape)
+    d = xy[pp] - c[ph]
+    dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    e = dist - r[ph]
+    radial = np.abs(d[:, 0] * np.cos(theta[pp]) + d[:, 1] * np.sin(theta[pp])) >= cos_tol * dist
+    keep = radial & (np.abs(e) <= reach)
+    ph, pp, d, e = ph[keep], pp[keep], d[keep], e[keep]
+    if len(ph) == 0:
+        return c, r
+    nb = np.maximum(np.rint(np.pi * r).astype(np.int64), 8)  # bins of about 2 px of arc
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)
+    key = ph * int(nb.max()) + np.minimum((ang / (2 * np.pi) * nb[ph]).astype(np.int64), nb[ph] - 1)
+    o = np.argsort(key, kind="stable")
+    ks, es = key[o], e[o]
+    first = np.concatenate([[0], np.nonzero(np.diff(ks))[0] + 1])
+    spread = np.maximum.reduceat(es, first) - np.minimum.reduceat(es, first)
+    thin = np.repeat(spread <= thick, np.diff(np.concatenate([first, [len(ks)]])))
+    sel = o[thin]
+    sel = sel[np.abs(e[sel]) <= 2.0]
+    c2, r2, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=3, max_step=3.0)
+    # keep the thin fit only where enough of the circle is thin
+    n_thin = np.bincount(ph[sel], minlength=len(r))
+    use = n_thin >= 0.25 * 2 * np.pi * r  # circles, not arcs (a short arc alone is ill-conditioned)
+    c[use], r[use] = c2[use], r2[use]
+    return c, r
 
 
 @lru_cache(maxsize=4)
