@@ -67,8 +67,11 @@ def circle_hypotheses(
     hypothesis, so concentric rims each get one). The centre of a candidate starts at the
     least-squares intersection of its voters' normal lines; each hypothesis is refined by
     batched geometric fits (:func:`~rangesim.core.conics.fit_circles_batched`) on the edge
-    points of a ring around it whose direction is radial within 25 degrees, the ring
-    narrowing to ``band_px`` (+0.5) over three passes.
+    points of a ring around it (looked up pixel by pixel, :func:`ring_points`) whose direction
+    is radial within ``DIRECTION_TOL_DEG`` (15), the ring narrowing to ``band_px`` (+0.5) over
+    three passes, then once more on the stretches where the ring is one edge thick
+    (:func:`_thin_ring_fit`). All of it is batched over the hypotheses: the work follows the
+    edge pixels and the rings' areas, with no dense 3D accumulator and no per-candidate loop.
 
     Returns
     -------
@@ -308,11 +311,15 @@ def circles(
     radii : (rmin, rmax)
         Radius range, pixels.
     min_support : float
-        Least fraction of the circumference with an edge pixel within 1 px.
+        Least fraction of the circumference (bins of about 1 px) with an edge pixel within
+        1 px of the circle whose edge normal is radial within 15 degrees; each edge pixel
+        supports one circle (strongest first), so a candidate left below this once the pixels
+        of stronger circles are taken (a near-duplicate, a ghost across two rims) is dropped.
     threshold : float
         Accumulator threshold as a fraction of the 2 pi r votes of a complete circle.
     angle_tol_deg : float
-        Half-width of the voting window around the edge normal, degrees.
+        Half-width of the voting window around the edge normal, degrees (angle offsets k c / r;
+        below one step, as by default for r / c < 14, each point votes on its normal only).
     max_residual : float
         Largest RMS distance of the supporting edge pixels to the circle, pixels.
     keep : (H, W) bool, optional
@@ -321,8 +328,7 @@ def circles(
     Returns
     -------
     list of Circle
-        Strongest (largest support) first; near-duplicates (centre and radius within 2 px)
-        removed.
+        Strongest (largest support) first.
 
     Examples
     --------
