@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.edges._grid import AXES, NEIGHBOURS, pad_last2, padded_view
+from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
 from rangesim.edges._noise import depth_quantum
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
 
@@ -375,7 +375,7 @@ def find_discontinuities(
     nan_boundary = np.zeros((h, w), bool)
     rim = np.zeros((h, w), bool)
 
-    ii, jj = np.nonzero(has_invalid)
+    ii, jj = nonzero2(has_invalid)
     if ii.size:
         vpad = np.pad(valid, 1, constant_values=True)
         if empty is not None:
@@ -457,7 +457,7 @@ def find_discontinuities(
         rim[e_i[keep], e_j[keep]] = True
 
     # direction across the jump from the broken neighbour pairs (gradient of "is far")
-    ei, ej = np.nonzero((occluding | occluded) & np.isnan(direction))
+    ei, ej = nonzero2((occluding | occluded) & np.isnan(direction))
     if ei.size:
         gx = np.zeros(ei.size, np.float32)
         gy = np.zeros(ei.size, np.float32)

@@ -203,13 +203,15 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
 
 
-def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: float) -> float:
+def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: float,
+                    stride: int = 4) -> float:
     """``max(default, k * median(strength))`` over valid pixels with a finite strength.
 
-    The median is taken on every 4th row and column (1/16 of the pixels): plenty for a
-    robust noise level, and 16 times cheaper than over a megapixel.
+    The median is taken on every ``stride``-th row and column (1/16 of the pixels by
+    default): plenty for a robust noise level, and 16 times cheaper than over a megapixel.
+    A caller that computes its strength on that subsample only passes it with ``stride=1``.
     """
-    sub = (slice(None, None, 4), slice(None, None, 4))
+    sub = (slice(None, None, stride), slice(None, None, stride))
     st = strength[sub][valid[sub] & np.isfinite(strength[sub])]
     if st.size == 0:
         return float(default)

@@ -46,9 +46,10 @@ def scan_arrays(scan: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def scan_depth(scan: Any) -> tuple[np.ndarray, np.ndarray]:
     """Depth (H, W) float32 with NaN at unusable pixels, and validity; see :func:`scan_arrays`."""
-    z = np.asarray(scan.depth, dtype=np.float32)
+    z = np.array(scan.depth, dtype=np.float32)          # a copy: NaN goes in below
     valid = np.asarray(scan.valid, dtype=bool) & np.isfinite(z)
-    return np.where(valid, z, np.float32(np.nan)), valid
+    np.copyto(z, np.nan, where=~valid)                  # (np.where is ~5x slower)
+    return z, valid
 
 
 def scan_points(scan: Any, valid: np.ndarray, component_major: bool = False) -> np.ndarray:
@@ -126,7 +127,7 @@ def pixel_geometry(scan: Any, z: np.ndarray | None = None) -> PixelGeometry:
         z, _ = scan_depth(scan)
     f = focal_length_px(scan)
     if f is not None:
-        return PixelGeometry((z / np.float32(f)).astype(np.float32), True, f)
+        return PixelGeometry((z / np.float32(f)).astype(np.float32, copy=False), True, f)
     xyz, _, _ = scan_arrays(scan)
     xyz = xyz.astype(np.float64)
     d_all, z_all = [], []

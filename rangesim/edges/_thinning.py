@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rangesim.edges._grid import nonzero2
+
 __all__ = ["nearest_axis", "nonmax_suppress", "thin_staircases", "JUMP_CLEARANCE", "near_mask"]
 
 
@@ -53,7 +55,7 @@ def nonmax_suppress(
     h, w = strength.shape
     if candidates is None:
         candidates = ~np.isnan(strength)
-    ii, jj = np.nonzero(candidates & ~np.isnan(strength))
+    ii, jj = nonzero2(candidates & ~np.isnan(strength))
     keep = np.zeros((h, w), bool)
     sides = np.full((h, w), np.nan, np.float32) if return_sides else None
     if ii.size == 0:
@@ -112,7 +114,7 @@ def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np
     stride = w + 2
     p = np.pad(mask, 1).ravel()
     cand = mask if droppable is None else (mask & droppable)
-    ii, jj = np.nonzero(cand)
+    ii, jj = nonzero2(cand)
     if ii.size == 0:
         return mask.copy()
     base = (ii + 1) * stride + (jj + 1)
@@ -143,7 +145,7 @@ def near_mask(where: np.ndarray, ref: np.ndarray, r: int) -> np.ndarray:
     """
     h, w = where.shape
     out = np.zeros((h, w), bool)
-    ii, jj = np.nonzero(where)
+    ii, jj = nonzero2(where)
     if ii.size == 0 or r <= 0:
         return out
     stride = w + 2 * r
