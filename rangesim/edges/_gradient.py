@@ -168,28 +168,48 @@ def _nan_gaussian(z: np.ndarray, sigma: float) -> np.ndarray:
     return num
 
 
+class _Flat:
+    """An image padded by one pixel and flattened, so that shifted copies are 1-D slices.
+
+    Elementwise NumPy on 1-D slices runs ~3x faster than on shifted 2-D views of a padded
+    image (0.12 against 0.41 ms per add on 1024 x 1024 float32). Results are 1-D over
+    the *core* (pixel (0, 0) to (H-1, W-1) in padded row-major order, pad columns in
+    between hold junk); :meth:`image` takes the (H, W) pixels out.
+    """
+
+    def __init__(self, a: np.ndarray, fill: Any) -> None:
+        h, w = a.shape
+        p = np.full((h + 2, w + 2), fill, a.dtype)
+        p[1:-1, 1:-1] = a
+        self.flat = p.ravel()
+        self.h, self.w, self.stride = h, w, w + 2
+        self.n = (h - 1) * (w + 2) + w
+
+    def at(self, dr: int, dc: int, grow: int = 0) -> np.ndarray:
+        """The core shifted by (dr, dc), extended by ``grow`` elements on each side."""
+        start = (1 + dr) * self.stride + 1 + dc
+        return self.flat[start - grow:start + self.n + grow]
+
+    def image(self, core: np.ndarray) -> np.ndarray:
+        """(H, W) contiguous copy of the pixels of a core-long array."""
+        it = core.itemsize
+        return np.lib.stride_tricks.as_strided(core, (self.h, self.w), (self.stride * it, it)).copy()
+
+
 def _box3(a: np.ndarray) -> np.ndarray:
     """3x3 sum with zeros outside the image and in place of NaN.
 
     Measured on 1024 x 1024 float32: 2.4 ms against 20.8 ms for
-    ``scipy.ndimage.uniform_filter(a, 3, mode="constant") * 9`` (equal to 1e-6).
+    ``scipy.ndimage.uniform_filter(a, 3, mode="constant") * 9`` (equal to 1e-6); on the
+    flattened padded image (:class:`_Flat`), faster still.
     """
-    p = np.zeros((a.shape[0] + 2, a.shape[1] + 2), a.dtype)
-    p[1:-1, 1:-1] = a
-    np.copyto(p, 0, where=np.isnan(p))
-    r = p[:-2] + p[1:-1]
-    r += p[2:]
-    out = r[:, :-2] + r[:, 1:-1]
-    out += r[:, 2:]
-    return out
-
-
-def _ratio(num: np.ndarray, den: np.ndarray, min_den: float) -> np.ndarray:
-    """num / den where den >= min_den, else NaN."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = num / den
-    np.copyto(out, np.nan, where=den < min_den)
-    return out
+    f = _Flat(a, 0)
+    np.copyto(f.flat, 0, where=np.isnan(f.flat))
+    r = f.at(-1, 0, 1) + f.at(0, 0, 1)
+    r += f.at(1, 0, 1)
+    out = r[:-2] + r[1:-1]
+    out += r[2:]
+    return f.image(out)
 
 
 def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
@@ -231,25 +251,23 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
     """
     h, w = z.shape
     z = np.asarray(z, np.float32)
-    p = np.pad(z, 1, constant_values=np.nan)
-
-    def v(dr: int, dc: int, er: int = 0, ec: int = 0) -> np.ndarray:
-        # view shifted by (dr, dc), grown by er rows / ec columns on each side
-        return p[1 + dr - er:1 + dr + h + er, 1 + dc - ec:1 + dc + w + ec]
+    f = _Flat(z, np.nan)
+    v = f.at
+    st = f.stride
 
     # Every pixel first as if its whole 3x3 window were valid and unbroken: the plain
     # operators, in the same order of operations as the exact rule below. A NaN anywhere
     # in the window makes them NaN, and a broken pair can only lie in the window of a
     # pixel next to it: those pixels (a few percent) are redone exactly, sparsely.
-    d = v(0, -1, 1, 0) - 2 * v(0, 0, 1, 0)
-    d += v(0, 1, 1, 0)
-    r0 = d[:-2] + d[1:-1]
-    r0 += d[2:]
+    d = v(0, -1, st) - 2 * v(0, 0, st)          # one row more on each side
+    d += v(0, 1, st)
+    r0 = d[:-2 * st] + d[st:-st]
+    r0 += d[2 * st:]
     r0 /= np.float32(3)
-    d = v(-1, 0, 0, 1) - 2 * v(0, 0, 0, 1)
-    d += v(1, 0, 0, 1)
-    r90 = d[:, :-2] + d[:, 1:-1]
-    r90 += d[:, 2:]
+    d = v(-1, 0, 1) - 2 * v(0, 0, 1)            # one column more on each side
+    d += v(1, 0, 1)
+    r90 = d[:-2] + d[1:-1]
+    r90 += d[2:]
     r90 /= np.float32(3)
     c2 = 2 * v(0, 0)
     s4 = v(-1, 0) + v(0, -1)
@@ -257,16 +275,19 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
     s4 += v(1, 0)
     two_steps = np.float32(2) * _SQRT2
     diag = []
-    for centre, ends in (((-1, -1), (1, 1)), ((-1, 1), (1, -1))):
-        other = ((-1, 1), (1, -1)) if centre == (-1, -1) else ((-1, -1), (1, 1))
-        r = v(*centre) - c2
-        r += v(*ends)
-        e = v(*other[0]) + v(*other[1])
+    # (centre diagonal's ends), (the L-pair's ends) for 45 and 135 deg
+    for (a, b), (e0, e1) in ((((-1, -1), (1, 1)), ((-1, 1), (1, -1))),
+                             (((-1, 1), (1, -1)), ((-1, -1), (1, 1)))):
+        r = v(*a) - c2
+        r += v(*b)
+        e = v(*e0) + v(*e1)
         e *= 2
         r += s4 - e                     # centre + ell
         r /= two_steps
         diag.append(r)
-    out = [r0, diag[0], r90, diag[1]]
+    out = [f.image(r) for r in (r0, diag[0], r90, diag[1])]
+    r0 = out[0]
+    p = f.flat.reshape(h + 2, w + 2)
 
     redo = np.isnan(r0)
     if pairs is not None:
