@@ -1,18 +1,39 @@
-"""Hough benchmark: rangesim's direction-guided circle finder against scikit-image's
-``hough_circle`` + ``hough_circle_peaks``, and its ellipse finder against ``hough_ellipse``
-(on a small crop holding one ellipse, as ``hough_ellipse`` is slow), on the same edge maps
-of the noise-free Green Piece (white_scanner, 512 x 480). Prints times, ratios and recall.
+"""Hough benchmark: rangesim's feature finders against OpenCV (the baseline) on the same edge maps,
+timed interleaved in one process (median of the runs), with recall, precision and errors.
 
-    python benchmarks/bench_hough.py [--repeat 3]
+- circles: ``rs.features.circles`` against ``cv2.HoughCircles`` (HOUGH_GRADIENT), on synthetic
+  edge maps (512^2 with 12 circles, 1024^2 with 24, amid segments, arcs, ellipses and noise
+  pixels) and on head-on scans of the Green Piece (white_scanner, noisy seed 0 and noise-free,
+  gradient edges with rim creases kept), 12 visible rims from the CAD part;
+- ellipses (model-free path): ``rs.features.ellipses(mask, remove_explained=False)`` against
+  ``cv2.fitEllipse`` on each contour of ``cv2.findContours`` (linked edge pixels) and
+  ``cv2.ximgproc.findEllipses`` (opencv-contrib), on the tilted Green Piece; the model-guided
+  path (``ellipses(edges, scan, scene)``) is printed beside them;
+- segments: ``rs.features.lines`` against ``cv2.HoughLinesP`` and scikit-image's
+  ``probabilistic_hough_line``, on the same tilted and head-on maps (the part's plate edges).
+
+Tuning and reporting are kept apart: every rangesim default and OpenCV's ``param2`` (accumulator
+threshold; chosen by the best F1 over 10..40 with ``--tune``) were set on synthetic seeds 0-4;
+the synthetic rows here use seeds 100-104 (512^2) and 100-102 (1024^2). The Green Piece rows
+(seed 0 and noise-free) were in sight while the finder was developed, so they are not held out.
+
+    python benchmarks/bench_hough.py [--repeat 5] [--tune] [--skimage]
 """
 from __future__ import annotations
 
 import argparse
+import statistics
+import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from skimage.transform import hough_circle, hough_circle_peaks, hough_ellipse
+
+try:
+    import cv2
+except ImportError:  # the bench extra: pip install -e ".[bench]"
+    sys.exit("bench_hough needs OpenCV with the contrib modules: pip install opencv-contrib-python-headless")
 
 import rangesim as rs
 import rangesim.edges  # noqa: F401
@@ -22,82 +43,323 @@ from rangesim.core.geometry import look_at
 from rangesim.evaluate._feature_scores import feature_scores
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_info  # noqa: E402
+
 QUIET = {"noise.sigma_px": 0, "noise.speckle_contrast": 0, "noise.quantization_px": 0}
+TUNE_SEEDS = (0, 1, 2, 3, 4)
+REPORT_SEEDS = {512: (100, 101, 102, 103, 104), 1024: (100, 101, 102)}
+SYNTH = {512: dict(n=12, radii=(6, 60), search=(5, 64)), 1024: dict(n=24, radii=(8, 120), search=(5, 128))}
+GREEN_RADII = (5, 70)  # px, the Green Piece's rims are 10-60 px head-on
+CV_PARAM2 = {512: 20, 1024: 25}  # best F1 on TUNE_SEEDS (run with --tune)
+cv2.setNumThreads(1)  # the 2-core VM is shared; rangesim is single-threaded numpy too
 
 
-class _C:  # a found circle for feature_scores
-    def __init__(self, x, y, r):
-        self.center, self.radius = (float(x), float(y)), float(r)
+# -- inputs ------------------------------------------------------------------------------------
+
+@dataclass
+class TrueRound:
+    """A ground-truth circle/ellipse as feature_scores reads it."""
+
+    name: str
+    center: np.ndarray
+    axes: np.ndarray
+    visible: float = 1.0
 
 
-def best_time(fn, repeat):
-    times, out = [], None
+class Found:
+    """A found circle/ellipse (centre, radius or axes) for feature_scores."""
+
+    def __init__(self, center, radius=None, axes=None):
+        self.center = (float(center[0]), float(center[1]))
+        if radius is not None:
+            self.radius = float(radius)
+        else:
+            self.axes = (float(axes[0]), float(axes[1]))
+
+
+def _draw(mask: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+    H, W = mask.shape
+    xi, yi = np.rint(x).astype(int), np.rint(y).astype(int)
+    ok = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
+    mask[yi[ok], xi[ok]] = True
+
+
+def synthetic_edges(size: int, n_circles: int, seed: int, radii=(6, 60), sigma: float = 0.25):
+    """A size x size edge mask: ``n_circles`` non-overlapping circles (70-100 % of each drawn,
+    positions with sigma px noise, rounded to pixels), 20 segments, 8 arcs of 15-40 % of a
+    circle and 6 ellipses (b/a 0.4-0.75, a - b >= 4 px) per 512^2, and 0.05 % noise pixels.
+
+    Returns
+    -------
+    mask : (size, size) bool
+    truth : dict
+        ``{"circles": [TrueRound], "segments": []}``: only the circles.
+    """
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((size, size), bool)
+    truth, placed = [], []
+    for _ in range(20000):
+        if len(truth) == n_circles:
+            break
+        r = rng.uniform(*radii)
+        c = rng.uniform(r + 2, size - r - 2, 2)
+        if any(np.hypot(*(c - c2)) < r + r2 + 3 for c2, r2 in placed):
+            continue
+        placed.append((c, r))
+        a = np.linspace(0, 2 * np.pi, int(np.ceil(6 * np.pi * r)), endpoint=False)
+        a = a[np.mod(a - rng.uniform(0, 2 * np.pi), 2 * np.pi) < rng.uniform(0.7, 1.0) * 2 * np.pi]
+        _draw(mask, c[0] + r * np.cos(a) + rng.normal(0, sigma, len(a)),
+              c[1] + r * np.sin(a) + rng.normal(0, sigma, len(a)))
+        truth.append(TrueRound(f"circle_{len(truth)}", c, np.array([r, r])))
+    k = size // 512
+    for _ in range(20 * k):
+        p, L, t = rng.uniform(0, size, 2), rng.uniform(20, 200), rng.uniform(0, np.pi)
+        s = np.linspace(0, L, int(L * 2))
+        _draw(mask, p[0] + s * np.cos(t) + rng.normal(0, sigma, len(s)),
+              p[1] + s * np.sin(t) + rng.normal(0, sigma, len(s)))
+    for _ in range(8 * k):
+        r, c, span = rng.uniform(*radii), rng.uniform(0, size, 2), rng.uniform(0.15, 0.4) * 2 * np.pi
+        a = rng.uniform(0, 2 * np.pi) + np.linspace(0, span, int(span * r * 3))
+        _draw(mask, c[0] + r * np.cos(a), c[1] + r * np.sin(a))
+    for _ in range(6 * k):
+        A = rng.uniform(radii[0] + 5, radii[1])
+        B, c, t = min(A * rng.uniform(0.4, 0.75), A - 4), rng.uniform(0, size, 2), rng.uniform(0, np.pi)
+        a = np.linspace(0, 2 * np.pi, int(2 * np.pi * A * 3))
+        x, y = A * np.cos(a), B * np.sin(a)
+        _draw(mask, c[0] + x * np.cos(t) - y * np.sin(t), c[1] + x * np.sin(t) + y * np.cos(t))
+    n_noise = int(0.0005 * size * size)
+    mask[rng.integers(0, size, n_noise), rng.integers(0, size, n_noise)] = True
+    return mask, {"circles": truth, "segments": []}
+
+
+def green_piece():
+    """Head-on (circles) and tilted (ellipses) scans of the Green Piece, noisy (seed 0) and
+    noise-free, with gradient edges (rim creases kept) and the CAD part's ground truth."""
+    scene = rs.load_scene(ROOT / "scenes/green_piece.toml")
+    out = {}
+    for label, params in (("noisy seed 0", {}), ("noise-free", QUIET)):
+        sensor = rs.load_sensor("white_scanner").with_params(params)
+        for view, pose in (("head-on", look_at((0, 0, 300), (0, 0, 0), up=(0, 1, 0))), ("tilted", None)):
+            scan = rs.scan(scene, sensor, seed=0, pose=pose)
+            out[(label, view)] = (scan, rs.edges.gradient(scan, jump_clearance=0),
+                                  rs.evaluate.ground_truth_features(scan, scene))
+    return scene, out
+
+
+# -- methods -----------------------------------------------------------------------------------
+
+def cv_circles(mask: np.ndarray, search, param2: int) -> list:
+    """cv2.HoughCircles (HOUGH_GRADIENT, dp 1, minDist 10 px, Canny high 100) on the edge map."""
+    res = cv2.HoughCircles(mask.astype(np.uint8) * 255, cv2.HOUGH_GRADIENT, 1, 10, param1=100,
+                           param2=param2, minRadius=int(search[0]), maxRadius=int(search[1]))
+    return [] if res is None else [Found(c[:2], radius=c[2]) for c in res[0]]
+
+
+def cv_fit_ellipses(mask: np.ndarray, min_points: int = 20) -> list:
+    """cv2.fitEllipse on every contour (cv2.findContours: linked edge pixels) of >= min_points."""
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    out = []
+    for c in contours:
+        if len(c) >= min_points:
+            (x, y), (w, h), _ = cv2.fitEllipse(c)
+            if min(w, h) > 0:
+                out.append(Found((x, y), axes=(max(w, h) / 2, min(w, h) / 2)))
+    return out
+
+
+def cv_find_ellipses(mask: np.ndarray) -> list:
+    """cv2.ximgproc.findEllipses (Jia et al. 2017) on the edge map as an image."""
+    res = cv2.ximgproc.findEllipses(mask.astype(np.uint8) * 255)
+    if res is None:
+        return []
+    return [Found(e[:2], axes=(max(e[2], e[3]), min(e[2], e[3]))) for e in res.reshape(-1, res.shape[-1])]
+
+
+class Seg:
+    def __init__(self, a, b):
+        self.start, self.end = (float(a[0]), float(a[1])), (float(b[0]), float(b[1]))
+
+
+def cv_segments(mask: np.ndarray) -> list:
+    """cv2.HoughLinesP (1 px, 0.5 degree, 15 votes, min length 30, max gap 3)."""
+    res = cv2.HoughLinesP(mask.astype(np.uint8) * 255, 1, np.deg2rad(0.5), 15, minLineLength=30, maxLineGap=3)
+    return [] if res is None else [Seg(s[:2], s[2:]) for s in np.asarray(res).reshape(-1, 4)]
+
+
+def sk_segments(mask: np.ndarray) -> list:
+    """skimage probabilistic_hough_line (threshold 15, length 30, gap 3, 0.5 degree, seeded)."""
+    from skimage.transform import probabilistic_hough_line
+    theta = np.deg2rad(np.arange(-90, 90, 0.5))
+    return [Seg(a, b) for a, b in probabilistic_hough_line(mask, 15, 30, 3, theta=theta, rng=0)]
+
+
+# -- measurement -------------------------------------------------------------------------------
+
+def interleaved(fns: dict, repeat: int) -> tuple[dict, dict]:
+    """Median seconds of each callable, run in turn ``repeat`` times after one warm-up each."""
+    out = {k: f() for k, f in fns.items()}
+    times = {k: [] for k in fns}
     for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return min(times), out
+        for k, f in fns.items():
+            t = time.perf_counter()
+            out[k] = f()
+            times[k].append(time.perf_counter() - t)
+    return {k: statistics.median(v) for k, v in times.items()}, out
+
+
+def _round_scores(found, truth) -> dict:
+    s = feature_scores({"circles": found}, truth, center_tol_px=2.0)["round"]
+    return {"recall": s["recall"], "precision": s["precision"], "n": s["n_found"],
+            "centre": s["center_error_px"], "radius": s["radius_error_px"]}
+
+
+def _fmt(v, digits=2):
+    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else f"{v:.{digits}f}"
+
+
+def _row(inp: str, method: str, t: float, t_base: float | None, s: dict) -> None:
+    ratio = f"{t / t_base:5.2f}x" if t_base else "     -"
+    print(f"| {inp} | {method} | {t * 1e3:8.1f} | {ratio} | {_fmt(s['recall'])} | {_fmt(s['precision'])} | "
+          f"{_fmt(s['centre']['mean'], 3)} / {_fmt(s['centre']['max'], 3)} | "
+          f"{_fmt(s['radius']['mean'], 3)} / {_fmt(s['radius']['max'], 3)} |")
+
+
+def _pooled(scores: list[dict]) -> dict:
+    """Scores of several images pooled: recall/precision from the totals, errors over all."""
+    def agg(key, part):
+        vals = [s[key][part] for s in scores if s[key][part] is not None]
+        return (float(np.mean(vals)) if part == "mean" else float(np.max(vals))) if vals else None
+    matched = sum(s["recall"] * s["n_truth"] for s in scores)
+    return {"recall": matched / sum(s["n_truth"] for s in scores),
+            "precision": matched / max(sum(s["n"] for s in scores), 1),
+            "centre": {"mean": agg("centre", "mean"), "max": agg("centre", "max")},
+            "radius": {"mean": agg("radius", "mean"), "max": agg("radius", "max")}}
+
+
+def tune_opencv() -> None:
+    """OpenCV's param2 by the best F1 on the tuning seeds (printed; copy into CV_PARAM2)."""
+    for size, cfg in SYNTH.items():
+        maps = [synthetic_edges(size, cfg["n"], s, cfg["radii"]) for s in TUNE_SEEDS]
+        for p2 in range(10, 45, 5):
+            sc = []
+            for m, t in maps:
+                s = _round_scores(cv_circles(m, cfg["search"], p2), t)
+                s["n_truth"] = len(t["circles"])
+                sc.append(s)
+            p = _pooled(sc)
+            f1 = 2 * p["recall"] * p["precision"] / max(p["recall"] + p["precision"], 1e-9)
+            print(f"tune {size}: param2 {p2}: recall {p['recall']:.2f} precision {p['precision']:.2f} F1 {f1:.3f}")
+
+
+def bench_circles(views, repeat: int) -> None:
+    print("\n## circles (times: median of interleaved runs; ratio: rangesim / OpenCV)\n")
+    print("| input | method | ms | vs OpenCV | recall | precision | centre error mean / max px | "
+          "radius error mean / max px |")
+    print("|---|---|---|---|---|---|---|---|")
+    for size, cfg in SYNTH.items():
+        ours_s, cv_s, t_ours, t_cv = [], [], [], []
+        for seed in REPORT_SEEDS[size]:
+            mask, truth = synthetic_edges(size, cfg["n"], seed, cfg["radii"])
+            t, out = interleaved({"ours": lambda m=mask, r=cfg["search"]: F.circles(m, radii=r),
+                                  "cv": lambda m=mask, r=cfg["search"], p=CV_PARAM2[size]: cv_circles(m, r, p)},
+                                 repeat)
+            for lst, key in ((ours_s, "ours"), (cv_s, "cv")):
+                s = _round_scores(out[key], truth)
+                s["n_truth"] = len(truth["circles"])
+                lst.append(s)
+            t_ours.append(t["ours"])
+            t_cv.append(t["cv"])
+        inp = f"synthetic {size}^2, {cfg['n']} circles, seeds {REPORT_SEEDS[size][0]}-{REPORT_SEEDS[size][-1]}"
+        to, tc = statistics.median(t_ours), statistics.median(t_cv)
+        _row(inp, "rangesim circles", to, tc, _pooled(ours_s))
+        _row(inp, f"OpenCV HOUGH_GRADIENT (param2 {CV_PARAM2[size]})", tc, None, _pooled(cv_s))
+    for label in ("noisy seed 0", "noise-free"):
+        scan, edges, truth = views[(label, "head-on")]
+        H, W = edges.mask.shape
+        t, out = interleaved({"ours": lambda e=edges: F.circles(e, radii=GREEN_RADII),
+                              "cv": lambda e=edges: cv_circles(e.mask, GREEN_RADII, CV_PARAM2[512])}, repeat)
+        inp = f"Green Piece head-on {W}x{H}, {label} ({int(edges.mask.sum())} edge px)"
+        _row(inp, "rangesim circles", t["ours"], t["cv"], _round_scores(out["ours"], truth))
+        _row(inp, f"OpenCV HOUGH_GRADIENT (param2 {CV_PARAM2[512]})", t["cv"], None,
+             _round_scores(out["cv"], truth))
+
+
+def bench_skimage(views) -> None:
+    from skimage.transform import hough_circle, hough_circle_peaks
+
+    scan, edges, truth = views[("noise-free", "head-on")]
+    radii = np.arange(5, 71)
+    t = time.perf_counter()
+    acc = hough_circle(edges.mask, radii)
+    _, cx, cy, r = hough_circle_peaks(acc, radii, min_xdistance=3, min_ydistance=3, total_num_peaks=15)
+    dt = time.perf_counter() - t
+    s = _round_scores([Found((x, y), radius=rr) for x, y, rr in zip(cx, cy, r)], truth)
+    print(f"\nscikit-image hough_circle + peaks (15), Green Piece noise-free head-on: {dt * 1e3:.0f} ms, "
+          f"recall {_fmt(s['recall'])}, precision {_fmt(s['precision'])}")
+
+
+def bench_ellipses(scene, views, repeat: int) -> None:
+    print("\n## ellipses, model-free (times: median of interleaved runs; ratio: rangesim / cv2.fitEllipse)\n")
+    print("| input | method | ms | vs fitEllipse | recall | precision | centre error mean / max px | "
+          "mean semi-axis error mean / max px |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label in ("noisy seed 0", "noise-free"):
+        scan, edges, truth = views[(label, "tilted")]
+        mask = edges.mask
+        t, out = interleaved({"ours": lambda m=mask: F.ellipses(m, remove_explained=False),
+                              "fit": lambda m=mask: cv_fit_ellipses(m),
+                              "find": lambda m=mask: cv_find_ellipses(m)}, repeat)
+        inp = f"Green Piece tilted, {label} ({int(mask.sum())} edge px)"
+        for key, name in (("ours", "rangesim ellipses (no model)"), ("fit", "cv2.findContours + fitEllipse"),
+                          ("find", "cv2.ximgproc.findEllipses")):
+            s = feature_scores({"ellipses": out[key]}, truth, center_tol_px=2.0)["round"]
+            s = {"recall": s["recall"], "precision": s["precision"], "centre": s["center_error_px"],
+                 "radius": s["radius_error_px"]}
+            _row(inp, name, t[key], t["fit"] if key != "fit" else None, s)
+        t_mg, found = interleaved({"mg": lambda e=edges, s=scan: F.ellipses(e, s, scene)}, max(1, repeat // 2))
+        s = feature_scores({"ellipses": found["mg"]}, truth, center_tol_px=2.0)["round"]
+        s = {"recall": s["recall"], "precision": s["precision"], "centre": s["center_error_px"],
+             "radius": s["radius_error_px"]}
+        _row(inp, "rangesim ellipses (model-guided, with lines/circles/arcs)", t_mg["mg"], None, s)
+
+
+def bench_segments(views, repeat: int) -> None:
+    print("\n## segments (times: median of interleaved runs; ratio: rangesim / cv2.HoughLinesP)\n")
+    print("| input | method | ms | vs HoughLinesP | recall | precision | endpoint error mean / max px |")
+    print("|---|---|---|---|---|---|---|")
+    for key in (("noise-free", "head-on"), ("noise-free", "tilted"), ("noisy seed 0", "tilted")):
+        scan, edges, truth = views[key]
+        truth = {"circles": [], "segments": [s for s in truth["segments"]
+                                              if np.hypot(*(s.xyxy[2:] - s.xyxy[:2])) >= 30]}
+        t, out = interleaved({"ours": lambda e=edges: F.lines(e), "cv": lambda e=edges: cv_segments(e.mask),
+                              "sk": lambda e=edges: sk_segments(e.mask)}, repeat)
+        inp = f"Green Piece {key[1]}, {key[0]} ({len(truth['segments'])} truth segments >= 30 px)"
+        for k, name in (("ours", "rangesim lines"), ("cv", "cv2.HoughLinesP"),
+                        ("sk", "skimage probabilistic_hough_line")):
+            s = feature_scores({"segments": out[k]}, truth, segment_tol_px=5.0)["segments"]
+            ratio = f"{t[k] / t['cv']:5.2f}x" if k != "cv" else "     -"
+            print(f"| {inp} | {name} | {t[k] * 1e3:8.1f} | {ratio} | {_fmt(s['recall'])} | "
+                  f"{_fmt(s['precision'])} | {_fmt(s['endpoint_error_px']['mean'])} / "
+                  f"{_fmt(s['endpoint_error_px']['max'])} |")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--tune", action="store_true", help="choose OpenCV's param2 on the tuning seeds")
+    ap.add_argument("--skimage", action="store_true", help="also scikit-image hough_circle (slow)")
     args = ap.parse_args()
-    scene = rs.load_scene(ROOT / "scenes/green_piece.toml")
-    sensor = rs.load_sensor("white_scanner").with_params(QUIET)
-
-    # -- circles: head-on view, radii 5..70 px --
-    scan = rs.scan(scene, sensor, seed=0, pose=look_at((0, 0, 300), (0, 0, 0), up=(0, 1, 0)))
-    edges = rs.edges.gradient(scan, jump_clearance=0)
-    truth = rs.evaluate.ground_truth_features(scan, scene)
-    n_truth = sum(c.visible >= 0.5 for c in truth["circles"])
-    radii = np.arange(5, 71)
-    F.circles(edges, radii=(5, 70))  # warm-up
-    t_ours, ours = best_time(lambda: F.circles(edges, radii=(5, 70)), args.repeat)
-
-    def skimage_circles():
-        acc = hough_circle(edges.mask, radii)
-        _, cx, cy, r = hough_circle_peaks(acc, radii, min_xdistance=3, min_ydistance=3,
-                                          total_num_peaks=len(ours))
-        return [_C(x, y, rr) for x, y, rr in zip(cx, cy, r)]
-
-    t_sk, sk = best_time(skimage_circles, args.repeat)
-    s_ours = feature_scores({"circles": ours}, truth, scan, center_tol_px=2.0)["round"]
-    s_sk = feature_scores({"circles": sk}, truth, scan, center_tol_px=2.0)["round"]
-    print(f"edge map: {edges.mask.shape[1]}x{edges.mask.shape[0]} px, {int(edges.mask.sum())} edge px, "
-          f"{n_truth} visible rims, radii 5..70 px")
-    print(f"circles  rangesim  {t_ours * 1e3:8.1f} ms  recall {s_ours['recall']:.2f}  precision "
-          f"{s_ours['precision']:.2f}  max centre error {s_ours['center_error_px']['max']:.2f} px")
-    print(f"circles  skimage   {t_sk * 1e3:8.1f} ms  recall {s_sk['recall']:.2f}  precision "
-          f"{s_sk['precision']:.2f}  (same number of peaks)")
-    print(f"circles  speed-up  {t_sk / t_ours:8.1f}x")
-
-    # -- ellipse: tilted view, one hole rim in a crop --
-    scan = rs.scan(scene, sensor, seed=0)
-    edges = rs.edges.gradient(scan, jump_clearance=0)
-    truth = rs.evaluate.ground_truth_features(scan, scene)
-    g = next(c for c in truth["circles"] if c.name == "hole_2_rim_top")
-    half = int(np.ceil(g.axes[0])) + 4
-    x0, y0 = int(round(g.center[0])) - half, int(round(g.center[1])) - half
-    crop = edges.mask[y0:y0 + 2 * half + 1, x0:x0 + 2 * half + 1]
-    local = np.asarray(g.center) - (x0, y0)
-    F.ellipses(crop, remove_explained=False)
-    t_ours, ours = best_time(lambda: F.ellipses(crop, remove_explained=False), args.repeat)
-    d_ours = min((np.hypot(*(np.asarray(e.center) - local)) for e in ours), default=np.inf)
-    t = time.perf_counter()
-    res = hough_ellipse(crop, accuracy=2, threshold=10, min_size=int(g.axes[1]) - 2,
-                        max_size=int(g.axes[0]) + 2)
-    t_sk = time.perf_counter() - t
-    if len(res):
-        res.sort(order="accumulator")
-        best = res[-1]
-        d_sk = float(np.hypot(best["xc"] - local[0], best["yc"] - local[1]))
-    else:
-        d_sk = np.inf
-    print(f"ellipse crop {crop.shape[1]}x{crop.shape[0]} px, {int(crop.sum())} edge px ({g.name})")
-    print(f"ellipse  rangesim  {t_ours * 1e3:8.1f} ms  centre error {d_ours:.2f} px")
-    print(f"ellipse  skimage   {t_sk * 1e3:8.1f} ms  centre error {d_sk:.2f} px")
-    print(f"ellipse  speed-up  {t_sk / t_ours:8.1f}x")
+    print(f"cpu: {cpu_info()}; OpenCV {cv2.__version__} (1 thread); tuning seeds {TUNE_SEEDS}, "
+          f"report seeds {REPORT_SEEDS}")
+    if args.tune:
+        tune_opencv()
+    scene, views = green_piece()
+    bench_circles(views, args.repeat)
+    if args.skimage:
+        bench_skimage(views)
+    bench_ellipses(scene, views, args.repeat)
+    bench_segments(views, args.repeat)
 
 
 if __name__ == "__main__":
