@@ -13,8 +13,9 @@ timed interleaved in one process (median of the runs), with recall, precision an
   ``probabilistic_hough_line``, on the same tilted and head-on maps (the part's plate edges).
 
 Tuning and reporting are kept apart: every rangesim default and OpenCV's ``param2`` (accumulator
-threshold; chosen by the best F1 over 10..40 with ``--tune``) were set on synthetic seeds 0-4;
-the synthetic rows here use seeds 100-104 (512^2) and 100-102 (1024^2). The Green Piece rows
+threshold; chosen by the best F1 over 10..40 with ``--tune``) were set on synthetic seeds 0-4
+(rangesim's also on noisy Green Piece seeds 1 and 2); the synthetic rows here use seeds 100-104
+(512^2) and 100-102 (1024^2). The Green Piece rows
 (seed 0 and noise-free) were in sight while the finder was developed, so they are not held out.
 
     python benchmarks/bench_hough.py [--repeat 5] [--tune] [--skimage]
