@@ -63,6 +63,20 @@ def _strided(z: np.ndarray, target: int) -> np.ndarray:
     return z[::k, ::k]
 
 
+def _levels_close(z: np.ndarray, levels: np.ndarray) -> bool:
+    """Whether sampled neighbours that differ lie at most :data:`_QUANTUM_MAX_LEVELS` of
+    ``levels`` apart (median; False with fewer than 100 such pairs)."""
+    k = max(1, int(np.sqrt(z.size / _QUANTUM_SAMPLES)))
+    h, w = z.shape
+    hk, wk = (h - 1) // k * k, (w - 1) // k * k      # pairs of true neighbours, sampled
+    apart = []
+    for a, b in ((z[:hk:k, :wk:k], z[:hk:k, 1:wk + 1:k]), (z[:hk:k, :wk:k], z[1:hk + 1:k, :wk:k])):
+        differ = np.isfinite(a) & np.isfinite(b) & (a != b)
+        apart.append(np.abs(np.searchsorted(levels, a[differ]) - np.searchsorted(levels, b[differ])))
+    apart = np.concatenate(apart)
+    return bool(apart.size >= 100 and np.median(apart) <= _QUANTUM_MAX_LEVELS)
+
+
 def depth_quantum(z: np.ndarray) -> np.ndarray | None:
     """Quantisation step of a depth image at every pixel (mm), or None if it is not quantised.
 
@@ -96,19 +110,15 @@ def depth_quantum(z: np.ndarray) -> np.ndarray | None:
     head = vals[:4000]
     if head.size < 200 or np.unique(head).size > 0.5 * head.size:
         return None
-    levels = np.unique(z[np.isfinite(z)]).astype(np.float64)
-    if levels.size < _QUANTUM_MIN_LEVELS:
+    # the test: neighbours that differ are a level or two apart. First on the levels of
+    # every 2nd row and column, a subset of the image's: neighbours lie at most as many
+    # of those apart as of all levels, so a failure there is a failure (sorting a quarter
+    # of the pixels, not all: 13 against 48 ms at 1024 x 1024 on a noise-free scan)
+    quarter = z[::2, ::2]
+    if not _levels_close(z, np.unique(quarter[np.isfinite(quarter)]).astype(np.float64)):
         return None
-    # the test: neighbours that differ are a level or two apart
-    k = max(1, int(np.sqrt(z.size / _QUANTUM_SAMPLES)))
-    h, w = z.shape
-    hk, wk = (h - 1) // k * k, (w - 1) // k * k      # pairs of true neighbours, sampled
-    apart = []
-    for a, b in ((z[:hk:k, :wk:k], z[:hk:k, 1:wk + 1:k]), (z[:hk:k, :wk:k], z[1:hk + 1:k, :wk:k])):
-        differ = np.isfinite(a) & np.isfinite(b) & (a != b)
-        apart.append(np.abs(np.searchsorted(levels, a[differ]) - np.searchsorted(levels, b[differ])))
-    apart = np.concatenate(apart)
-    if apart.size < 100 or np.median(apart) > _QUANTUM_MAX_LEVELS:
+    levels = np.unique(z[np.isfinite(z)]).astype(np.float64)
+    if levels.size < _QUANTUM_MIN_LEVELS or not _levels_close(z, levels):
         return None
     # rounding to uneven levels (a Kinect's millimetres over its disparity steps: gaps
     # 1, 2, 1, 2 mm) moves a pair by up to the larger gap beside a level: the running
