@@ -61,8 +61,10 @@ def nonmax_suppress(
     if ii.size == 0:
         return (keep, sides) if return_sides else keep
     low = np.float32(-1e30)                      # not -inf: 0 * -inf would be NaN
-    sp = np.pad(np.where(np.isnan(strength), low, strength).astype(np.float32), 1,
-                constant_values=low).ravel()
+    sp = np.full((h + 2, w + 2), low, np.float32)      # (np.pad of np.where: 3x slower)
+    sp[1:-1, 1:-1] = strength
+    np.copyto(sp, low, where=np.isnan(sp))
+    sp = sp.ravel()
     stride = w + 2
     base = (ii + 1) * stride + (jj + 1)
     d = direction[ii, jj]
