@@ -186,7 +186,6 @@ def fit_conics_batched(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ok : (K,) bool
         Where an ellipse-specific solution exists (4 a c - b^2 > 0).
     """
-    K = len(samples)
     m = samples.mean(axis=1, keepdims=True)
     s = np.maximum(np.abs(samples - m).max(axis=(1, 2)), 1e-9)
     q = (samples - m) / s[:, None, None]
@@ -196,34 +195,7 @@ def fit_conics_batched(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     S1 = np.einsum("kni,knj->kij", D1, D1)
     S2 = np.einsum("kni,knj->kij", D1, D2)
     S3 = np.einsum("kni,knj->kij", D2, D2)
-    ok = np.abs(np.linalg.det(S3)) > 1e-12
-    S3[~ok] = np.eye(3)
-    T = -np.linalg.solve(S3, np.swapaxes(S2, 1, 2))
-    M = S1 + S2 @ T
-    M = np.stack([M[:, 2] / 2, -M[:, 1], M[:, 0] / 2], 1)
-    M[~np.isfinite(M).all(axis=(1, 2))] = 0.0
-    _, v = np.linalg.eig(M)
-    v = np.real(v)
-    cond = 4 * v[:, 0, :] * v[:, 2, :] - v[:, 1, :] ** 2  # (K, 3): per eigenvector
-    has = cond > 0
-    ok &= has.any(1)
-    first = np.argmax(has, axis=1)
-    a1 = v[np.arange(K), :, first]  # (K, 3)
-    a2 = np.einsum("kij,kj->ki", T, a1)
-    A, B, C = (a1 / s[:, None] ** 2).T
-    D, E = (a2[:, :2] / s[:, None]).T
-    F = a2[:, 2]
-    mx, my = m[:, 0, 0], m[:, 0, 1]
-    conics = np.stack([
-        A, B, C,
-        D - 2 * A * mx - B * my,
-        E - 2 * C * my - B * mx,
-        F + A * mx ** 2 + B * mx * my + C * my ** 2 - D * mx - E * my,
-    ], 1)
-    nrm = np.linalg.norm(conics, axis=1)
-    ok &= np.isfinite(nrm) & (nrm > 0)
-    conics = np.where(ok[:, None], conics / np.where(ok, nrm, 1.0)[:, None], 0.0)
-    return conics, ok
+    return _direct_fits(S1, S2, S3, m[:, 0], s)
 
 
 def sampson_distance_batched(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:

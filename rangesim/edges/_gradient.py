@@ -82,10 +82,10 @@ def _smooth5(a: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def _near(mask: np.ndarray, r: int) -> np.ndarray:
-    """Pixels within chessboard distance ``r`` of a ``mask`` pixel or of the image border."""
+def _near(mask: np.ndarray, r: int, border: bool = True) -> np.ndarray:
+    """Pixels within chessboard distance ``r`` of a ``mask`` pixel (or of the image border)."""
     h, w = mask.shape
-    p = np.ones((h + 2 * r, w + 2 * r), bool)
+    p = np.full((h + 2 * r, w + 2 * r), border)
     p[r:-r, r:-r] = mask
     rows = p[:, :w].copy()
     for k in range(1, 2 * r + 1):
@@ -294,7 +294,7 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
         any_pair = pairs[0] | pairs[1]
         any_pair |= pairs[2]
         any_pair |= pairs[3]
-        redo |= _near_inside(any_pair, 1)
+        redo |= _near(any_pair, 1, border=False)
     redo &= ~np.isnan(z)
     if skip is not None:
         redo &= ~skip
@@ -302,20 +302,6 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
     if idx.size:
         for r, exact in zip(out, _second_differences_at(p, pairs, idx, w)):
             r.ravel()[idx] = exact
-    return out
-
-
-def _near_inside(mask: np.ndarray, r: int) -> np.ndarray:
-    """Pixels within chessboard distance ``r`` of a ``mask`` pixel (nothing outside)."""
-    h, w = mask.shape
-    q = np.zeros((h + 2 * r, w + 2 * r), bool)
-    q[r:-r, r:-r] = mask
-    rows = q[:, :w].copy()
-    for k in range(1, 2 * r + 1):
-        rows |= q[:, k:k + w]
-    out = rows[:h].copy()
-    for k in range(1, 2 * r + 1):
-        out |= rows[k:k + h]
     return out
 
 
