@@ -213,6 +213,28 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
 
 
+def stencil_window(window: int | None, name: str, noise: float | None) -> int:
+    """The odd stencil size (pixels) of a normal estimate: ``window`` checked, or chosen from the noise.
+
+    Default (None): 3 on noise-free scans (``noise`` below :data:`NOISE_FLOOR` footprints, or
+    None), else ``2 ceil(12 noise) + 1`` clipped to 3..9 (7 at the White Scanner preset's 0.25):
+    the stencil grows until the noise on the normal's slopes falls under the creases' bend.
+
+    Examples
+    --------
+    >>> stencil_window(None, "window", 0.25), stencil_window(None, "window", 0.0), stencil_window(5, "window", 0.25)
+    (7, 3, 5)
+    """
+    if window is not None:
+        window = int(window)
+        if window < 3 or window % 2 == 0:
+            raise ValueError(f"{name} must be an odd integer >= 3, got {window}")
+        return window
+    if noise is None or noise < NOISE_FLOOR:
+        return 3
+    return int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9))
+
+
 def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: float,
                     stride: int = 4) -> float:
     """``max(default, k * median(strength))`` over valid pixels with a finite strength.

@@ -9,7 +9,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
-from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_NORMAL, estimate_depth_noise, noise_threshold
+from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_NORMAL, estimate_depth_noise, noise_threshold, stencil_window
 from rangesim.edges._scan_access import scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import RIM, EdgeMap
@@ -110,9 +110,7 @@ def normal(
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
     if window is not None:
-        window = int(window)
-        if window < 3 or window % 2 == 0:
-            raise ValueError(f"window must be an odd integer >= 3, got {window}")
+        stencil_window(window, "window", None)  # a bad window is refused before any work
     z, valid = scan_depth(scan)
     xyz = scan_points(scan, valid, component_major=True)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
@@ -120,8 +118,7 @@ def normal(
     if window is None or threshold_deg is None:
         noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
-    if window is None:
-        window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3
+    window = stencil_window(window, "window", noise)
     auto_threshold = threshold_deg is None
     if auto_threshold:
         threshold_deg = 20.0

@@ -13,7 +13,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.edges._differences import central_difference, dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, find_discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
-from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold
+from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold, stencil_window
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry, scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nearest_axis, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import EdgeMap
@@ -229,17 +229,14 @@ def pcl_organized(
     if unknown:
         raise ValueError(f"unknown edge types {sorted(unknown)}; choose from {EDGE_TYPES}")
     if normal_window is not None:
-        normal_window = int(normal_window)
-        if normal_window < 3 or normal_window % 2 == 0:
-            raise ValueError(f"normal_window must be an odd integer >= 3, got {normal_window}")
+        stencil_window(normal_window, "normal_window", None)  # a bad window is refused before any work
     z, valid = scan_depth(scan)
     geo = pixel_geometry(scan, z)
     noise = None
     if normal_window is None or curvature_threshold is None:
         noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
-    if normal_window is None:
-        normal_window = int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9)) if noisy else 3
+    normal_window = stencil_window(normal_window, "normal_window", noise)
     auto_threshold = curvature_threshold is None
     low, high = (0.4, 1.1) if auto_threshold else (float(t) for t in curvature_threshold)
     xyz = scan_points(scan, valid, component_major=True)
