@@ -583,7 +583,6 @@ def simulate(noise: StripeNoise, rng: "np.random.Generator | NumPyDraws | PixelD
     corr_px : (rows, columns)
         Correlation std of the correlated terms, cells.
     """
-    n = shape[0] * shape[1]
     draws = _draws(rng)
     xp = _ops(signal, candidate)
     if xp is _NP:
@@ -617,13 +616,13 @@ def simulate(noise: StripeNoise, rng: "np.random.Generator | NumPyDraws | PixelD
         w0 = float(stripe_width_px(np.ones(1), reference_magnification, s, noise.psf_px)[0])
         ratio = xp.f32(w / w0)
     else:  # no footprint: the imaged stripe is the blur alone, whatever the incidence
-        ratio = xp.full_like(signal, 1.0) if xp is _DR else np.ones(n, np.float32)
+        ratio = xp.f32(xp.full_like(signal, 1.0))
     if noise.edge_gain > 0 and s > 0:
         # erfcx (a stable phi / Phi) has no Dr.Jit counterpart either
         edge_px = partial_stripe_shift_mm(xp.numpy(border), xp.numpy(cos_incidence), s) * xp.numpy(magnification)
         edge_px = xp.like(edge_px.astype(np.float32), signal)
     else:
-        edge_px = xp.full_like(signal, 0.0) if xp is _DR else np.zeros(n, np.float32)
+        edge_px = xp.f32(xp.full_like(signal, 0.0))
     sigmas = peak_sigma_px(noise, width_ratio=ratio, amplitude=amplitude, speckle_px=speckle_px, edge_px=edge_px)
     sigmas = {k: xp.where(candidate, v, np.float32(0)) for k, v in sigmas.items()}
     error = draw_peak_error_px(draws, shape, sigmas, noise.quantization_px, corr_px)
