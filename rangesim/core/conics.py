@@ -172,42 +172,6 @@ def conic_normal_angle(conic: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return np.arctan2(b * x + 2 * c * y + e, 2 * a * x + b * y + d)
 
 
-def fit_conics_batched(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`fit_conic` on many small point sets at once (RANSAC samples).
-
-    Parameters
-    ----------
-    samples : (K, n, 2) float, n >= 5, pixels
-
-    Returns
-    -------
-    conics : (K, 6) float
-        Unit-norm conics in pixel coordinates (rows of zeros where no fit).
-    ok : (K,) bool
-        Where an ellipse-specific solution exists (4 a c - b^2 > 0).
-    """
-    m = samples.mean(axis=1, keepdims=True)
-    s = np.maximum(np.abs(samples - m).max(axis=(1, 2)), 1e-9)
-    q = (samples - m) / s[:, None, None]
-    x, y = q[..., 0], q[..., 1]
-    D1 = np.stack([x * x, x * y, y * y], -1)
-    D2 = np.stack([x, y, np.ones_like(x)], -1)
-    S1 = np.einsum("kni,knj->kij", D1, D1)
-    S2 = np.einsum("kni,knj->kij", D1, D2)
-    S3 = np.einsum("kni,knj->kij", D2, D2)
-    return _direct_fits(S1, S2, S3, m[:, 0], s)
-
-
-def sampson_distance_batched(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """(K, N) :func:`sampson_distance` of N points to each of K conics."""
-    a, b, c, d, e, f = (conics[:, i:i + 1] for i in range(6))
-    x, y = xy[None, :, 0], xy[None, :, 1]
-    q = a * x * x + b * x * y + c * y * y + d * x + e * y + f
-    gx = 2 * a * x + b * y + d
-    gy = b * x + 2 * c * y + e
-    return np.abs(q) / np.maximum(np.hypot(gx, gy), 1e-12)
-
-
 def fit_circles_batched(xy: np.ndarray, group: np.ndarray, n_groups: int, center: np.ndarray,
                         radius: np.ndarray, *, iterations: int = 2, max_step: float = 3.0,
                         min_points: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -279,9 +243,10 @@ def _group_sums(w: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
 
 
 def _direct_fits(S1: np.ndarray, S2: np.ndarray, S3: np.ndarray, m: np.ndarray,
-                 s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 s: np.ndarray, normalised: bool = False):
     """Halir-Flusser direct ellipse fits from the (K, 3, 3) blocks of the scatter matrices of
-    points centred on ``m`` (K, 2) and scaled by ``1 / s`` (K,): unit-norm pixel conics, ok."""
+    points centred on ``m`` (K, 2) and scaled by ``1 / s`` (K,): unit-norm pixel conics, ok
+    (and, with ``normalised``, the (K, 6) solutions in the normalised frame)."""
     ok = np.abs(np.linalg.det(S3)) > 1e-12
     S3[~ok] = np.eye(3)
     T = -np.linalg.solve(S3, np.swapaxes(S2, 1, 2))
@@ -310,6 +275,8 @@ def _direct_fits(S1: np.ndarray, S2: np.ndarray, S3: np.ndarray, m: np.ndarray,
     nrm = np.linalg.norm(conics, axis=1)
     ok &= np.isfinite(nrm) & (nrm > 0)
     conics = np.where(ok[:, None], conics / np.where(ok, nrm, 1.0)[:, None], 0.0)
+    if normalised:
+        return conics, ok, np.concatenate([a1, a2], 1)
     return conics, ok
 
 
@@ -339,22 +306,70 @@ def fit_conics_grouped(xy: np.ndarray, group: np.ndarray, n_groups: int) -> tupl
     s = np.maximum(np.maximum.reduceat(np.abs(q).max(1), starts), 1e-9)
     s[n == 0] = 1.0
     q = q / s[group, None]
+    conics, ok, _ = fit_conics_moments(_group_sums(conic_monomials(q), group, n_groups), m, s)
+    return conics, ok
+
+
+#: exponents (i, j) of the 15 monomials x^i y^j, i + j <= 4, whose sums make a conic's scatter matrix
+MOMENT_POWERS = [(i, j) for i in range(5) for j in range(5 - i)]
+
+
+def conic_monomials(q: np.ndarray) -> np.ndarray:
+    """(N, 15) monomials x^i y^j of :data:`MOMENT_POWERS` at points ``q`` (N, 2).
+
+    Their sums over a set of points (the moments) are additive: the moments of a union of sets
+    in one frame are the sums of theirs, so fits of unions cost no pass over the points.
+    """
     x, y = q[:, 0], q[:, 1]
-    # the 15 moments sum x^i y^j (i + j <= 4) give every entry of the 6 x 6 scatter matrix
     xp = [np.ones_like(x), x, x * x, x * x * x, x * x * x * x]
     yp = [np.ones_like(y), y, y * y, y * y * y, y * y * y * y]
-    pows = [(i, j) for i in range(5) for j in range(5 - i)]
-    mom = _group_sums(np.column_stack([xp[i] * yp[j] for i, j in pows]), group, n_groups)
-    col = {p: k for k, p in enumerate(pows)}
+    return np.column_stack([xp[i] * yp[j] for i, j in MOMENT_POWERS])
+
+
+def fit_conics_moments(mom: np.ndarray, m: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Direct ellipse fits from moments (Halir-Flusser), with their approximate residuals.
+
+    Parameters
+    ----------
+    mom : (K, 15) float
+        Sums of :func:`conic_monomials` of each set's points in its frame ``q = (xy - m) / s``.
+    m : (K, 2) float, pixels
+        Frame origins.
+    s : (K,) float, pixels
+        Frame scales (the points should have ``|q| <= 1`` or so, for conditioning).
+
+    Returns
+    -------
+    conics : (K, 6) float
+        Unit-norm conics in pixel coordinates (zeros where no fit).
+    ok : (K,) bool
+        Fitted: an ellipse-specific solution exists and there are at least 5 points.
+    rms : (K,) float, pixels
+        ``s * sqrt(sum f^2 / sum |grad f|^2)`` of the fitted form f: the gradient-weighted
+        algebraic residual, a first-order estimate of the RMS geometric distance (from the
+        moments alone).
+    """
+    K = len(mom)
+    col = {p: k for k, p in enumerate(MOMENT_POWERS)}
     mono = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # x^2, xy, y^2, x, y, 1
-    S = np.empty((n_groups, 6, 6))
+    S = np.empty((K, 6, 6))
     for a, (i1, j1) in enumerate(mono):
         for b, (i2, j2) in enumerate(mono):
             S[:, a, b] = mom[:, col[(i1 + i2, j1 + j2)]]
-    conics, ok = _direct_fits(S[:, :3, :3], S[:, :3, 3:], S[:, 3:, 3:].copy(), m, s)
-    ok &= n >= 5
+    conics, ok, v = _direct_fits(S[:, :3, :3], S[:, :3, 3:], S[:, 3:, 3:].copy(), m, s, normalised=True)
+    ok &= mom[:, col[(0, 0)]] >= 5
     conics[~ok] = 0.0
-    return conics, ok
+    # residual of the normalised form v = (A, B, C, D, E, F): sum f^2 = v S v; the gradient
+    # (2A x + B y + D, B x + 2C y + E) is linear in (x, y, 1), so sum |grad|^2 = g P g + h P h
+    f2 = np.einsum("ki,kij,kj->k", v, S, v)
+    P = S[:, 3:, 3:]  # sums of (x, y, 1)(x, y, 1)^T
+    g = np.stack([2 * v[:, 0], v[:, 1], v[:, 3]], 1)
+    h = np.stack([v[:, 1], 2 * v[:, 2], v[:, 4]], 1)
+    grad2 = np.einsum("ki,kij,kj->k", g, P, g) + np.einsum("ki,kij,kj->k", h, P, h)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = s * np.sqrt(np.maximum(f2, 0) / grad2)
+    rms = np.where(ok & np.isfinite(rms), rms, np.inf)
+    return conics, ok, rms
 
 
 def real_ellipses(conics: np.ndarray) -> np.ndarray:
@@ -380,3 +395,42 @@ def sampson_distance_rows(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:
     gx = 2 * a * x + b * y + d
     gy = b * x + 2 * c * y + e
     return np.abs(q) / np.maximum(np.hypot(gx, gy), 1e-12)
+
+
+def ellipse_params(conics: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`ellipse_from_conic` of many conics at once.
+
+    Parameters
+    ----------
+    conics : (K, 6) float
+
+    Returns
+    -------
+    center : (K, 2) float, pixels
+    axes : (K, 2) float
+        Semi-axes a >= b, pixels.
+    angle : (K,) float
+        Major-axis angle, radians in [-pi/2, pi/2).
+    ok : (K,) bool
+        Real ellipses; the other rows hold NaN or meaningless values.
+    """
+    conics = np.asarray(conics, float)
+    sgn = np.where(conics[:, 0] < 0, -1.0, 1.0)
+    a, b, c, d, e, f = (conics * sgn[:, None]).T
+    h, gx, gy = b / 2, d / 2, e / 2
+    det = a * c - h * h
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cx = (h * gy - c * gx) / det
+        cy = (h * gx - a * gy) / det
+        f0 = cx * gx + cy * gy + f
+        mean, half = (a + c) / 2, np.hypot((a - c) / 2, h)
+        lo, hi = mean - half, mean + half
+        ok = (det > 0) & (lo > 0) & (f0 < 0)
+        axes = np.column_stack([np.sqrt(-f0 / lo), np.sqrt(-f0 / hi)])
+    # eigenvector of lo, the better conditioned of the two forms (as ellipse_from_conic)
+    v1x, v1y, v2x, v2y = h, lo - a, lo - c, h
+    first = v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y
+    vx, vy = np.where(first, v1x, v2x), np.where(first, v1y, v2y)
+    vx = np.where((vx == 0) & (vy == 0), 1.0, vx)
+    angle = (np.arctan2(vy, vx) + np.pi / 2) % np.pi - np.pi / 2
+    return np.column_stack([cx, cy]), axes, angle, ok

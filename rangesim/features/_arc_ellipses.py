@@ -1,0 +1,399 @@
+"""Model-free ellipses: conics fitted to short arcs of edge pixels, then grown along the edges.
+
+Hypotheses come from the pieces of smooth edge curves inside square tiles of several sizes
+(tiles that shift by half their size, so that every arc lies whole in some tile at some scale);
+each hypothesis that is a good ellipse on its piece is grown over all the edge points near it
+whose edge direction agrees, refitted, and kept when it covers enough of its own perimeter.
+Each edge point supports one ellipse (strongest first). All of it is batched: the work follows
+the edge pixels and the number of hypotheses, with no per-curve loop and no tracing.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from rangesim.core.conics import (
+    conic_monomials,
+    ellipse_params,
+    fit_conics_grouped,
+    fit_conics_moments,
+    real_ellipses,
+    sampson_distance_rows,
+)
+
+#: tile sizes (px) of the arc pieces; each tiling also shifted by half a tile (diagonally)
+TILES_PX = (16, 32, 64, 128, 256)
+#: neighbouring edge pixels belong to one smooth curve when their edge normals agree within this
+LINK_DEG = 35.0
+#: neighbouring edge pixels are linked only when their step is at least this far off their normals
+ADJACENT_DEG = 30.0
+#: a grown point's edge normal must agree with the ellipse's normal within this, degrees
+DIRECTION_TOL_DEG = 25.0
+
+
+def smooth_curves(xy: np.ndarray, theta: np.ndarray, link_deg: float = LINK_DEG, gap_px: int = 2) -> np.ndarray:
+    """Curve label of every edge point: nearby edge pixels whose normals agree.
+
+    Two edge pixels are linked when they are 8-neighbours, or up to ``gap_px`` + 1 px apart
+    along their common tangent (the step within ``link_deg`` of the tangent: gaps of up to
+    ``gap_px`` missing pixels are bridged, parallel edges are not), and their normals agree
+    within ``link_deg`` (the sense ignored).
+
+    Parameters
+    ----------
+    xy : (N, 2) float, pixels (integer pixel positions)
+    theta : (N,) float
+        Edge-normal angles, radians.
+
+    Returns
+    -------
+    (N,) int
+        Component labels: a corner (normals turning by more than ``link_deg`` between two
+        neighbours) or a crossing edge of another direction ends a curve.
+    """
+    n = len(xy)
+    if n == 0:
+        return np.zeros(0, int)
+    x, y = xy[:, 0].astype(np.int64), xy[:, 1].astype(np.int64)
+    R = int(gap_px) + 1
+    W = int(x.max()) + 2 * R + 1
+    key = (y + R) * W + (x + R)
+    order = np.argsort(key)
+    ks = key[order]
+    cos_link, sin_link = np.cos(np.deg2rad(link_deg)), np.sin(np.deg2rad(link_deg))
+    cos_adjacent = np.cos(np.deg2rad(ADJACENT_DEG))
+    rows, cols = [], []
+    # half of the (2R+1)^2 offsets: each pair is found once
+    for dy in range(0, R + 1):
+        for dx in range(-R, R + 1):
+            if dy == 0 and dx <= 0:
+                continue
+            target = key + dy * W + dx
+            j = np.minimum(np.searchsorted(ks, target), n - 1)
+            hit = ks[j] == target
+            i, k = np.nonzero(hit)[0], order[j[hit]]
+            agree = np.abs(np.cos(theta[i] - theta[k])) >= cos_link
+            # the step must run along both tangents: within link_deg across a bridged gap, at
+            # least ADJACENT_DEG off the normal between neighbours (a curve's pixel steps are
+            # up to 45 degrees off its tangent; a parallel edge next to it is along the normal)
+            step = np.hypot(dx, dy)
+            lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
+            for t in (theta[i], theta[k]):
+                agree &= np.abs(dx * np.cos(t) + dy * np.sin(t)) <= lim * step
+            rows.append(i[agree])
+            cols.append(k[agree])
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    g = coo_matrix((np.ones(len(r), np.int8), (r, c)), shape=(n, n))
+    return connected_components(g, directed=False)[1]
+
+
+def arc_hypotheses(xy: np.ndarray, curve: np.ndarray, *, min_points: int = 10, tiles_px=TILES_PX,
+                   max_rms: float = 0.5, min_inliers: float = 0.6, min_arc_deg: float = 60.0,
+                   axes_range: tuple[float, float] = (4.0, 200.0), min_ratio: float = 0.2,
+                   pairs_per_tile: int = 3):
+    """Ellipses fitted to the pieces of each smooth curve inside square tiles.
+
+    Parameters
+    ----------
+    xy : (N, 2) float
+    curve : (N,) int
+        :func:`smooth_curves` labels.
+    min_points : int
+        Least points of a piece.
+    max_rms, min_inliers : float
+        A piece's fit is kept when the RMS Sampson distance of its points is at most
+        ``max_rms`` px and ``min_inliers`` of them lie within 1 px.
+    min_arc_deg : float
+        Least angle of the ellipse (parametric, in 10 degree bins) the piece covers: shorter
+        arcs leave the ellipse ill-determined.
+
+    Returns
+    -------
+    conics : (K, 6) float
+        Unit-norm conics of the kept pieces, the longest pieces first.
+    n_points : (K,) int
+    """
+    n = len(xy)
+    if n < min_points:
+        return np.zeros((0, 6)), np.zeros(0, int)
+    # pieces: the points of one curve in one tile (every tiling: sizes x 2 shifts); each
+    # tile is the frame of its pieces' moments (origin its centre, scale half its size)
+    tiles, frames, x, y = [], [], xy[:, 0], xy[:, 1]
+    for s in tiles_px:
+        for ox, oy in ((0, 0), (s // 2, s // 2)):
+            tx, ty = ((x + ox) // s).astype(np.int64), ((y + oy) // s).astype(np.int64)
+            tiles.append((len(tiles) * 4096 + ty) * 4096 + tx)
+            frames.append(np.column_stack([(tx + 0.5) * s - ox, (ty + 0.5) * s - oy, np.full(n, s / 2)]))
+    n_curves = int(curve.max()) + 1
+    uk, first_row, piece, cnt = np.unique(np.concatenate(tiles) * n_curves + np.tile(curve, len(tiles)),
+                                          return_index=True, return_inverse=True, return_counts=True)
+    frame = np.concatenate(frames)[first_row]  # (P, 3): origin x, y and scale of each piece
+    piece_tile, piece_curve = uk // n_curves, uk % n_curves
+    small = max(5, min_points // 3)
+    use = cnt >= small
+    rows = np.nonzero(use[piece])[0]
+    pt, pc = np.tile(np.arange(n), len(tiles))[rows], piece[rows]
+    o = np.argsort(pc, kind="stable")
+    pt, pc = pt[o], pc[o]
+    q = (xy[pt] - frame[pc, :2]) / frame[pc, 2:]
+    mom = np.zeros((len(cnt), 15))
+    starts = np.searchsorted(pc, np.nonzero(use)[0])
+    # float32 suffices for hypotheses (grow refits in float64) and halves the memory traffic
+    mom[use] = np.add.reduceat(conic_monomials(q.astype(np.float32)), starts, axis=0)
+    points = _Pieces(pt, np.where(use, cnt, 0))
+    # a piece that recurs in several tilings (a curve whole inside tiles of several shifts and
+    # sizes) is fitted once: the same curve, count and sum of point indices
+    psum = np.bincount(pc, weights=pt, minlength=len(cnt)).astype(np.int64)
+    _, first, inv = np.unique(np.column_stack([piece_curve, cnt, psum]), axis=0, return_index=True,
+                              return_inverse=True)
+    same_as = first[inv.ravel()]  # the first copy of each piece
+    quality = dict(max_rms=max_rms, min_inliers=min_inliers, axes_range=axes_range, min_ratio=min_ratio,
+                   min_arc_deg=min_arc_deg)
+    single = first[use[first]]
+    conics, curved, good = _fit_pieces(xy, points, mom[single], frame[single], [single], **quality)
+    good &= cnt[single] >= min_points
+    out_c, out_n = [conics[good]], [cnt[single][good]]
+    # pairs of curved pieces (a fit that is a real ellipse, whatever its residual) sharing a
+    # tile, the largest few per tile: the arcs of one rim that a gap or a corner split; their
+    # moments (one frame per tile) add up
+    is_curved = np.zeros(len(cnt), bool)
+    is_curved[single[curved]] = True
+    cand = np.nonzero(is_curved[same_as] & use)[0]
+    cand = cand[np.lexsort((-cnt[cand], piece_tile[cand]))]  # by tile, largest first
+    ct = piece_tile[cand]
+    rank = np.arange(len(cand)) - np.searchsorted(ct, ct, "left")
+    cand, ct = cand[rank < pairs_per_tile], ct[rank < pairs_per_tile]
+    pa, pb = [], []
+    for k in range(1, pairs_per_tile):
+        same = np.nonzero(ct[:-k] == ct[k:])[0] if len(ct) > k else np.zeros(0, int)
+        pa.append(cand[same])
+        pb.append(cand[same + k])
+    pa, pb = np.concatenate(pa), np.concatenate(pb)
+    fa, fb = same_as[pa], same_as[pb]
+    _, once = np.unique(np.minimum(fa, fb) * len(cnt) + np.maximum(fa, fb), return_index=True)
+    pa, pb = pa[once], pb[once]
+    big = cnt[pa] + cnt[pb] >= min_points
+    pa, pb = pa[big], pb[big]
+    if len(pa):
+        conics, _, good = _fit_pieces(xy, points, mom[pa] + mom[pb], frame[pa], [pa, pb], **quality)
+        out_c.append(conics[good])
+        out_n.append((cnt[pa] + cnt[pb])[good])
+    conics, npts = np.concatenate(out_c), np.concatenate(out_n)
+    o = np.argsort(-npts, kind="stable")
+    return conics[o], npts[o]
+
+
+class _Pieces:
+    """Point indices of the pieces: piece ``k`` holds ``points[start[k]:start[k] + count[k]]``."""
+
+    def __init__(self, points: np.ndarray, count: np.ndarray):
+        self.points, self.count = points, count
+        self.start = np.concatenate([[0], np.cumsum(count)[:-1]])
+
+    def rows(self, groups: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(group, point) rows, sorted by group, of groups made of one piece from each array
+        of ``groups`` (group g = the pieces ``groups[0][g], groups[1][g], ...``)."""
+        gid, pts = [], []
+        for members in groups:
+            c = self.count[members]
+            gid.append(np.repeat(np.arange(len(members)), c))
+            pts.append(self.points[np.repeat(self.start[members], c) + np.arange(c.sum())
+                                   - np.repeat(np.cumsum(c) - c, c)])
+        gid, pts = np.concatenate(gid), np.concatenate(pts)
+        o = np.argsort(gid, kind="stable")
+        return gid[o], pts[o]
+
+
+def _fit_pieces(xy, pieces: _Pieces, mom: np.ndarray, frame: np.ndarray, groups: list[np.ndarray], *,
+                max_rms, min_inliers, axes_range, min_ratio, min_arc_deg, trim_rms=3.0):
+    """Direct fits of groups of pieces from their moments ``mom`` (G, 15) in the frames
+    ``frame`` (G, 3), then checked on their points.
+
+    Returns
+    -------
+    conics : (G, 6)
+    curved : (G,) bool
+        The fit is a real ellipse within the largest axis (not a straight run).
+    good : (G,) bool
+        Also a close fit (RMS Sampson distance <= ``max_rms``, ``min_inliers`` within 1 px),
+        within the axes range and covering ``min_arc_deg`` of its ellipse.
+    """
+    conics, ok, rms_est = fit_conics_moments(mom, frame[:, :2], frame[:, 2])
+    c, axes, ang, real = ellipse_params(conics)
+    curved = ok & real & (axes[:, 0] <= axes_range[1])
+    good = curved & (rms_est <= trim_rms) & (axes[:, 1] >= 0.5 * axes_range[0])
+    # the exact checks, on the points of the groups left, after one trimmed refit (the points
+    # within 1 px of the first fit: a piece of a rim with some clutter linked to it)
+    idx = np.nonzero(good)[0]
+    gid, pt = pieces.rows([g[idx] for g in groups])
+    inl = sampson_distance_rows(conics[idx][gid], xy[pt]) <= 1.0
+    m = np.bincount(gid, minlength=len(idx))
+    new, nok = fit_conics_grouped(xy[pt[inl]], gid[inl], len(idx))
+    nok &= real_ellipses(new) & (np.bincount(gid[inl], minlength=len(idx)) >= 6)
+    conics[idx[nok]] = new[nok]
+    c, axes, ang, real = ellipse_params(conics)
+    d = sampson_distance_rows(conics[idx][gid], xy[pt])
+    inl = d <= 1.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(np.bincount(gid, weights=np.where(inl, d * d, 0), minlength=len(idx))
+                      / np.bincount(gid, weights=inl, minlength=len(idx)))
+        frac = np.bincount(gid, weights=inl, minlength=len(idx)) / m
+    # arc covered by the inliers: parametric angle in the ellipse's frame, 36 bins
+    k = idx[gid[inl]]
+    t = _parametric_angle(xy[pt[inl]], c[k], axes[k], ang[k])
+    occ = np.zeros(len(idx) * 36, bool)
+    occ[gid[inl] * 36 + np.minimum((t / (2 * np.pi) * 36).astype(np.int64), 35)] = True
+    arc = occ.reshape(len(idx), 36).sum(1) * 10.0
+    good[idx] = (rms <= max_rms) & (frac >= min_inliers) & (arc >= min_arc_deg) & real[idx] \
+        & (axes[idx, 1] >= axes_range[0]) & (axes[idx, 0] <= axes_range[1]) & (axes[idx, 1] >= min_ratio * axes[idx, 0])
+    return conics, curved, good
+
+
+def _parametric_angle(p: np.ndarray, c: np.ndarray, axes: np.ndarray, ang: np.ndarray) -> np.ndarray:
+    """(N,) parametric angle in [0, 2 pi) of points about their ellipses (rows)."""
+    d = p - c
+    ca, sa = np.cos(ang), np.sin(ang)
+    u = (d[:, 0] * ca + d[:, 1] * sa) / np.maximum(axes[:, 0], 1e-9)
+    v = (-d[:, 0] * sa + d[:, 1] * ca) / np.maximum(axes[:, 1], 1e-9)
+    return np.mod(np.arctan2(v, u), 2 * np.pi)
+
+
+def distinct(conics: np.ndarray, center_px: float = 2.0, rel_size: float = 0.2) -> np.ndarray:
+    """Indices of the conics (in order) that repeat no earlier kept one (centre within
+    ``center_px`` and both semi-axes within ``rel_size``)."""
+    c, axes, _, _ = ellipse_params(conics)
+    K = len(c)
+    if K == 0:
+        return np.zeros(0, int)
+    near = (np.hypot(*(c[:, None] - c[None]).transpose(2, 0, 1)) <= center_px)
+    near &= (np.abs(axes[:, None] - axes[None]) <= rel_size * axes[None]).all(-1)
+    taken = np.zeros(K, bool)
+    kept = []
+    for k in range(K):
+        if not taken[k]:
+            kept.append(k)
+            taken |= near[k]
+    return np.array(kept, int)
+
+
+def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2.0, 1.5, 1.0),
+         direction_tol_deg: float = DIRECTION_TOL_DEG):
+    """Refit each conic on the edge points near it whose edge normal agrees, narrowing.
+
+    Returns
+    -------
+    conics : (K, 6) float
+    ok : (K,) bool
+        Real ellipses after the last pass.
+    hyp, point : (P,) int
+        (ellipse, edge point) pairs of the inliers: within the last band and agreeing.
+    """
+    K = len(conics)
+    conics = conics.copy()
+    cos_tol = np.cos(np.deg2rad(direction_tol_deg))
+    # candidates, once: the points within ``bands[0] + margin`` px of the first conic (a
+    # refit moves an ellipse by less), found through its bounding box (points sorted by x)
+    c, axes, _, ok = ellipse_params(conics)
+    margin = 3.0
+    reach = np.where(ok, axes[:, 0], 0) + bands[0] + margin + 1
+    order = np.argsort(xy[:, 0], kind="stable")
+    xs = xy[order, 0]
+    lo = np.where(ok, np.searchsorted(xs, c[:, 0] - reach, "left"), 0)
+    n = np.where(ok, np.searchsorted(xs, c[:, 0] + reach, "right"), 0) - lo
+    hyp = np.repeat(np.arange(K), n)
+    pt = order[np.arange(n.sum()) - np.repeat(np.cumsum(n) - n - lo, n)]
+    near = np.abs(xy[pt, 1] - c[hyp, 1]) <= reach[hyp]
+    hyp, pt = hyp[near], pt[near]
+    near = sampson_distance_rows(conics[hyp], xy[pt]) <= bands[0] + margin
+    hyp, pt = hyp[near], pt[near]
+    p, ct, st = xy[pt], np.cos(theta[pt]), np.sin(theta[pt])
+    for band in bands:
+        q = conics[hyp]
+        gx = 2 * q[:, 0] * p[:, 0] + q[:, 1] * p[:, 1] + q[:, 3]
+        gy = q[:, 1] * p[:, 0] + 2 * q[:, 2] * p[:, 1] + q[:, 4]
+        val = q[:, 0] * p[:, 0] ** 2 + q[:, 1] * p[:, 0] * p[:, 1] + q[:, 2] * p[:, 1] ** 2 + q[:, 3] * p[:, 0] \
+            + q[:, 4] * p[:, 1] + q[:, 5]
+        gn = np.maximum(np.hypot(gx, gy), 1e-12)
+        sel = (np.abs(gx * ct + gy * st) >= cos_tol * gn) & (np.abs(val) <= band * gn)
+        if band == bands[-1]:
+            break
+        new, nok = fit_conics_grouped(p[sel], hyp[sel], K)
+        nok &= (np.bincount(hyp[sel], minlength=K) >= 6) & real_ellipses(new)
+        conics[nok & ok] = new[nok & ok]
+    ok &= real_ellipses(conics)
+    return conics, ok, hyp[sel], pt[sel]
+
+
+def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray):
+    """Fraction of each ellipse's perimeter holding an inlier, and the RMS Sampson distance of
+    the inliers.
+
+    The bins are equal steps of the parametric angle, ``round(2 pi b)`` of them: at least 1 px
+    of arc each (1 px at the ends of the major axis, a / b px at the ends of the minor one),
+    so that a drawn curve of pixels about 1 px apart fills every bin.
+
+    Returns
+    -------
+    cov, rms, perimeter : (K,) float
+    """
+    K = len(conics)
+    c, axes, ang, real = ellipse_params(conics)
+    c, axes = np.where(real[:, None], c, 0.0), np.where(real[:, None], axes, 1.0)  # not counted below
+    a, b = axes[:, 0], axes[:, 1]
+    perim = np.pi * (3 * (a + b) - np.sqrt(np.maximum((3 * a + b) * (a + 3 * b), 0)))  # Ramanujan
+    n_bins = np.maximum(np.nan_to_num(np.rint(2 * np.pi * b)), 8).astype(np.int64)
+    start = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
+    t = _parametric_angle(xy[pt], c[hyp], axes[hyp], ang[hyp])
+    bins = np.minimum((t / (2 * np.pi) * n_bins[hyp]).astype(np.int64), n_bins[hyp] - 1)
+    occ = np.zeros(int(n_bins.sum()), bool)
+    occ[start[hyp] + bins] = True
+    cov = np.add.reduceat(occ, start) / n_bins
+    d = sampson_distance_rows(conics[hyp], xy[pt])
+    cnt = np.bincount(hyp, minlength=K)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(np.bincount(hyp, weights=d * d, minlength=K) / cnt)
+    rms[(cnt == 0) | ~real] = np.inf
+    cov[(cnt == 0) | ~real] = 0.0
+    return cov, rms, perim
+
+
+def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, min_support: float = 0.5,
+                  max_residual: float = 0.8, axes_range: tuple[float, float] = (4.0, 200.0),
+                  min_ratio: float = 0.2) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
+    """Ellipses of edge points without a model: arc hypotheses, grown, one owner per point.
+
+    Returns
+    -------
+    list of (conic (6,), inlier point indices, coverage, RMS Sampson distance px, n inliers),
+    largest coverage first.
+    """
+    if len(xy) < min_points:
+        return []
+    curve = smooth_curves(xy, theta)
+    conics, _ = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
+    conics = conics[distinct(conics)]
+    if len(conics) == 0:
+        return []
+    conics, ok, hyp, pt = grow(conics, xy, theta)
+    cov, rms, _ = coverage(conics, xy, hyp, pt)
+    _, axes, _, real = ellipse_params(conics)
+    n_in = np.bincount(hyp, minlength=len(conics))
+    good = ok & real & (cov >= min_support) & (rms <= max_residual) & (n_in >= min_points)
+    good &= (axes[:, 1] >= axes_range[0]) & (axes[:, 0] <= axes_range[1]) & (axes[:, 1] >= min_ratio * axes[:, 0])
+    order = np.nonzero(good)[0]
+    order = order[np.argsort(-cov[order], kind="stable")]
+    by_h = np.split(pt[np.argsort(hyp, kind="stable")], np.cumsum(n_in)[:-1])
+    used = np.zeros(len(xy), bool)
+    out = []
+    for j in order:
+        pts = by_h[j]
+        free = pts[~used[pts]]
+        if len(free) < len(pts):
+            # a candidate left with too little of its perimeter once stronger ellipses took
+            # their points (a near-duplicate, a ghost across two rims) is dropped
+            if len(free) < min_points or coverage(conics[j:j + 1], xy, np.zeros(len(free), int), free)[0][0] < min_support:
+                continue
+        used[pts] = True
+        out.append((conics[j], pts, float(cov[j]), float(rms[j]), len(pts)))
+    return out
