@@ -141,3 +141,25 @@ def test_sizes_from_small_rims_to_large_ellipses(axes):
     assert len(found) == 1
     d, da = _match(found, (210.3, 209.6), axes)
     assert d <= 0.3 and da <= 0.3, (d, da)
+
+
+def test_rim_around_thread_crests(monkeypatch):
+    """A threaded hole: crests (arcs of smaller, shifted ellipses 2 px apart, touching the rim)
+    fill the rim, so every arc piece of the rim is linked to clutter; the rim's outer outline
+    still gives it."""
+    m = np.zeros((140, 140), bool)
+    center, axes, angle = (70.0, 68.0), (30.0, 22.0), 0.25
+    draw_ellipse(m, center, axes, angle)
+    for k in range(1, 9):  # crests: concentric arcs sweeping inwards, each touching the rim
+        shrink = 2.0 * k
+        draw_ellipse(m, (center[0] + 0.6 * shrink, center[1]), (axes[0] - shrink, axes[1] - shrink), angle,
+                     gaps=[(2.6, 6.3)])
+    found = F.ellipses(m, remove_explained=False)
+    d, da = _match(found, center, axes)
+    assert d <= 0.3 and da <= 0.5, (d, da)
+    # the arc pieces alone miss it: the outline is what finds it
+    import rangesim.features._arc_ellipses as A
+
+    monkeypatch.setattr(A, "outline_hypotheses", lambda xy, **kw: (np.zeros((0, 6)), np.zeros(0, int)))
+    alone = F.ellipses(m, remove_explained=False)
+    assert not alone or _match(alone, center, axes)[0] > 0.3

@@ -10,6 +10,7 @@ the edge pixels and the number of hypotheses, with no per-curve loop and no trac
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -358,6 +359,63 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     return cov, rms, perim
 
 
+def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float = 0.5, min_inliers: float = 0.6,
+                       min_arc_deg: float = 60.0, axes_range: tuple[float, float] = (4.0, 200.0),
+                       min_ratio: float = 0.2, gap_px: int = 1):
+    """Ellipses fitted to the outer outline of each group of edge pixels (as ``cv2.fitEllipse``
+    on a contour): the rim around a hole's clutter (thread crests, a floor's edges) that links
+    to the rim's arcs and spoils their pieces.
+
+    The edge pixels, dilated to bridge gaps of ``gap_px``, are grouped (8-connected); a group's
+    outline is its points with a 4-neighbour in the group's outer background (the background
+    region left of its leftmost pixel; not the regions it encloses, and not the region of a
+    group it lies in). Each outline is fitted and checked as the pieces of
+    :func:`arc_hypotheses`.
+
+    Returns
+    -------
+    conics : (K, 6) float
+    n_points : (K,) int
+    """
+    none = np.zeros((0, 6)), np.zeros(0, int)
+    if len(xy) < min_points:
+        return none
+    x, y = xy[:, 0].astype(np.int64) + 1, xy[:, 1].astype(np.int64) + 1
+    m = np.zeros((int(y.max()) + 2, int(x.max()) + 2), bool)
+    m[y, x] = True
+    grown = ndimage.binary_dilation(m, np.ones((gap_px + 1,) * 2, bool)) if gap_px > 0 else m
+    groups, G = ndimage.label(grown, np.ones((3, 3), bool))
+    spaces = ndimage.label(~grown)[0]  # 4-connected background regions
+    # each group's outer background: the region left of its leftmost pixel (not enclosed by it)
+    gy, gx = np.nonzero(grown)
+    gl = groups[gy, gx]
+    first = np.full(G + 1, np.iinfo(np.int64).max)
+    np.minimum.at(first, gl, gx * grown.shape[0] + gy)
+    fx, fy = first[1:] // grown.shape[0], first[1:] % grown.shape[0]
+    outer = np.concatenate([[-1], spaces[fy, fx - 1]])
+    lab = groups[y, x]
+    on = np.zeros(len(xy), bool)
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        on |= spaces[y + dy, x + dx] == outer[lab]
+    idx = np.nonzero(on)[0]
+    idx = idx[np.argsort(lab[idx], kind="stable")]
+    g, cnt = np.unique(lab[idx], return_counts=True)
+    group = np.repeat(np.arange(len(g)), cnt)
+    n = np.bincount(group, minlength=len(g))
+    centre = np.column_stack([np.bincount(group, weights=xy[idx, k], minlength=len(g)) / n for k in (0, 1)])
+    scale = np.maximum(np.maximum.reduceat(np.abs(xy[idx] - centre[group]).max(1), np.cumsum(n) - n), 1.0)
+    q = (xy[idx] - centre[group]) / scale[group, None]
+    mom = np.add.reduceat(conic_monomials(q.astype(np.float32)), np.cumsum(n) - n, axis=0).astype(np.float64)
+    big = np.nonzero(n >= min_points)[0]
+    if len(big) == 0:
+        return none
+    pieces = _Pieces(idx, n)
+    conics, _, good = _fit_pieces(xy, pieces, mom[big], np.column_stack([centre, scale])[big], [big],
+                                  max_rms=max_rms, min_inliers=min_inliers, axes_range=axes_range,
+                                  min_ratio=min_ratio, min_arc_deg=min_arc_deg)
+    return conics[good], n[big][good]
+
+
 def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, min_support: float = 0.5,
                   max_residual: float = 0.8, axes_range: tuple[float, float] = (4.0, 200.0),
                   min_ratio: float = 0.2) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
@@ -371,7 +429,10 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     if len(xy) < min_points:
         return []
     curve = smooth_curves(xy, theta)
-    conics, _ = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
+    conics, n = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
+    c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio)
+    conics, n = np.concatenate([conics, c2]), np.concatenate([n, n2])
+    conics = conics[np.argsort(-n, kind="stable")]
     conics = conics[distinct(conics)]
     if len(conics) == 0:
         return []
