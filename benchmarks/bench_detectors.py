@@ -79,6 +79,9 @@ CENTER_TOL_PX, SIZE_TOL = 3.0, 0.2
 TOLERANCE_PX = 2.0
 #: radius range of the circle finder, pixels (the smallest holes image at about 4 px)
 CIRCLE_RADII_PX = (3.0, 150.0)
+#: model-free ellipse settings for rims this small (chosen on tuning seeds 0-19, all presets
+#: noise-free): at least 12 points, semi-axes from 2.5 px, 55 % of the perimeter covered
+ELLIPSE_SETTINGS = {"min_points": 12, "axes_range": (2.5, 200.0), "free_support": 0.55}
 #: the noise keys zeroed for the noise-free scans, where the preset has them
 NOISE_KEYS = ("noise.sigma_px", "noise.quantization_px", "noise.speckle_contrast", "noise.signal_px",
               "camera.read_noise_e")
@@ -220,7 +223,7 @@ def run_case(seed: int, sensor_name: str, noisy: bool) -> dict[str, Any]:
             gradient_map = em
     feats = rs.evaluate.ground_truth_features(scan, scene)
     feats["circles"] = [measured_visibility(t, scan.valid) for t in feats["circles"]]
-    found = _dedupe([*rs.features.circles(gradient_map, CIRCLE_RADII_PX), *rs.features.ellipses(gradient_map)])
+    found = _dedupe([*rs.features.circles(gradient_map, CIRCLE_RADII_PX), *rs.features.ellipses(gradient_map, **ELLIPSE_SETTINGS)])
     rounds = round_feature_counts(found, feats["circles"])
     seg = rs.evaluate.feature_scores({"segments": rs.features.lines(gradient_map)}, feats, scan,
                                      min_visible=MIN_VISIBLE)["segments"]

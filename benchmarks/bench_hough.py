@@ -322,7 +322,7 @@ def bench_ellipses(scene, views, repeat: int) -> None:
         s = feature_scores({"ellipses": found["mg"]}, truth, center_tol_px=2.0)["round"]
         s = {"recall": s["recall"], "precision": s["precision"], "centre": s["center_error_px"],
              "radius": s["radius_error_px"]}
-        _row(inp, "rangesim ellipses (model-guided, with lines/circles/arcs)", t_mg["mg"], None, s)
+        _row(inp, "rangesim ellipses (model-guided)", t_mg["mg"], None, s)
 
 
 def bench_segments(views, repeat: int) -> None:
