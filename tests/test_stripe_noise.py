@@ -147,3 +147,22 @@ def test_detectors_take_the_predicted_noise_where_the_data_underestimates_it():
     assert estimate_depth_noise(scan) == pytest.approx(true, rel=0.1)
     # without the prediction the second differences of a correlated error see only a fraction of it
     assert estimate_depth_noise(replace(scan, sigma=None)) < 0.5 * true
+
+
+@pytest.mark.parametrize("sampling", [(1.0, 1.0), (0.3, 0.5)])
+def test_border_distance_at_asked_cells_is_the_exact_distance_transform(sampling):
+    """The k-d tree answer at a few cells equals the full Euclidean distance transform there
+    (the border half a cell beyond the last measurable cell)."""
+    rng = np.random.default_rng(4)
+    m = np.ones((60, 80), bool)
+    m[rng.random(m.shape) < 0.01] = False  # scattered holes
+    m[20:35, 10:30] = False  # a shadow
+    m[:, :3] = False
+    full = sn.border_distance(m, sampling=sampling)
+    cells = rng.choice(np.flatnonzero(m.ravel()), 300, replace=False)
+    np.testing.assert_allclose(sn.border_distance_at(m, cells, sampling), full[cells], atol=1e-12)
+    ask = np.zeros(m.size, bool)
+    ask[cells] = True
+    part = sn.border_distance(m, sampling=sampling, where=ask)
+    np.testing.assert_allclose(part[cells], full[cells], atol=1e-12)
+    assert np.isinf(part[~ask & m.ravel()]).all() and (part[~m.ravel()] == 0).all()

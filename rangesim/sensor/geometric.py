@@ -36,7 +36,7 @@ from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
-from rangesim.sensor.stripe_noise import PixelDraws, StripeNoise, border_distance, dorsch_sigma_mm, simulate
+from rangesim.sensor.stripe_noise import PixelDraws, StripeNoise, border_distance_at, dorsch_sigma_mm, simulate
 from rangesim.sensor.triangulation import triangulate
 
 #: below this |n . r| (sheet nearly containing the camera ray) triangulation is undefined
@@ -157,12 +157,15 @@ def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], 
 
     def border_mm(where) -> "mi.Float":
         # the stripe is truncated where the surface ends or the laser cannot reach it
+        # (px on the image over magnification px/mm), only at the cells asked: the others +inf
         status_np = np.asarray(status)
         reached = (status_np == Status.VALID) | (status_np == Status.DROPOUT)
-        m = np.asarray(magnification)
-        d = border_distance(reached.reshape(shape), where=np.asarray(where)) / np.where(
-            (status_np == Status.VALID) & (m > 0), m, 1.0)
-        return mi.Float(d.astype(np.float32))
+        ask = np.flatnonzero(np.asarray(where) & reached)
+        m = np.asarray(magnification)[ask]
+        d = np.full(status_np.size, np.inf, np.float32)
+        d[ask] = border_distance_at(reached.reshape(shape), ask) / np.where(
+            (status_np[ask] == Status.VALID) & (m > 0), m, 1.0)
+        return mi.Float(d)
 
     corr = noise.correlation_mm * f / z_ref
     draw = simulate(noise, draws, shape, candidate=candidate, signal=signal, cos_incidence=cos_i,
