@@ -163,3 +163,32 @@ def test_rim_around_thread_crests(monkeypatch):
     monkeypatch.setattr(A, "outline_hypotheses", lambda xy, **kw: (np.zeros((0, 6)), np.zeros(0, int)))
     alone = F.ellipses(m, remove_explained=False)
     assert not alone or _match(alone, center, axes)[0] > 0.3
+
+
+def test_coverage_is_the_fraction_of_arc_length_on_thin_ellipses():
+    """Coverage counts 1 px bins of arc length: on a thin ellipse (b/a = 0.15) the points of
+    the arc from one end of the major axis to the other (half the perimeter, by symmetry)
+    cover half of it, and the two flat sides alone (most of the perimeter) not the ends'
+    share; equal steps of the parametric angle would give the flat sides far less weight."""
+    from rangesim.core.conics import fit_conic
+    from rangesim.features._arc_ellipses import coverage
+
+    center, axes, angle = np.array([100.0, 80.0]), (40.0, 6.0), 0.3
+    t = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
+    (a, b), c, s = axes, np.cos(angle), np.sin(angle)
+    pts = np.column_stack([center[0] + a * np.cos(t) * c - b * np.sin(t) * s,
+                           center[1] + a * np.cos(t) * s + b * np.sin(t) * c])
+    conic = fit_conic(pts)[None]
+    full = coverage(conic, pts, np.zeros(len(pts), int), np.arange(len(pts)))[0][0]
+    half_idx = np.nonzero(t < np.pi)[0]
+    half = coverage(conic, pts, np.zeros(len(half_idx), int), half_idx)[0][0]
+    # the quarter of parametric angle around each end of the major axis holds little arc
+    ends = np.nonzero(np.abs(np.cos(t)) > np.cos(np.pi / 4))[0]
+    end_cov = coverage(conic, pts, np.zeros(len(ends), int), ends)[0][0]
+    assert full == pytest.approx(1.0, abs=0.01)
+    assert half == pytest.approx(0.5, abs=0.02)
+    # exact share of the arc where |cos t| > cos 45 deg: integrate the speed
+    tt = np.linspace(0, 2 * np.pi, 200001)
+    speed = np.hypot(a * np.sin(tt), b * np.cos(tt))
+    share = speed[np.abs(np.cos(tt)) > np.cos(np.pi / 4)].sum() / speed.sum()
+    assert end_cov == pytest.approx(share, abs=0.02) and share < 0.45

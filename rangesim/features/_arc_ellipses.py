@@ -29,6 +29,8 @@ TILES_PX = (16, 32, 64, 128, 256)
 LINK_DEG = 35.0
 #: neighbouring edge pixels are linked only when their step is at least this far off their normals
 ADJACENT_DEG = 30.0
+#: ellipses longer than this (px of perimeter) are not scored: conics of straight runs
+MAX_PERIMETER_PX = 20000.0
 #: a grown point's edge normal must agree with the ellipse's normal within this, degrees
 DIRECTION_TOL_DEG = 25.0
 
@@ -330,9 +332,11 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     """Fraction of each ellipse's perimeter holding an inlier, and the RMS Sampson distance of
     the inliers.
 
-    The bins are equal steps of the parametric angle, ``round(2 pi b)`` of them: at least 1 px
-    of arc each (1 px at the ends of the major axis, a / b px at the ends of the minor one),
-    so that a drawn curve of pixels about 1 px apart fills every bin.
+    The bins are 1 px of arc each, ``round(perimeter)`` of them (as a circle's ``round(2 pi r)``
+    in :func:`~rangesim.features.circles`): a point's bin is its arc length from the major
+    axis's end, interpolated in a table of the arc length at 64 steps of the parametric angle.
+    Equal steps of the parametric angle instead would be up to a / b px of arc long, so a thin
+    ellipse (b of 2-4 px) would be "covered" by a few points.
 
     Returns
     -------
@@ -342,11 +346,19 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     c, axes, ang, real = ellipse_params(conics)
     c, axes = np.where(real[:, None], c, 0.0), np.where(real[:, None], axes, 1.0)  # not counted below
     a, b = axes[:, 0], axes[:, 1]
-    perim = np.pi * (3 * (a + b) - np.sqrt(np.maximum((3 * a + b) * (a + 3 * b), 0)))  # Ramanujan
-    n_bins = np.maximum(np.nan_to_num(np.rint(2 * np.pi * b)), 8).astype(np.int64)
+    # arc length at t_j = 2 pi j / 64: trapezoids of |d(x, y)/dt| = sqrt(a^2 sin^2 t + b^2 cos^2 t)
+    steps = 64
+    tj = np.linspace(0.0, 2 * np.pi, steps + 1)
+    speed = np.sqrt((a[:, None] * np.sin(tj)) ** 2 + (b[:, None] * np.cos(tj)) ** 2)
+    arc = np.concatenate([np.zeros((K, 1)), np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]), 1) * (2 * np.pi / steps)], 1)
+    perim = arc[:, -1]
+    huge = ~(perim <= MAX_PERIMETER_PX)  # a straight run's conic: not an ellipse to score (cov 0)
+    n_bins = np.where(huge, 8, np.maximum(np.nan_to_num(np.rint(perim)), 8)).astype(np.int64)
     start = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
-    t = _parametric_angle(xy[pt], c[hyp], axes[hyp], ang[hyp])
-    bins = np.minimum((t / (2 * np.pi) * n_bins[hyp]).astype(np.int64), n_bins[hyp] - 1)
+    u = _parametric_angle(xy[pt], c[hyp], axes[hyp], ang[hyp]) * (steps / (2 * np.pi))
+    j = np.minimum(u.astype(np.int64), steps - 1)
+    s_pt = arc[hyp, j] + (u - j) * (arc[hyp, j + 1] - arc[hyp, j])
+    bins = np.minimum((s_pt / perim[hyp] * n_bins[hyp]).astype(np.int64), n_bins[hyp] - 1)
     occ = np.zeros(int(n_bins.sum()), bool)
     occ[start[hyp] + bins] = True
     cov = np.add.reduceat(occ, start) / n_bins
@@ -354,8 +366,8 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     cnt = np.bincount(hyp, minlength=K)
     with np.errstate(invalid="ignore", divide="ignore"):
         rms = np.sqrt(np.bincount(hyp, weights=d * d, minlength=K) / cnt)
-    rms[(cnt == 0) | ~real] = np.inf
-    cov[(cnt == 0) | ~real] = 0.0
+    rms[(cnt == 0) | ~real | huge] = np.inf
+    cov[(cnt == 0) | ~real | huge] = 0.0
     return cov, rms, perim
 
 
