@@ -192,3 +192,20 @@ def test_coverage_is_the_fraction_of_arc_length_on_thin_ellipses():
     speed = np.hypot(a * np.sin(tt), b * np.cos(tt))
     share = speed[np.abs(np.cos(tt)) > np.cos(np.pi / 4)].sum() / speed.sum()
     assert end_cov == pytest.approx(share, abs=0.02) and share < 0.45
+
+
+def test_circles_are_not_the_ends_of_elongated_ellipses(monkeypatch):
+    """Near the ends of its major axis a small elongated ellipse (b/a 0.65-0.7) follows a
+    circle over about half of it: the circle finder must not report that circle, while a real
+    circle drawn over 60 % of its perimeter beside it is kept."""
+    import rangesim.features._circles as C
+
+    for axes in ((16.0, 11.0), (14.0, 9.0)):
+        m = np.zeros((120, 200), bool)
+        draw_ellipse(m, (60.3, 60.2), axes, 0.3)
+        draw_ellipse(m, (150.0, 60.0), (15.0, 15.0), 0.0, gaps=[(0.0, 0.4 * 2 * np.pi)])
+        found = F.circles(m, radii=(4, 30))
+        assert [round(f.radius) for f in found] == [15], [(np.round(f.center), round(f.radius, 1)) for f in found]
+    # without the check, the last ellipse's end is reported as a circle
+    monkeypatch.setattr(C, "_ellipse_pieces", lambda found, xy, theta: np.zeros(len(found), bool))
+    assert len(F.circles(m, radii=(4, 30))) == 2

@@ -8,13 +8,17 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.core.conics import fit_circles_batched
+from rangesim.core.conics import ellipse_params, fit_circles_batched
 from rangesim.core.memory import check_memory
+from rangesim.features._arc_ellipses import coverage as ellipse_coverage
+from rangesim.features._arc_ellipses import grow
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._edge_points import angular_coverage, edge_points
 
 DIRECTION_TOL_DEG = 15.0  # an inlier's edge normal is radial within this, degrees
 REL_CELL = 1 / 4  # accumulator cell over the band's smallest radius (radius_bands)
+ELLIPSE_PIECE_RATIO = 0.85  # a circle that grows into an ellipse thinner than this is its end
+PIECE_MAX_SUPPORT = 0.75  # circles supported over more of their perimeter are not checked
 
 
 @dataclass(frozen=True)
@@ -314,7 +318,8 @@ def circles(
         Least fraction of the circumference (bins of about 1 px) with an edge pixel within
         1 px of the circle whose edge normal is radial within 15 degrees; each edge pixel
         supports one circle (strongest first), so a candidate left below this once the pixels
-        of stronger circles are taken (a near-duplicate, a ghost across two rims) is dropped.
+        of stronger circles are taken (a near-duplicate, a ghost across two rims) is dropped;
+        so is a circle that is the end of an elongated ellipse (:func:`_ellipse_pieces`).
     threshold : float
         Accumulator threshold as a fraction of the 2 pi r votes of a complete circle.
     angle_tol_deg : float
@@ -372,7 +377,40 @@ def circles(
         used[pts] = True
         found.append(Circle((float(c[j, 0]), float(c[j, 1])), float(r[j]), int(votes[j]), float(cov[j]),
                             float(rms[j])))
-    return found
+    return [f for f, piece in zip(found, _ellipse_pieces(found, xy, theta)) if not piece]
+
+
+def _ellipse_pieces(found: list[Circle], xy: np.ndarray, theta: np.ndarray,
+                    max_ratio: float = ELLIPSE_PIECE_RATIO) -> np.ndarray:
+    """(len(found),) bool: circles that are the end of an elongated ellipse.
+
+    Near the ends of its major axis an ellipse is close to a circle of radius b^2 / a over half
+    or more of that circle's perimeter. Each circle supported over less than
+    ``PIECE_MAX_SUPPORT`` (0.75) of its perimeter is grown as a general conic over the edge
+    points within 3, 1.5 then 1 px whose normal agrees (:func:`~._arc_ellipses.grow`); when
+    that conic is an ellipse of axis ratio below ``max_ratio`` that covers more of its own
+    perimeter than the circle did, the edge is that ellipse and the circle is dropped.
+    """
+    out = np.zeros(len(found), bool)
+    # a circle supported over most of its perimeter is no ellipse's end (an ellipse of axis
+    # ratio 0.85 leaves its osculating circle well before that): only the others are grown
+    ask = np.array([f.support < PIECE_MAX_SUPPORT for f in found], bool)
+    if not ask.any():
+        return out
+    found = [f for f, a in zip(found, ask) if a]
+    c = np.array([f.center for f in found], float)
+    r = np.array([f.radius for f in found], float)
+    one = np.ones(len(r))
+    conics = np.column_stack([one, 0 * one, one, -2 * c[:, 0], -2 * c[:, 1], (c ** 2).sum(1) - r ** 2])
+    conics /= np.linalg.norm(conics, axis=1, keepdims=True)
+    grown, ok, hyp, pt = grow(conics, xy, theta, bands=(3.0, 1.5, 1.0))
+    cov, _, _ = ellipse_coverage(grown, xy, hyp, pt)
+    _, axes, _, real = ellipse_params(grown)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = axes[:, 1] / axes[:, 0]
+    support = np.array([f.support for f in found])
+    out[ask] = ok & real & (ratio < max_ratio) & (cov > support)
+    return out
 
 
 def _coverage(xy: np.ndarray, c: np.ndarray, r: np.ndarray, ph: np.ndarray,
