@@ -236,7 +236,10 @@ def _group_sums(w: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
     groups are sorted (as the circle finder's pairs are), else a bincount per column."""
     if len(group) and np.all(group[1:] >= group[:-1]):
         starts = np.searchsorted(group, np.arange(n_groups))
-        out = np.add.reduceat(w, np.minimum(starts, len(group) - 1), axis=0)
+        # a row of zeros after the last, so that trailing empty groups start inside the array
+        # and the last non-empty group keeps its last row
+        padded = np.concatenate([w, np.zeros((1,) + w.shape[1:], w.dtype)])
+        out = np.add.reduceat(padded, starts, axis=0)
         out[np.bincount(group, minlength=n_groups) == 0] = 0.0
         return out
     return np.column_stack([np.bincount(group, weights=w[:, j], minlength=n_groups) for j in range(w.shape[1])])

@@ -4,7 +4,8 @@ Hypotheses come from the pieces of smooth edge curves inside square tiles of sev
 (tiles that shift by half their size, so that every arc lies whole in some tile at some scale);
 each hypothesis that is a good ellipse on its piece is grown over all the edge points near it
 whose edge direction agrees, refitted, and kept when it covers enough of its own perimeter.
-Each edge point supports one ellipse (strongest first). All of it is batched: the work follows
+Each edge point is claimed by one ellipse (strongest first): a candidate left with too little
+unclaimed support is dropped. All of it is batched: the work follows
 the edge pixels and the number of hypotheses, with no per-curve loop and no tracing.
 """
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from rangesim.core.conics import (
     conic_monomials,
@@ -172,7 +174,8 @@ def arc_hypotheses(xy: np.ndarray, curve: np.ndarray, *, min_points: int = 10, t
         same = np.nonzero(ct[:-k] == ct[k:])[0] if len(ct) > k else np.zeros(0, int)
         pa.append(cand[same])
         pb.append(cand[same + k])
-    pa, pb = np.concatenate(pa), np.concatenate(pb)
+    pa = np.concatenate(pa) if pa else np.zeros(0, np.int64)
+    pb = np.concatenate(pb) if pb else np.zeros(0, np.int64)
     fa, fb = same_as[pa], same_as[pb]
     _, once = np.unique(np.minimum(fa, fb) * len(cnt) + np.maximum(fa, fb), return_index=True)
     pa, pb = pa[once], pb[once]
@@ -269,15 +272,61 @@ def distinct(conics: np.ndarray, center_px: float = 2.0, rel_size: float = 0.2) 
     K = len(c)
     if K == 0:
         return np.zeros(0, int)
-    near = (np.hypot(*(c[:, None] - c[None]).transpose(2, 0, 1)) <= center_px)
-    near &= (np.abs(axes[:, None] - axes[None]) <= rel_size * axes[None]).all(-1)
+    # pairs of near centres (a k-d tree: no K x K arrays), then the greedy pass over them
+    pairs = cKDTree(np.nan_to_num(c, nan=1e12, posinf=1e12, neginf=-1e12)).query_pairs(center_px, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.abs(axes[i] - axes[j])
+    fwd, back = (d <= rel_size * axes[j]).all(1), (d <= rel_size * axes[i]).all(1)  # k takes j: within j's size
+    i, j = np.concatenate([i[fwd], j[back]]), np.concatenate([j[fwd], i[back]])
+    o = np.argsort(i, kind="stable")
+    i, j = i[o], j[o]
+    start = np.searchsorted(i, np.arange(K + 1))
     taken = np.zeros(K, bool)
     kept = []
     for k in range(K):
         if not taken[k]:
             kept.append(k)
-            taken |= near[k]
+            taken[j[start[k]:start[k + 1]]] = True
     return np.array(kept, int)
+
+
+def _ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(owner, index) of the concatenated ranges ``start[k] .. start[k] + count[k]``."""
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count - start, count)
+
+
+def box_candidates(center: np.ndarray, reach: np.ndarray, xy: np.ndarray,
+                   cell_px: float = 32.0) -> tuple[np.ndarray, np.ndarray]:
+    """(box, point) pairs: the points within ``reach`` px (Chebyshev) of each centre.
+
+    Through a grid of ``cell_px`` cells (points sorted by cell), so the pairs looked at are
+    those of the cells each box overlaps: proportional to the boxes' areas, not to the image.
+    A box with a non-finite centre or reach gets none.
+    """
+    K = len(center)
+    if K == 0 or len(xy) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    gx, gy = (xy[:, 0] // cell_px).astype(np.int64), (xy[:, 1] // cell_px).astype(np.int64)
+    nx, ny = int(gx.max()) + 1, int(gy.max()) + 1
+    key = gy * nx + gx
+    order = np.argsort(key, kind="stable")
+    cell_start = np.searchsorted(key[order], np.arange(nx * ny + 1))
+    good = np.isfinite(center).all(1) & np.isfinite(reach)
+    cx, cy = np.where(good, center[:, 0], 0.0), np.where(good, center[:, 1], 0.0)
+    r = np.where(good, reach, -1.0)
+    x0 = np.clip(np.floor((cx - r) / cell_px), 0, nx).astype(np.int64)
+    x1 = np.clip(np.floor((cx + r) / cell_px), -1, nx - 1).astype(np.int64)
+    y0 = np.clip(np.floor((cy - r) / cell_px), 0, ny).astype(np.int64)
+    y1 = np.clip(np.floor((cy + r) / cell_px), -1, ny - 1).astype(np.int64)
+    wx, wy = np.maximum(x1 - x0 + 1, 0), np.maximum(y1 - y0 + 1, 0)
+    box, local = _ranges(np.zeros(K, np.int64), np.where(good, wx * wy, 0))
+    cell = (y0[box] + local // np.maximum(wx[box], 1)) * nx + x0[box] + local % np.maximum(wx[box], 1)
+    first, count = cell_start[cell], cell_start[cell + 1] - cell_start[cell]
+    which, at = _ranges(first, count)
+    hyp, pt = box[which], order[at]
+    inside = (np.abs(xy[pt, 0] - cx[hyp]) <= r[hyp]) & (np.abs(xy[pt, 1] - cy[hyp]) <= r[hyp])
+    return hyp[inside], pt[inside]
 
 
 def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2.0, 1.5, 1.0),
@@ -299,15 +348,8 @@ def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2
     # refit moves an ellipse by less), found through its bounding box (points sorted by x)
     c, axes, _, ok = ellipse_params(conics)
     margin = 3.0
-    reach = np.where(ok, axes[:, 0], 0) + bands[0] + margin + 1
-    order = np.argsort(xy[:, 0], kind="stable")
-    xs = xy[order, 0]
-    lo = np.where(ok, np.searchsorted(xs, c[:, 0] - reach, "left"), 0)
-    n = np.where(ok, np.searchsorted(xs, c[:, 0] + reach, "right"), 0) - lo
-    hyp = np.repeat(np.arange(K), n)
-    pt = order[np.arange(n.sum()) - np.repeat(np.cumsum(n) - n - lo, n)]
-    near = np.abs(xy[pt, 1] - c[hyp, 1]) <= reach[hyp]
-    hyp, pt = hyp[near], pt[near]
+    reach = axes[:, 0] + bands[0] + margin + 1
+    hyp, pt = box_candidates(np.where(ok[:, None], c, np.inf), np.where(ok, reach, 0.0), xy)
     near = sampson_distance_rows(conics[hyp], xy[pt]) <= bands[0] + margin
     hyp, pt = hyp[near], pt[near]
     p, ct, st = xy[pt], np.cos(theta[pt]), np.sin(theta[pt])
@@ -343,6 +385,8 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     cov, rms, perimeter : (K,) float
     """
     K = len(conics)
+    if K == 0:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
     c, axes, ang, real = ellipse_params(conics)
     c, axes = np.where(real[:, None], c, 0.0), np.where(real[:, None], axes, 1.0)  # not counted below
     a, b = axes[:, 0], axes[:, 1]
@@ -352,7 +396,7 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     speed = np.sqrt((a[:, None] * np.sin(tj)) ** 2 + (b[:, None] * np.cos(tj)) ** 2)
     arc = np.concatenate([np.zeros((K, 1)), np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]), 1) * (2 * np.pi / steps)], 1)
     perim = arc[:, -1]
-    huge = ~(perim <= MAX_PERIMETER_PX)  # a straight run's conic: not an ellipse to score (cov 0)
+    huge = ~(perim <= MAX_PERIMETER_PX)  # (NaN too) a straight run's conic: not an ellipse to score (cov 0)
     n_bins = np.where(huge, 8, np.maximum(np.nan_to_num(np.rint(perim)), 8)).astype(np.int64)
     start = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
     u = _parametric_angle(xy[pt], c[hyp], axes[hyp], ang[hyp]) * (steps / (2 * np.pi))
@@ -378,7 +422,8 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     on a contour): the rim around a hole's clutter (thread crests, a floor's edges) that links
     to the rim's arcs and spoils their pieces.
 
-    The edge pixels, dilated to bridge gaps of ``gap_px``, are grouped (8-connected); a group's
+    The edge pixels, dilated by ``gap_px`` every way (bridging gaps of up to twice that), are
+    grouped (8-connected); a group's
     outline is its points with a 4-neighbour in the group's outer background (the background
     region left of its leftmost pixel; not the regions it encloses, and not the region of a
     group it lies in). Each outline is fitted and checked as the pieces of
@@ -392,10 +437,13 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     none = np.zeros((0, 6)), np.zeros(0, int)
     if len(xy) < min_points:
         return none
-    x, y = xy[:, 0].astype(np.int64) + 1, xy[:, 1].astype(np.int64) + 1
-    m = np.zeros((int(y.max()) + 2, int(x.max()) + 2), bool)
+    g = max(int(gap_px), 0)
+    pad = g + 1  # room for the dilation (g px every way) and the neighbour tests beyond it
+    x, y = xy[:, 0].astype(np.int64) + pad, xy[:, 1].astype(np.int64) + pad
+    m = np.zeros((int(y.max()) + pad + 1, int(x.max()) + pad + 1), bool)
     m[y, x] = True
-    grown = ndimage.binary_dilation(m, np.ones((gap_px + 1,) * 2, bool)) if gap_px > 0 else m
+    # a symmetric (2 g + 1)-square dilation: gaps of up to 2 g missing pixels are bridged
+    grown = ndimage.binary_dilation(m, np.ones((2 * g + 1,) * 2, bool)) if g > 0 else m
     groups, G = ndimage.label(grown, np.ones((3, 3), bool))
     spaces = ndimage.label(~grown)[0]  # 4-connected background regions
     # each group's outer background: the region left of its leftmost pixel (not enclosed by it)
@@ -407,7 +455,8 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     outer = np.concatenate([[-1], spaces[fy, fx - 1]])
     lab = groups[y, x]
     on = np.zeros(len(xy), bool)
-    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+    # the 4-neighbours of a point's dilated footprint (y - g .. y + g, x - g .. x + g)
+    for dy, dx in ((-g - 1, 0), (g + 1, 0), (0, -g - 1), (0, g + 1)):
         on |= spaces[y + dy, x + dx] == outer[lab]
     idx = np.nonzero(on)[0]
     idx = idx[np.argsort(lab[idx], kind="stable")]
@@ -431,7 +480,9 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
 def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, min_support: float = 0.5,
                   max_residual: float = 0.8, axes_range: tuple[float, float] = (4.0, 200.0),
                   min_ratio: float = 0.2) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
-    """Ellipses of edge points without a model: arc hypotheses, grown, one owner per point.
+    """Ellipses of edge points without a model: arc hypotheses, grown, one claim per point
+    (a candidate whose unclaimed inliers cover less than ``min_support`` is dropped; the
+    returned inliers of an accepted ellipse are all of them, claimed before or not).
 
     Returns
     -------

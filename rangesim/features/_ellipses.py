@@ -196,13 +196,16 @@ def ellipses(
 
     Without a model (:func:`~._arc_ellipses.free_ellipses`): the edge pixels are linked into
     smooth curves (neighbours, or up to 3 px apart along their tangent, whose normals agree
-    within 35 degrees); the pieces of each curve inside square tiles of 16-128 px (four
-    shifts each), and the pairs of the largest pieces that share a tile, are fitted by direct
-    least squares; the pieces that are good ellipses (RMS Sampson distance <= 0.5 px over at
+    within 35 degrees); the pieces of each curve inside square tiles of 16-256 px (two shifts
+    each: none and half a tile diagonally), the pairs of the largest pieces that share a tile,
+    and the outer outline of each group of edge pixels are fitted by direct least squares; those
+    that are good ellipses (after one trimmed refit, RMS Sampson distance <= 0.5 px over at
     least 60 degrees of arc) are grown over the edge points within 3, 2, 1.5 then 1 px whose
     normal agrees within 25 degrees, refitted, and kept when those points cover at least
-    ``free_support`` of the perimeter with an RMS distance <= 0.8 px. Each edge point supports
-    one ellipse (largest coverage first). ``seed`` is not used (the path has no random
+    ``free_support`` of the perimeter (1 px bins of arc length) with an RMS distance <= 0.8 px.
+    Edge points are claimed by one ellipse each (largest coverage first): a candidate whose
+    unclaimed points no longer cover ``free_support`` (a near-duplicate, a ghost across two
+    rims) is dropped; an accepted ellipse's ``n_points`` counts all its inliers. ``seed`` is not used (the path has no random
     sampling; kept so that callers passing it keep working).
 
     Returns

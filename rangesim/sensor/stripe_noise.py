@@ -520,7 +520,7 @@ def border_distance_at(measurable: np.ndarray, cells: np.ndarray,
     """:func:`border_distance` of the measurable cells ``cells`` only (flat indices), (K,).
 
     Exact: a k-d tree over the border cells (the unmeasurable cells next to a measurable one,
-    where every nearest unmeasurable cell lies), queried on both cores; its cost follows the
+    where every nearest unmeasurable cell lies), queried on all cores; its cost follows the
     border and the cells asked, not the grid (no full-size array is made).
     """
     from scipy.spatial import cKDTree
