@@ -126,33 +126,15 @@ def conic_matrix(conic: np.ndarray) -> np.ndarray:
 
 
 def ellipse_from_conic(conic: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """(center (2,), semi-axes (a >= b), major-axis angle in (-pi/2, pi/2]) or None.
+    """(center (2,), semi-axes (a >= b), major-axis angle in [-pi/2, pi/2)) or None.
 
-    Closed form of the 2 x 2 algebra (centre, eigenvalues and major-axis eigenvector of the
-    quadratic part).
+    One row of :func:`ellipse_params` (closed form of the 2 x 2 algebra); None for a parabola,
+    a hyperbola, an imaginary ellipse or a point.
     """
-    a, b, c, d, e, f = (float(v) for v in conic)
-    if a < 0:
-        a, b, c, d, e, f = -a, -b, -c, -d, -e, -f
-    h, gx, gy = b / 2, d / 2, e / 2
-    det = a * c - h * h
-    if not det > 0:
-        return None  # parabola or hyperbola (or not finite)
-    cx = (h * gy - c * gx) / det
-    cy = (h * gx - a * gy) / det
-    f0 = cx * gx + cy * gy + f  # value of the form at the centre
-    mean, half = (a + c) / 2, np.hypot((a - c) / 2, h)
-    lo, hi = mean - half, mean + half  # eigenvalues, lo <= hi; the major axis goes with lo
-    if not (lo > 0 and f0 < 0):
-        return None  # an imaginary ellipse (or a point)
-    # eigenvector of lo: (h, lo - a) or (lo - c, h), whichever is better conditioned
-    v1, v2 = (h, lo - a), (lo - c, h)
-    vx, vy = v1 if v1[0] ** 2 + v1[1] ** 2 >= v2[0] ** 2 + v2[1] ** 2 else v2
-    if vx == 0 and vy == 0:
-        vx = 1.0  # a circle: any direction
-    angle = float(np.arctan2(vy, vx))
-    angle = (angle + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector
-    return np.array([cx, cy]), np.array([np.sqrt(-f0 / lo), np.sqrt(-f0 / hi)]), angle
+    c, axes, angle, ok = ellipse_params(np.asarray(conic, float).reshape(1, 6))
+    if not ok[0]:
+        return None
+    return c[0], axes[0], float(angle[0])
 
 
 def sampson_distance(conic: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -377,17 +359,7 @@ def fit_conics_moments(mom: np.ndarray, m: np.ndarray, s: np.ndarray) -> tuple[n
 
 def real_ellipses(conics: np.ndarray) -> np.ndarray:
     """(K,) bool: which conics are real ellipses (as :func:`ellipse_from_conic` accepts)."""
-    a, b, c, d, e, f = conics.T
-    sgn = np.where(a < 0, -1.0, 1.0)
-    a, b, c, d, e, f = a * sgn, b * sgn, c * sgn, d * sgn, e * sgn, f * sgn
-    h, gx, gy = b / 2, d / 2, e / 2
-    det = a * c - h * h
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cx = (h * gy - c * gx) / det
-        cy = (h * gx - a * gy) / det
-        f0 = cx * gx + cy * gy + f
-        lo = (a + c) / 2 - np.hypot((a - c) / 2, h)
-        return (det > 0) & (lo > 0) & (f0 < 0)
+    return ellipse_params(conics)[3]
 
 
 def sampson_distance_rows(conics: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -417,23 +389,23 @@ def ellipse_params(conics: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     ok : (K,) bool
         Real ellipses; the other rows hold NaN or meaningless values.
     """
-    conics = np.asarray(conics, float)
+    conics = np.asarray(conics, float).reshape(-1, 6)
     sgn = np.where(conics[:, 0] < 0, -1.0, 1.0)
     a, b, c, d, e, f = (conics * sgn[:, None]).T
     h, gx, gy = b / 2, d / 2, e / 2
     det = a * c - h * h
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         cx = (h * gy - c * gx) / det
         cy = (h * gx - a * gy) / det
-        f0 = cx * gx + cy * gy + f
+        f0 = cx * gx + cy * gy + f  # value of the form at the centre
         mean, half = (a + c) / 2, np.hypot((a - c) / 2, h)
-        lo, hi = mean - half, mean + half
-        ok = (det > 0) & (lo > 0) & (f0 < 0)
+        lo, hi = mean - half, mean + half  # eigenvalues, lo <= hi; the major axis goes with lo
+        ok = (det > 0) & (lo > 0) & (f0 < 0)  # not a parabola, hyperbola, imaginary ellipse or point
         axes = np.column_stack([np.sqrt(-f0 / lo), np.sqrt(-f0 / hi)])
-    # eigenvector of lo, the better conditioned of the two forms (as ellipse_from_conic)
+    # eigenvector of lo: (h, lo - a) or (lo - c, h), whichever is better conditioned
     v1x, v1y, v2x, v2y = h, lo - a, lo - c, h
     first = v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y
     vx, vy = np.where(first, v1x, v2x), np.where(first, v1y, v2y)
-    vx = np.where((vx == 0) & (vy == 0), 1.0, vx)
-    angle = (np.arctan2(vy, vx) + np.pi / 2) % np.pi - np.pi / 2
+    vx = np.where((vx == 0) & (vy == 0), 1.0, vx)  # a circle: any direction
+    angle = (np.arctan2(vy, vx) + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector
     return np.column_stack([cx, cy]), axes, angle, ok
