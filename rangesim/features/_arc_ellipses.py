@@ -202,10 +202,9 @@ class _Pieces:
         of ``groups`` (group g = the pieces ``groups[0][g], groups[1][g], ...``)."""
         gid, pts = [], []
         for members in groups:
-            c = self.count[members]
-            gid.append(np.repeat(np.arange(len(members)), c))
-            pts.append(self.points[np.repeat(self.start[members], c) + np.arange(c.sum())
-                                   - np.repeat(np.cumsum(c) - c, c)])
+            owner, at = ranges(self.start[members], self.count[members])
+            gid.append(owner)
+            pts.append(self.points[at])
         gid, pts = np.concatenate(gid), np.concatenate(pts)
         o = np.argsort(gid, kind="stable")
         return gid[o], pts[o]
@@ -290,7 +289,7 @@ def distinct(conics: np.ndarray, center_px: float = 2.0, rel_size: float = 0.2) 
     return np.array(kept, int)
 
 
-def _ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(owner, index) of the concatenated ranges ``start[k] .. start[k] + count[k]``."""
     owner = np.repeat(np.arange(len(count)), count)
     return owner, np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count - start, count)
@@ -320,10 +319,10 @@ def box_candidates(center: np.ndarray, reach: np.ndarray, xy: np.ndarray,
     y0 = np.clip(np.floor((cy - r) / cell_px), 0, ny).astype(np.int64)
     y1 = np.clip(np.floor((cy + r) / cell_px), -1, ny - 1).astype(np.int64)
     wx, wy = np.maximum(x1 - x0 + 1, 0), np.maximum(y1 - y0 + 1, 0)
-    box, local = _ranges(np.zeros(K, np.int64), np.where(good, wx * wy, 0))
+    box, local = ranges(np.zeros(K, np.int64), np.where(good, wx * wy, 0))
     cell = (y0[box] + local // np.maximum(wx[box], 1)) * nx + x0[box] + local % np.maximum(wx[box], 1)
     first, count = cell_start[cell], cell_start[cell + 1] - cell_start[cell]
-    which, at = _ranges(first, count)
+    which, at = ranges(first, count)
     hyp, pt = box[which], order[at]
     inside = (np.abs(xy[pt, 0] - cx[hyp]) <= r[hyp]) & (np.abs(xy[pt, 1] - cy[hyp]) <= r[hyp])
     return hyp[inside], pt[inside]

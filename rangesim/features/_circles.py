@@ -11,7 +11,7 @@ import numpy as np
 from rangesim.core.conics import ellipse_params, fit_circles_batched
 from rangesim.core.memory import check_memory
 from rangesim.features._arc_ellipses import coverage as ellipse_coverage
-from rangesim.features._arc_ellipses import grow
+from rangesim.features._arc_ellipses import grow, ranges
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._edge_points import angular_coverage, edge_points
 
@@ -257,9 +257,7 @@ def ring_points(c: np.ndarray, r: np.ndarray, width: float | np.ndarray, index: 
     ci = np.rint(c).astype(np.int64)
     s0 = np.searchsorted(d, np.maximum(r - width - 0.75, 0), "left")  # 0.75: the rounding of c
     s1 = np.searchsorted(d, r + width + 0.75, "right")
-    n = s1 - s0
-    hyp = np.repeat(np.arange(len(r)), n)
-    j = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n - s0, n)
+    hyp, j = ranges(s0, s1 - s0)
     x = ci[hyp, 0] + ox[j]
     y = ci[hyp, 1] + oy[j]
     inside = (x >= 0) & (x < W) & (y >= 0) & (y < H)
