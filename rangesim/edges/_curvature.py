@@ -1,4 +1,5 @@
-"""Curvature edge points on scans: both principal curvatures large (the paper's Fig. 12 rule)."""
+"""Curvature edge points on scans: ridges of the largest principal curvature (creases), or
+both principal curvatures large (the paper's Fig. 12 rule: corners)."""
 from __future__ import annotations
 
 from typing import Any
@@ -9,7 +10,9 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import pad_last2, padded_view
+from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, noise_threshold
 from rangesim.edges._scan_access import scan_depth
+from rangesim.edges._thinning import nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["curvature"]
@@ -19,6 +22,18 @@ __all__ = ["curvature"]
 #: into its small principal curvature (see rangesim.curvature.curvature_edges)
 DEFAULT_RELATIVE_THRESHOLD = 0.5
 
+#: the extrema rule's default threshold on |k| R (R the fit block's half-width, mm): a
+#: least-squares quadric over a block straddling a crease of bend theta has curvature
+#: about 1.9 tan(theta / 2) / R (0.33 / R at 20 degrees, the ground truth's least crease;
+#: 0.25 / R is a 15 degree bend, the gradient detector's noise-free threshold)
+EXTREMA_RELATIVE_THRESHOLD = 0.25
+
+#: on noisy scans the extrema threshold is at least this many times the median |k| R over
+#: the valid pixels (the fit's noise level)
+NOISE_K_CURVATURE = 6.0
+
+RULES = ("extrema", "both")
+
 
 def curvature(
     scan: Any,
@@ -26,15 +41,24 @@ def curvature(
     window: int = 5,
     jump_threshold: float = JUMP_THRESHOLD,
     max_search: int = 50,
+    rule: str = "extrema",
+    full_block: bool = True,
 ) -> EdgeMap:
-    """Edge points where both principal curvatures are large, with convex/concave labels.
+    """Edge points of high curvature on per-pixel quadric fits, with convex/concave labels.
 
-    The rule of the founding paper's Fig. 12 on per-pixel quadric fits
-    (:func:`rangesim.curvature.curvature_scan`, ``window`` x ``window`` blocks, NaN-aware)
-    and :func:`rangesim.curvature.curvature_edges`: ``|k1| > threshold`` and
-    ``|k2| > threshold``. It marks corners, tips and tight doubly-curved blends; a straight
-    crease (one principal curvature ~0) is, by design, not marked, except where the fit
-    leaks curvature into the along-crease direction.
+    Curvatures come from :func:`rangesim.curvature.curvature_scan` (``window`` x ``window``
+    blocks, NaN-aware). Two rules of the founding paper:
+
+    * ``rule="extrema"`` (default): edges "as the local extrema of curvature" (section 3).
+      The principal curvature of larger magnitude, ``k``, is kept where ``|k|`` exceeds the
+      threshold and is a maximum across the crease: non-maximum suppression along the
+      image projection of ``k``'s principal direction (which runs across a crease), then
+      1 px diagonals as in :func:`~rangesim.edges.gradient`. It marks creases, corners and
+      tight blends.
+    * ``rule="both"``: the rule of the paper's Fig. 12, :func:`rangesim.curvature.curvature_edges`:
+      ``|k1| > threshold`` and ``|k2| > threshold``. It marks corners, tips and tight
+      doubly-curved blends; a straight crease (one principal curvature ~0) is, by design,
+      not marked, except where the fit leaks curvature into the along-crease direction.
 
     Type from the mean curvature, in :mod:`rangesim.curvature`'s convention (normal towards
     the camera, positive where the surface bends towards it): H < 0 convex, H > 0 concave.
@@ -49,10 +73,16 @@ def curvature(
         Uses ``xyz``, ``depth``, ``valid`` (mm, camera frame) and ``meta["K"]`` for the
         footprint (without it, see :func:`~rangesim.edges._scan_access.pixel_geometry`).
     threshold : float, optional
-        Curvature threshold, 1/mm. Default (None): range-adaptive, ``0.5 / (window // 2 *
-        footprint)`` per pixel (``footprint = z / f`` mm per pixel): a fit over a block of
-        half-width R = ``window // 2 * footprint`` mm cannot resolve radii below ~R, and a
-        90 degree corner responds with ~1 / R in both directions, a crease leaks ~0.3 / R.
+        Curvature threshold, 1/mm. Default (None): range-adaptive, a multiple of ``1 / R``
+        per pixel, with R = ``window // 2 * footprint`` mm the block's half-width
+        (``footprint = z / f`` mm per pixel); a fit over the block cannot resolve radii
+        below ~R. ``extrema``: :data:`EXTREMA_RELATIVE_THRESHOLD` = 0.25 / R (a crease of
+        bend theta gives ~1.9 tan(theta / 2) / R, so 15 degrees), on noisy scans (depth
+        noise of :func:`~rangesim.edges._noise.estimate_depth_noise` above
+        :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints) at least
+        :data:`NOISE_K_CURVATURE` times the median ``|k| R``. ``both``:
+        :data:`DEFAULT_RELATIVE_THRESHOLD` = 0.5 / R (a 90 degree corner responds with
+        ~1 / R in both directions, a crease leaks ~0.3 / R).
     window : int
         Odd fit-block size, pixels (>= 3).
     jump_threshold : float
@@ -63,12 +93,20 @@ def curvature(
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     max_search : int
         Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+    rule : {"extrema", "both"}
+        Which rule marks the edge points (above).
+    full_block : bool
+        ``extrema`` only: mark only pixels whose whole fit block is valid. A block cut by a
+        gap (a laser shadow beside a crease, the image border) fits off-centre, and its
+        curvature peak moves away from the gap by up to a pixel or two.
 
     Returns
     -------
     EdgeMap
-        ``method="curvature"``; ``strength`` is ``min(|k1|, |k2|)`` in 1/mm (NaN where the
-        fit failed); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None.
+        ``method="curvature"``; ``strength`` in 1/mm (NaN where the fit failed): the larger
+        ``|k|`` (``extrema``) or ``min(|k1|, |k2|)`` (``both``); ``labels``
+        CONVEX/CONCAVE/JUMP; ``direction``: the angle in [0, pi) of the image vector across
+        the crease (``extrema``), None (``both``).
 
     Examples
     --------
@@ -78,6 +116,9 @@ def curvature(
     >>> edges = rs.edges.curvature(scan)
     >>> edges.method, bool(edges.mask.any())
     ('curvature', True)
+    >>> corners = rs.edges.curvature(scan, rule="both")     # Fig. 12: corners only
+    >>> bool((corners.mask & (corners.labels != 3)).sum() <= (edges.mask & (edges.labels != 3)).sum())
+    True
 
     References
     ----------
@@ -90,17 +131,43 @@ def curvature(
     window = int(window)
     if window < 3 or window % 2 == 0:
         raise ValueError(f"window must be an odd integer >= 3, got {window}")
+    if rule not in RULES:
+        raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
     r = window // 2
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     curv = curvature_scan(scan, window=window)
     k1, k2, mean = curv["k1"], curv["k2"], curv["H"]
-    if threshold is None:
-        fp = geo.footprint
-        scale = (r * fp).astype(np.float64)           # curvature in units of 1 / R
-        points = curvature_edges(k1 * scale, k2 * scale, DEFAULT_RELATIVE_THRESHOLD)
+    scale = (r * geo.footprint).astype(np.float64)    # R, mm: curvature in units of 1 / R
+    direction = None
+    relative = None
+    if rule == "both":
+        strength = np.fmin(np.abs(k1), np.abs(k2))
+        if threshold is None:
+            relative = DEFAULT_RELATIVE_THRESHOLD
+            points = curvature_edges(k1 * scale, k2 * scale, relative)
+        else:
+            points = curvature_edges(k1, k2, float(threshold))
     else:
-        points = curvature_edges(k1, k2, float(threshold))
+        first = np.abs(k1) >= np.abs(k2)
+        strength = np.where(first, np.abs(k1), np.abs(k2))
+        direction = _image_angle(np.where(first[..., None], curv["dir1"], curv["dir2"]), scan, z)
+        if threshold is None:
+            relative_strength = strength * scale
+            relative = EXTREMA_RELATIVE_THRESHOLD
+            noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
+            if noise >= NOISE_FLOOR:
+                relative = noise_threshold(relative_strength, valid, relative, NOISE_K_CURVATURE)
+            with np.errstate(invalid="ignore"):
+                above = relative_strength > relative
+        else:
+            with np.errstate(invalid="ignore"):
+                above = strength > float(threshold)
+        if full_block:
+            # a block cut by a gap (a laser shadow beside a crease) fits off-centre: its
+            # curvature peak moves away from the gap by up to a pixel
+            above &= curv["n_points"] == window * window
+        points = nonmax_suppress(strength, direction, above)
     # drop fits whose block holds a discontinuity (either side of one)
     touching = pad_last2(disc.touching, r, False)
     near_jump = np.zeros(z.shape, bool)
@@ -108,16 +175,35 @@ def curvature(
         for dc in range(-r, r + 1):
             near_jump |= padded_view(touching, r, dr, dc, z.shape)
     points &= ~near_jump
+    jump = disc.occluding
+    if rule == "extrema":
+        # 1 px diagonals: NMS leaves 4-connected staircases, the truth is 8-connected
+        points = thin_staircases(points | jump | disc.rim, points)
     with np.errstate(invalid="ignore"):
         labels = np.where(mean > 0, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
-    jump = disc.occluding
     labels[disc.rim] = RIM
     labels[jump] = EdgeLabel.JUMP
-    strength = np.fmin(np.abs(k1), np.abs(k2))
+    mask = (points | jump | disc.rim) & valid
+    labels[~mask] = 0
     params = {
-        "threshold": None if threshold is None else float(threshold),
-        "relative_threshold": DEFAULT_RELATIVE_THRESHOLD if threshold is None else None,
+        "rule": rule, "full_block": bool(full_block), "threshold": None if threshold is None else float(threshold),
+        "relative_threshold": relative,
         "window": window, "jump_threshold": float(jump_threshold), "max_search": int(max_search),
     }
-    return EdgeMap(mask=(points | jump | disc.rim) & valid, labels=labels, strength=strength,
+    return EdgeMap(mask=mask, labels=labels, strength=strength, direction=direction,
                    method="curvature", params=params)
+
+
+def _image_angle(d: np.ndarray, scan: Any, z: np.ndarray) -> np.ndarray:
+    """Angle in [0, pi) of the image motion along 3D directions ``d`` (H, W, 3) at each pixel.
+
+    A step ``d`` from the camera-frame point (x, y, z) moves its image by
+    ``f / z * (d_x - x d_z / z, d_y - y d_z / z)`` (pinhole): the direction, not the length,
+    is kept. NaN where ``d`` or the point is undefined.
+    """
+    xyz = np.asarray(scan.xyz, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = d[..., 0] - xyz[..., 0] / z * d[..., 2]
+        v = d[..., 1] - xyz[..., 1] / z * d[..., 2]
+        angle = np.mod(np.arctan2(v, u), np.pi)
+    return angle.astype(np.float32)

@@ -5,7 +5,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import cKDTree
+from skimage.morphology import thin as skeleton_thin
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
@@ -91,6 +93,8 @@ def line_fit(
     jump_threshold: float = JUMP_THRESHOLD,
     max_search: int = 50,
     workers: int = -1,
+    thin: bool = True,
+    min_crease_px: int = 5,
 ) -> np.ndarray | EdgeMap:
     """Edge points by line fitting through nearest neighbours (the paper's technique 2).
 
@@ -117,6 +121,15 @@ def line_fit(
     not an edge. Line-fit edges get label 0
     (the technique cannot tell convex from concave).
 
+    On a scan the crease points form bands 2-3 px wide (every point within a neighbour's
+    reach of the crease sees no straight line across it): with ``thin`` they are thinned to
+    1 px lines (``skimage.morphology.thin`` of the crease pixels; jump pixels stay as the
+    jump rule marks them), and crease pieces of fewer than ``min_crease_px`` 8-connected
+    pixels are dropped: single noisy points whose neighbours happen not to line up, or
+    mixed pixels beside a jump. That also drops a real crease shorter than that (a small
+    chamfer seen in pieces beside a jump; on the flat machined target F1 0.79 -> 0.77),
+    and gains 0.04-0.07 F1 on the machined parts of ``benchmarks/bench_detectors.py``.
+
     Parameters
     ----------
     points_or_scan : (N, 3) array or RangeScan
@@ -140,6 +153,12 @@ def line_fit(
         Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
     workers : int
         Threads for the k-d tree queries (-1: all cores).
+    thin : bool
+        Scans only: thin crease bands to 1 px and drop crease pieces under
+        ``min_crease_px`` pixels (above).
+    min_crease_px : int
+        Scans only, with ``thin``: least size of a kept crease piece, pixels (8-connected;
+        1 keeps all).
 
     Returns
     -------
@@ -185,13 +204,33 @@ def line_fit(
         cut |= ~vpad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
     cut &= valid
     edge[cut] = disc.occluding[cut] | disc.rim[cut]
+    if thin:
+        edge = _thin_creases(edge, disc.occluding | disc.rim, int(min_crease_px))
     labels = np.where(disc.occluding, EdgeLabel.JUMP, EdgeLabel.NONE).astype(np.uint8)
     labels[disc.rim & ~disc.occluding] = RIM
     strength = np.where(valid, edge.astype(np.float32), np.float32(np.nan))
     params = {
         "k": int(k), "angle_tol_deg": float(angle_tol_deg), "line_sep_deg": float(line_sep_deg),
         "jump_threshold": float(jump_threshold), "max_search": int(max_search),
-        "noise": None if noise is None else float(noise),
+        "noise": None if noise is None else float(noise), "thin": bool(thin),
+        "min_crease_px": int(min_crease_px),
     }
     return EdgeMap(mask=edge & valid, labels=labels, strength=strength, method="line_fit",
                    params=params)
+
+
+def _thin_creases(edge: np.ndarray, fixed: np.ndarray, min_px: int) -> np.ndarray:
+    """Crease bands of ``edge`` (H, W) bool thinned to 1 px, pieces under ``min_px`` dropped.
+
+    Only the crease pixels are thinned (a crease running beside a jump, such as a small
+    chamfer, is not eaten by the jump's band); ``fixed`` pixels (jumps, rims) stay as
+    they are.
+    """
+    crease = skeleton_thin(edge & ~fixed)
+    if min_px > 1 and crease.any():
+        lab, n = ndimage.label(crease, structure=np.ones((3, 3), bool))
+        size = np.bincount(lab.ravel(), minlength=n + 1)
+        small = size < min_px
+        small[0] = False
+        crease &= ~small[lab]
+    return crease | (edge & fixed)
