@@ -185,14 +185,15 @@ def test_detections_lie_on_the_box_edges(name, box_scan, edge_distance):
     assert set(np.unique(em.labels[~em.mask])) <= {0}
 
 
-@pytest.mark.parametrize("name", ["gradient", "normal", "curvature"])
+@pytest.mark.parametrize("name", ["gradient", "normal", "curvature", "line_fit"])
 def test_convex_top_edges_concave_floor_edges(name, box_scan, edge_distance):
     em = DETECTORS[name](box_scan)
     top, bottom, vert = edge_distance["top"], edge_distance["bottom"], edge_distance["vertical"]
     crease = em.mask & np.isin(em.labels, [EdgeLabel.CONVEX, EdgeLabel.CONCAVE])
     near_top = crease & (top <= 2) & (bottom > 3) & (vert > 3)
     near_floor = crease & (bottom <= 2) & (top > 3) & (vert > 3)
-    assert near_top.sum() >= 30 and near_floor.sum() >= 30
+    least = 20 if name == "line_fit" else 30        # line_fit misses the floor crease's ends
+    assert near_top.sum() >= least and near_floor.sum() >= least
     assert np.mean(em.labels[near_top] == EdgeLabel.CONVEX) >= 0.9
     assert np.mean(em.labels[near_floor] == EdgeLabel.CONCAVE) >= 0.9
     # the silhouette (top and vertical edges, never the floor's) is labelled jump
@@ -372,10 +373,14 @@ def test_line_fit_many_random_points_and_nan_rows():
         line_fit(np.zeros((10, 2)))
 
 
-def test_line_fit_on_a_scan_labels_only_jumps(box_scan):
-    em = line_fit(box_scan)
-    assert set(np.unique(em.labels[em.mask])) <= {EdgeLabel.NONE, EdgeLabel.JUMP}
-    assert (em.labels[em.mask] == EdgeLabel.NONE).sum() >= 90
+def test_line_fit_on_a_scan_labels_creases_by_their_neighbourhood(box_scan):
+    plain = line_fit(box_scan, label_creases=False)
+    assert set(np.unique(plain.labels[plain.mask])) <= {EdgeLabel.NONE, EdgeLabel.JUMP}
+    assert (plain.labels[plain.mask] == EdgeLabel.NONE).sum() >= 90
+    labelled = line_fit(box_scan)
+    assert np.array_equal(plain.mask, labelled.mask)
+    crease = plain.mask & (plain.labels == EdgeLabel.NONE)
+    assert set(np.unique(labelled.labels[crease])) <= {EdgeLabel.CONVEX, EdgeLabel.CONCAVE}
 
 
 def test_line_fit_thins_crease_bands_to_lines(box_scan, edge_distance):

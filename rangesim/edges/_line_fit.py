@@ -95,6 +95,7 @@ def line_fit(
     workers: int = -1,
     thin: bool = True,
     min_crease_px: int = 5,
+    label_creases: bool = True,
 ) -> np.ndarray | EdgeMap:
     """Edge points by line fitting through nearest neighbours (the paper's technique 2).
 
@@ -118,8 +119,10 @@ def line_fit(
     (:func:`~rangesim.edges._discontinuities.find_discontinuities`, steps deeper than
     ``jump_threshold`` pixel footprints, searched across NaN gaps): an edge, labelled JUMP,
     on the near side of a jump, else none, so a hole in a flat face or the image border is
-    not an edge. Line-fit edges get label 0
-    (the technique cannot tell convex from concave).
+    not an edge. The technique itself cannot tell convex from concave; on a scan, with
+    ``label_creases``, a crease pixel is CONVEX where it lies nearer the camera than the
+    mean depth of the valid pixels of its 5 x 5 neighbourhood (a roof: the faces fall away
+    on both sides), else CONCAVE (label 0 without).
 
     On a scan the crease points form bands 2-3 px wide (every point within a neighbour's
     reach of the crease sees no straight line across it): with ``thin`` they are thinned to
@@ -159,6 +162,9 @@ def line_fit(
     min_crease_px : int
         Scans only, with ``thin``: least size of a kept crease piece, pixels (8-connected;
         1 keeps all).
+    label_creases : bool
+        Scans only: label creases convex or concave by the depth of their neighbourhood
+        (above); False leaves them 0, "type unknown".
 
     Returns
     -------
@@ -207,13 +213,16 @@ def line_fit(
     if thin:
         edge = _thin_creases(edge, disc.occluding | disc.rim, int(min_crease_px))
     labels = np.where(disc.occluding, EdgeLabel.JUMP, EdgeLabel.NONE).astype(np.uint8)
+    if label_creases:
+        crease = edge & ~disc.occluding & ~disc.rim
+        labels[crease] = _crease_type(z, valid, crease)
     labels[disc.rim & ~disc.occluding] = RIM
     strength = np.where(valid, edge.astype(np.float32), np.float32(np.nan))
     params = {
         "k": int(k), "angle_tol_deg": float(angle_tol_deg), "line_sep_deg": float(line_sep_deg),
         "jump_threshold": float(jump_threshold), "max_search": int(max_search),
         "noise": None if noise is None else float(noise), "thin": bool(thin),
-        "min_crease_px": int(min_crease_px),
+        "min_crease_px": int(min_crease_px), "label_creases": bool(label_creases),
     }
     return EdgeMap(mask=edge & valid, labels=labels, strength=strength, method="line_fit",
                    params=params)
@@ -234,3 +243,25 @@ def _thin_creases(edge: np.ndarray, fixed: np.ndarray, min_px: int) -> np.ndarra
         small[0] = False
         crease &= ~small[lab]
     return crease | (edge & fixed)
+
+
+def _crease_type(z: np.ndarray, valid: np.ndarray, crease: np.ndarray) -> np.ndarray:
+    """CONVEX or CONCAVE (uint8) for each ``crease`` pixel, in ``np.flatnonzero`` order.
+
+    Convex where the pixel's depth is below the mean depth of the valid pixels of its
+    5 x 5 neighbourhood: across a roof both faces fall away from the camera, so their
+    mean lies farther than the crest (a plane gives the pixel's own depth to first order).
+    """
+    h, w = z.shape
+    r = 2
+    zp = np.pad(np.where(valid, z, 0.0), r)
+    vp = np.pad(valid, r)
+    ii, jj = np.nonzero(crease)
+    total = np.zeros(ii.size)
+    count = np.zeros(ii.size)
+    for dr in range(-r, r + 1):
+        for dc in range(-r, r + 1):
+            total += zp[ii + r + dr, jj + r + dc]
+            count += vp[ii + r + dr, jj + r + dc]
+    farther = total / np.maximum(count, 1) > z[ii, jj]
+    return np.where(farther, EdgeLabel.CONVEX, EdgeLabel.CONCAVE).astype(np.uint8)
