@@ -13,6 +13,8 @@ Timed (each: one warm-up / cold run, then the median of --repeat runs):
 * ``mitsuba ray_intersect``: ``scene.ray_intersect`` of the Mitsuba scene rangesim built,
   same rays, ``si.t`` copied to NumPy.
 * ``mitsuba preliminary``: ``scene.ray_intersect_preliminary``, same rays, ``t`` to NumPy.
+* ``mitsuba coherent``: ``scene.ray_intersect(ray, RayFlags.All, coherent=True)`` (Embree's
+  coherent traversal, what the scan's camera rays use), ``si.t`` to NumPy.
 
 The scene is loaded once and reused; the cold rangesim run includes building the Mitsuba
 scene (Embree BVH) and tracing/compiling the Dr.Jit kernels (compiled kernels may come from
@@ -490,8 +492,13 @@ def main(argv=None) -> int:
         pi = mscene.scene.ray_intersect_preliminary(mi_ray)
         return np.array(pi.t, dtype=np.float32)
 
+    def run_mitsuba_coherent():
+        si = mscene.scene.ray_intersect(mi_ray, mi.RayFlags.All, True)
+        return np.array(si.t, dtype=np.float32)
+
     runs["mitsuba ray_intersect (t)"] = run_mitsuba
     runs["mitsuba preliminary (t)"] = run_mitsuba_pre
+    runs["mitsuba coherent (t)"] = run_mitsuba_coherent
     outputs = {}
     for name, (cold, med, times, out) in interleaved(runs, args.repeat).items():
         results[name] = {"cold_s": cold, "median_s": med, "times_s": times}

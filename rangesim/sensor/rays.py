@@ -65,7 +65,10 @@ def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
     d_world = dr.normalize(to_world @ rays)
     ray = mi.Ray3f(opaque_point(pose[:3, 3]), d_world)
     ray.maxt = opaque_scalar(maxt)  # depends on the image size (the corner ray)
-    si = mscene.scene.ray_intersect(ray)
+    # coherent: neighbouring pixels' rays share an origin and nearly a direction, and
+    # Embree's coherent traversal of them is ~1.7x faster on CPU (55 -> 33 ms at 1024^2,
+    # 327k triangles; 95 -> 87 ms at 5.2M); the flag is Embree's (CPU) only
+    si = mscene.scene.ray_intersect(ray, mi.RayFlags.All, True)
     hit = si.is_valid()
     t = dr.select(hit, si.t, dr.inf)
     part = mscene.part_index(si)

@@ -36,7 +36,9 @@ def occluded(mscene, points_world, normals_world, sources_world, active):
     length = dr.norm(to_source)
     ray = mi.Ray3f(mi.Point3f(origin), to_source / length)
     ray.maxt = length
-    return mscene.scene.ray_test(ray, active) & active
+    # coherent: neighbouring points' shadow rays head for nearly the same source (35 -> 27 ms
+    # at 1024^2 on CPU, 327k triangles)
+    return mscene.scene.ray_test(ray, True, active) & active
 
 
 def laser_reach(mscene, view, sources, pose, near: float, far: float):
