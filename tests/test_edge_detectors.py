@@ -398,3 +398,86 @@ def test_line_fit_thins_crease_bands_to_lines(box_scan, edge_distance):
     # the jumps are kept as the jump rule marks them
     jump = band.mask & (band.labels == EdgeLabel.JUMP)
     assert np.array_equal(jump, lines.mask & (lines.labels == EdgeLabel.JUMP))
+
+
+def _steep_plane(sigma_mm: float, with_sigma: bool, step_col: int = 64, step_mm: float = 15.0) -> RangeScan:
+    """A plane at 71.6 deg slant (neighbours 3.0 footprints apart, the jump rule's 3.73 close
+    above), with heavy-tailed depth noise of std ``sigma_mm`` (Student t, 3 degrees of
+    freedom, as a laser scanner's errors near grazing incidence), a 15 mm step down at
+    column ``step_col``; the noise model's ``sigma`` is attached or not."""
+    size, f, z0 = 96, 300.0, 400.0
+    K = np.array([[f, 0, size / 2], [0, f, size / 2], [0, 0, 1]])
+    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    t = np.arctan(3.0)
+    n = np.array([np.sin(t), 0.0, -np.cos(t)])
+    depth = ((np.array([0, 0, z0]) @ n) / (rays @ n))
+    depth[:, step_col:] += step_mm
+    depth = depth + sigma_mm / np.sqrt(3.0) * np.random.default_rng(0).standard_t(3, depth.shape)
+    xyz = (rays * depth[..., None]).astype(np.float32)
+    shape = (size, size)
+    return RangeScan(
+        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
+        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
+        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
+        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()},
+        sigma=np.full(shape, sigma_mm, np.float32) if with_sigma else None,
+    )
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal", "line_fit", "curvature"])
+def test_jump_rule_allows_for_the_predicted_noise(name):
+    """Neighbours 3.0 footprints apart with heavy-tailed noise of 1 mm std (footprint
+    ~1.3 mm) cross the 3.73-footprint jump threshold, beyond what the fold test explains,
+    at many pixels; 2 sqrt(2) sigma more (SIGMA_STEPS) leaves a fifth of them (the t
+    distribution's tails), and the real 15 mm (11 footprint) step stays a jump."""
+    from rangesim.edges._discontinuities import SIGMA_STEPS
+    assert SIGMA_STEPS == 2.0
+    jumps = {}
+    for with_sigma in (False, True):
+        em = DETECTORS[name](_steep_plane(1.0, with_sigma))
+        jump = em.mask & (em.labels == EdgeLabel.JUMP)
+        cols = np.arange(jump.shape[1])
+        off_step = jump[:, (cols < 61) | (cols > 66)]
+        jumps[with_sigma] = (off_step.sum(), jump[2:-2, 61:67].any(axis=1).mean())
+    assert jumps[False][0] >= 100, jumps
+    assert jumps[True][0] <= 0.25 * jumps[False][0], jumps
+    assert jumps[True][1] >= 0.95, jumps       # the step: a jump in (nearly) every row
+
+
+def _two_noise_plane(with_sigma: bool) -> RangeScan:
+    """A frontal plane at 400 mm, depth noise 0.15 mm on the left two thirds, 0.6 mm on the
+    right third (a far or grazing part of a scene), the noise model's sigma attached or not."""
+    size, f, z0 = 96, 300.0, 400.0
+    K = np.array([[f, 0, size / 2], [0, f, size / 2], [0, 0, 1]])
+    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    sigma = np.where(jj < 64, 0.15, 0.6).astype(np.float32)
+    depth = z0 + sigma * np.random.default_rng(1).standard_normal(sigma.shape)
+    xyz = (rays * depth[..., None]).astype(np.float32)
+    shape = (size, size)
+    return RangeScan(
+        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
+        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
+        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
+        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=sigma if with_sigma else None,
+    )
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal", "curvature"])
+def test_crease_threshold_follows_the_predicted_noise_per_pixel(name):
+    """The noise-derived threshold is set by the median pixel (the quiet part here); where
+    the scan's sigma says the noise is 4x larger, the threshold is 4x larger too
+    (local_noise_scale), so the noisy half is not strewn with creases."""
+    from rangesim.edges._noise import local_noise_scale
+    scan = _two_noise_plane(True)
+    scale = local_noise_scale(scan, scan.valid)
+    assert np.allclose(scale[:, :64], 1.0) and np.allclose(scale[:, 64:], 4.0, rtol=0.05)
+    assert local_noise_scale(_two_noise_plane(False), scan.valid) is None
+    creases = {}
+    for with_sigma in (False, True):
+        em = DETECTORS[name](_two_noise_plane(with_sigma))
+        crease = em.mask & np.isin(em.labels, [EdgeLabel.CONVEX, EdgeLabel.CONCAVE])
+        creases[with_sigma] = int(crease[:, 68:].sum())
+    assert creases[False] >= 20, creases
+    assert creases[True] <= 0.2 * creases[False], creases

@@ -10,7 +10,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import pad_last2, padded_view
-from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, noise_threshold
+from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, local_noise_scale, noise_threshold
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import RIM, EdgeMap
@@ -80,7 +80,9 @@ def curvature(
         bend theta gives ~1.9 tan(theta / 2) / R, so 15 degrees), on noisy scans (depth
         noise of :func:`~rangesim.edges._noise.estimate_depth_noise` above
         :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints) at least
-        :data:`NOISE_K_CURVATURE` times the median ``|k| R``. ``both``:
+        :data:`NOISE_K_CURVATURE` times the median ``|k| R``, and per pixel times
+        :func:`~rangesim.edges._noise.local_noise_scale` where the scan carries its noise
+        model's ``sigma``. ``both``:
         :data:`DEFAULT_RELATIVE_THRESHOLD` = 0.5 / R (a 90 degree corner responds with
         ~1 / R in both directions, a crease leaks ~0.3 / R).
     window : int
@@ -156,10 +158,14 @@ def curvature(
             relative_strength = strength * scale
             relative = EXTREMA_RELATIVE_THRESHOLD
             noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
+            pixel_relative: float | np.ndarray = relative
             if noise >= NOISE_FLOOR:
                 relative = noise_threshold(relative_strength, valid, relative, NOISE_K_CURVATURE)
+                # per pixel: raised where the noise model predicts more noise than the median
+                scale = local_noise_scale(scan, valid)
+                pixel_relative = relative if scale is None else relative * scale
             with np.errstate(invalid="ignore"):
-                above = relative_strength > relative
+                above = relative_strength > pixel_relative
         else:
             with np.errstate(invalid="ignore"):
                 above = strength > float(threshold)

@@ -9,7 +9,13 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import central_difference
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import shift
-from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_GRADIENT, estimate_depth_noise, noise_threshold
+from rangesim.edges._noise import (
+    NOISE_FLOOR,
+    NOISE_K_GRADIENT,
+    estimate_depth_noise,
+    local_noise_scale,
+    noise_threshold,
+)
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import RIM, EdgeMap
@@ -531,13 +537,20 @@ def gradient(
         # the median is taken on every 4th row and column: the bend only there
         noise_bend = np.degrees(2 * np.arctan(mag[::4, ::4]))
         threshold = noise_threshold(noise_bend, valid[::4, ::4], threshold, NOISE_K_GRADIENT, stride=1)
+    # per pixel: raised where the noise model predicts more noise than at the median pixel
+    pixel_threshold: float | np.ndarray = threshold
+    if auto_threshold and noisy:
+        scale = local_noise_scale(scan, valid)
+        if scale is not None:
+            pixel_threshold = np.minimum(np.float32(threshold) * scale, np.float32(89.0))
 
     # bend angle: the slopes on either side are t -+ d / 2 around the mean slope t across
     # the edge (central first difference, which straddles a crease at the centre); d is
     # the response summed over the edge's ridge: a crease between two pixel centres splits
     # its response between them (the larger neighbour across the edge holds the rest)
-    thin, beside = nonmax_suppress(mag, direction, mag > np.tan(np.radians(threshold) / 2),
-                                   return_sides=True)
+    with np.errstate(invalid="ignore"):
+        candidates = mag > np.tan(np.radians(pixel_threshold) / 2)
+    thin, beside = nonmax_suppress(mag, direction, candidates, return_sides=True)
     gx = central_difference(zs, 0, disc.pairs)
     gy = central_difference(zs, 2, disc.pairs)
     t = gx * np.cos(theta)
@@ -553,7 +566,7 @@ def gradient(
     bend -= np.arctan(t - half)
     np.degrees(bend, out=bend)
     with np.errstate(invalid="ignore"):
-        crease = bend > threshold
+        crease = bend > pixel_threshold
     if nms:
         crease &= thin
     jump = disc.occluding

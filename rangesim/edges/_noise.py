@@ -28,8 +28,8 @@ import numpy as np
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
-    "depth_quantum", "estimate_depth_noise", "noise_threshold", "NOISE_FLOOR", "NOISE_K_GRADIENT",
-    "NOISE_K_NORMAL", "NOISE_K_PCL",
+    "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "NOISE_FLOOR",
+    "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_PCL",
 ]
 
 #: depth noise (pixel footprints) below which a scan counts as noise-free: the detectors'
@@ -248,3 +248,31 @@ def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: 
     if st.size == 0:
         return float(default)
     return float(max(default, k * float(np.median(st))))
+
+
+def local_noise_scale(scan: Any, valid: np.ndarray) -> np.ndarray | None:
+    """How much noisier each pixel is than the scan's median pixel: ``max(1, sigma / median)``.
+
+    ``scan.sigma`` is the noise model's predicted depth std per pixel (mm; simulated
+    laser-stripe scans carry it). Noise grows steeply with incidence and range, so a face
+    seen near grazing or a far table is several times noisier than the median pixel that
+    :func:`noise_threshold` calibrates on; a detector multiplies its noise-derived threshold
+    by this scale there (the strength's noise is proportional to the depth noise for small
+    angles). Never below 1: a quieter pixel keeps the scan's threshold.
+
+    Returns
+    -------
+    (H, W) float32, or None
+        None when the scan carries no usable ``sigma`` (recorded scans, noise-free ones).
+    """
+    sigma = getattr(scan, "sigma", None)
+    if sigma is None:
+        return None
+    sigma = np.asarray(sigma, np.float32)
+    ok = valid & np.isfinite(sigma) & (sigma > 0)
+    if ok.sum() < 100:
+        return None
+    median = np.float32(np.median(sigma[ok]))
+    scale = np.ones(sigma.shape, np.float32)
+    np.divide(sigma, median, out=scale, where=ok & (sigma > median))
+    return scale

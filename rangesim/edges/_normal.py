@@ -9,7 +9,14 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
-from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_NORMAL, estimate_depth_noise, noise_threshold, stencil_window
+from rangesim.edges._noise import (
+    NOISE_FLOOR,
+    NOISE_K_NORMAL,
+    estimate_depth_noise,
+    local_noise_scale,
+    noise_threshold,
+    stencil_window,
+)
 from rangesim.edges._scan_access import scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import RIM, EdgeMap
@@ -71,7 +78,9 @@ def normal(
         :func:`~rangesim.edges._noise.estimate_depth_noise` above
         :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): ``max(20, k * median)`` of
         the strength over valid pixels, ``k`` = :data:`~rangesim.edges._noise.NOISE_K_NORMAL`
-        = 4.5 (~37 degrees at the White Scanner preset's noise with window 7).
+        = 4.5 (~37 degrees at the White Scanner preset's noise with window 7), and per pixel
+        times :func:`~rangesim.edges._noise.local_noise_scale` where the scan carries its
+        noise model's ``sigma``.
     window : int, optional
         Odd stencil size of the normal estimate, pixels (>= 3): differences over
         ``window // 2`` pixels. Default (None): 3 on noise-free scans, else
@@ -147,13 +156,17 @@ def normal(
         concave[better] = side[better] > 0
         angles.append(np.where(np.isnan(angle), np.float32(0), angle))
     np.copyto(strength, np.nan, where=strength < 0)
+    pixel_threshold: float | np.ndarray = threshold_deg
     if auto_threshold and noisy:
         threshold_deg = noise_threshold(strength, valid, threshold_deg, NOISE_K_NORMAL)
+        # per pixel: raised where the noise model predicts more noise than at the median
+        scale = local_noise_scale(scan, valid)
+        pixel_threshold = threshold_deg if scale is None else np.minimum(np.float32(threshold_deg) * scale, 179.0)
     # direction across the crease: dominant second harmonic of the four axis strengths
     theta = 0.5 * np.arctan2(angles[1] - angles[3], angles[0] - angles[2])
 
     with np.errstate(invalid="ignore"):
-        crease = strength > threshold_deg
+        crease = strength > pixel_threshold
     if nms:
         # a crease between pixel centres gives its bend to both pixels beside it; rank them
         # by the bend summed over the four axes (largest nearest the crease) to keep one

@@ -336,7 +336,8 @@ def circles(
     Examples
     --------
     >>> import rangesim as rs
-    >>> scan = rs.datasets.plate_scan()        # a plate with a hole, on a table, 128 x 120
+    >>> quiet = {"noise.sigma_px": 0, "noise.speckle_contrast": 0}
+    >>> scan = rs.datasets.plate_scan(quiet)   # a plate with a hole, on a table, 128 x 120, noise-free
 
     >>> found = rs.features.circles(rs.edges.gradient(scan), radii=(5, 30))
     >>> len(found), round(found[0].radius)                  # the hole's rim, radius in pixels

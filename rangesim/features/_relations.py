@@ -39,7 +39,8 @@ def relations(segments: list = (), circles: list = (), ellipses: list = (), arcs
     Examples
     --------
     >>> import rangesim as rs
-    >>> scan = rs.datasets.plate_scan()        # a plate with a hole, on a table, 128 x 120
+    >>> quiet = {"noise.sigma_px": 0, "noise.speckle_contrast": 0}
+    >>> scan = rs.datasets.plate_scan(quiet)   # a plate with a hole, on a table, 128 x 120, noise-free
 
     >>> edges = rs.edges.gradient(scan)
     >>> rows = rs.features.relations(rs.features.lines(edges, scan), rs.features.circles(edges, radii=(5, 30)))
