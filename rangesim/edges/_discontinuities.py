@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
-from rangesim.edges._noise import depth_quantum
+from rangesim.edges._noise import depth_quantum, predicted_noise
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
 
 __all__ = [
@@ -43,8 +43,10 @@ JUMP_THRESHOLD = float(1.0 / np.tan(np.radians(15.0)))
 QUANTUM_STEPS = 3.0
 
 #: predicted noise standard deviations of a neighbour pair's depth difference added to the
-#: jump threshold where the scan carries its noise model's ``sigma`` (:func:`discontinuities`)
-SIGMA_STEPS = 2.0
+#: jump threshold where the scan carries its noise model's ``sigma`` (:func:`discontinuities`);
+#: chosen on the machined parts' seeds 0-19: 2 gains a little more F1 on inria_laser and
+#: loses 2 of 69 hole rims on cyberware_3030 with its noise, 1 loses none
+SIGMA_STEPS = 1.0
 
 #: RangeScan.status code of a pixel whose camera ray hit no surface
 #: (:class:`rangesim.core.constants.Status` ``MISS``; the value, so that this analysis
@@ -91,11 +93,12 @@ def discontinuities(
     :func:`find_discontinuities` with a per-pixel threshold of ``jump_threshold`` pixel
     footprints plus :data:`QUANTUM_STEPS` depth quanta
     (:func:`~rangesim.edges._noise.depth_quantum`; nothing on scans whose depths are not
-    quantised), plus :data:`SIGMA_STEPS` standard deviations of a pair's difference,
-    ``2 sqrt(2) sigma``, where the scan carries the noise model's predicted ``sigma`` (mm):
+    quantised), plus :data:`SIGMA_STEPS` standard deviation of a pair's difference,
+    ``sqrt(2) sigma``, where the scan carries the noise model's predicted ``sigma`` (mm;
+    the least over the pixel's 5 x 5 neighbourhood, :func:`~rangesim.edges._noise.predicted_noise`):
     noise grows steeply with incidence, and a face seen at 70-75 degrees, whose neighbours
     already differ by 3 footprints, is otherwise a band of jumps wherever the noise adds
-    the rest (on the machined parts, inria_laser's noisy gradient F1 0.63 -> 0.84). Rounding moves each of two neighbours by at most half a quantum, so their
+    the rest (on the machined parts' seeds 0-7, inria_laser's noisy gradient F1 0.63 -> 0.81). Rounding moves each of two neighbours by at most half a quantum, so their
     difference by at most one, and a structured-light matcher errs by whole disparity
     levels on top of that: a Kinect's quantised table (steps of 1.5-3 footprints at 1-2 m)
     is then no band of jump dashes, while real depth edges (tens of quanta) stay. Folds
@@ -107,10 +110,9 @@ def discontinuities(
     quantum = depth_quantum(z)
     if quantum is not None:
         thr = thr + np.float32(QUANTUM_STEPS) * quantum
-    sigma = getattr(scan, "sigma", None)
+    sigma = predicted_noise(scan)
     if sigma is not None:
-        pair_sigma = np.float32(SIGMA_STEPS * np.sqrt(2.0)) * np.asarray(sigma, np.float32)
-        thr = thr + np.where(np.isfinite(pair_sigma), pair_sigma, np.float32(0))
+        thr = thr + np.float32(SIGMA_STEPS * np.sqrt(2.0)) * sigma
     empty, certain = empty_pixels(scan, np.isfinite(z))
     disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
                                 empty=empty, empty_certain=certain)

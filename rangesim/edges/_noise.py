@@ -28,7 +28,8 @@ import numpy as np
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
-    "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "NOISE_FLOOR",
+    "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "predicted_noise",
+    "NOISE_FLOOR",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_PCL",
 ]
 
@@ -250,11 +251,38 @@ def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: 
     return float(max(default, k * float(np.median(st))))
 
 
+#: side (pixels) of the window over which :func:`predicted_noise` takes the least sigma
+NOISE_WINDOW = 5
+
+
+def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
+    """The noise model's depth std of the surface around each pixel, mm, (H, W) float32.
+
+    ``scan.sigma`` (the predicted std per pixel; simulated laser-stripe scans carry it), its
+    least value over a ``window`` x ``window`` neighbourhood (default :data:`NOISE_WINDOW`):
+    the model also raises sigma at the very pixels of an edge (mixed and truncated stripes),
+    and a threshold raised there would hide the edge; a face that is noisy as a whole (seen
+    near grazing, far away) stays noisy under the minimum. NaN (invalid) counts as no
+    information; 0 where nothing around is valid. None when the scan carries no sigma.
+    """
+    sigma = getattr(scan, "sigma", None)
+    if sigma is None:
+        return None
+    from scipy.ndimage import minimum_filter
+
+    sigma = np.asarray(sigma, np.float32)
+    inf = np.float32(np.inf)
+    least = minimum_filter(np.where(np.isfinite(sigma), sigma, inf), size=int(window or NOISE_WINDOW),
+                           mode="nearest")
+    least[~np.isfinite(least)] = 0
+    return least
+
+
 def local_noise_scale(scan: Any, valid: np.ndarray) -> np.ndarray | None:
     """How much noisier each pixel is than the scan's median pixel: ``max(1, sigma / median)``.
 
-    ``scan.sigma`` is the noise model's predicted depth std per pixel (mm; simulated
-    laser-stripe scans carry it). Noise grows steeply with incidence and range, so a face
+    ``sigma`` is :func:`predicted_noise`, the noise model's predicted depth std around the
+    pixel (mm; simulated laser-stripe scans carry it). Noise grows steeply with incidence and range, so a face
     seen near grazing or a far table is several times noisier than the median pixel that
     :func:`noise_threshold` calibrates on; a detector multiplies its noise-derived threshold
     by this scale there (the strength's noise is proportional to the depth noise for small
@@ -265,10 +293,9 @@ def local_noise_scale(scan: Any, valid: np.ndarray) -> np.ndarray | None:
     (H, W) float32, or None
         None when the scan carries no usable ``sigma`` (recorded scans, noise-free ones).
     """
-    sigma = getattr(scan, "sigma", None)
+    sigma = predicted_noise(scan)
     if sigma is None:
         return None
-    sigma = np.asarray(sigma, np.float32)
     ok = valid & np.isfinite(sigma) & (sigma > 0)
     if ok.sum() < 100:
         return None
