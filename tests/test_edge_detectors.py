@@ -362,6 +362,24 @@ def test_line_fit_ridge_of_two_planes_at_90_degrees():
     assert not edge[~ridge & inner & (np.abs(gy) >= 2) & (np.abs(gy) <= 8)].any()
 
 
+def test_line_fit_points_takes_a_tolerance_per_point():
+    """A 90 degree ridge (bend 90, neighbours across it at 90 degrees): an edge where the
+    opposite-pair tolerance is below 90 - 45 (the diagonal pairs across the ridge make 135
+    degrees), not where it is 60 degrees; per point, each half of the ridge keeps its own."""
+    from rangesim.edges import line_fit_points
+    g = np.arange(-10, 11, dtype=float)
+    gx, gy = np.meshgrid(np.arange(30, dtype=float), g)
+    pts = np.stack([gx, gy * np.sqrt(0.5), -np.abs(gy) * np.sqrt(0.5)], axis=-1).reshape(-1, 3)
+    ridge = ((gy == 0) & (gx >= 3) & (gx <= 26)).ravel()
+    assert line_fit_points(pts, angle_tol_deg=15.0)[ridge].all()
+    assert not line_fit_points(pts, angle_tol_deg=60.0)[ridge].any()
+    tol = np.where(gx.ravel() < 15, 15.0, 60.0)
+    edge = line_fit_points(pts, angle_tol_deg=tol)
+    assert edge[ridge & (gx.ravel() < 14)].all() and not edge[ridge & (gx.ravel() > 15)].any()
+    with pytest.raises(ValueError, match="one per point"):
+        line_fit_points(pts, angle_tol_deg=tol[:-1])
+
+
 def test_line_fit_many_random_points_and_nan_rows():
     rng = np.random.default_rng(0)
     pts = rng.uniform(0, 100, (20000, 3))
