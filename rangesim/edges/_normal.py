@@ -12,6 +12,7 @@ from rangesim.edges._grid import AXES, pad_last2, padded_view
 from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_NORMAL,
+    NOISE_K_NORMAL_LOCAL,
     estimate_depth_noise,
     local_noise_scale,
     noise_threshold,
@@ -78,9 +79,10 @@ def normal(
         :func:`~rangesim.edges._noise.estimate_depth_noise` above
         :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): ``max(20, k * median)`` of
         the strength over valid pixels, ``k`` = :data:`~rangesim.edges._noise.NOISE_K_NORMAL`
-        = 4.5 (~37 degrees at the White Scanner preset's noise with window 7), and per pixel
-        times :func:`~rangesim.edges._noise.local_noise_scale` where the scan carries its
-        noise model's ``sigma``.
+        = 4.5 (~37 degrees at the White Scanner preset's noise with window 7); where the
+        scan carries its noise model's ``sigma``, ``k`` =
+        :data:`~rangesim.edges._noise.NOISE_K_NORMAL_LOCAL` = 3.5 and per pixel times
+        :func:`~rangesim.edges._noise.local_noise_scale`.
     window : int, optional
         Odd stencil size of the normal estimate, pixels (>= 3): differences over
         ``window // 2`` pixels. Default (None): 3 on noise-free scans, else
@@ -158,9 +160,11 @@ def normal(
     np.copyto(strength, np.nan, where=strength < 0)
     pixel_threshold: float | np.ndarray = threshold_deg
     if auto_threshold and noisy:
-        threshold_deg = noise_threshold(strength, valid, threshold_deg, NOISE_K_NORMAL)
-        # per pixel: raised where the noise model predicts more noise than at the median
+        # per pixel where the noise model predicts each pixel's noise: raised where it is
+        # above the median's, and without the margin a scan-wide figure needs for them
         scale = local_noise_scale(scan, valid)
+        k = NOISE_K_NORMAL if scale is None else NOISE_K_NORMAL_LOCAL
+        threshold_deg = noise_threshold(strength, valid, threshold_deg, k)
         pixel_threshold = threshold_deg if scale is None else np.minimum(np.float32(threshold_deg) * scale, 179.0)
     # direction across the crease: dominant second harmonic of the four axis strengths
     theta = 0.5 * np.arctan2(angles[1] - angles[3], angles[0] - angles[2])
