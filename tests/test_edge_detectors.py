@@ -489,10 +489,14 @@ def test_crease_threshold_follows_the_predicted_noise_per_pixel(name):
     (local_noise_scale), so the noisy half is not strewn with creases."""
     from rangesim.edges._noise import local_noise_scale
     scan = _two_noise_plane(True)
-    scale = local_noise_scale(scan, scan.valid)
+    footprint = np.full(scan.shape, 400.0 / 300.0, np.float32)      # z / f, a frontal plane
+    scale = local_noise_scale(scan, scan.valid, footprint)
     # the least sigma over 5 x 5: the two columns beside the border take the quiet side's
     assert np.allclose(scale[:, :66], 1.0) and np.allclose(scale[:, 66:], 4.0, rtol=0.05)
-    assert local_noise_scale(_two_noise_plane(False), scan.valid) is None
+    assert local_noise_scale(_two_noise_plane(False), scan.valid, footprint) is None
+    # in footprints: the same sigma twice as far away is half as noisy relative to a pixel
+    assert np.allclose(local_noise_scale(scan, scan.valid, footprint * np.where(np.arange(96) < 64, 1.0, 2.0))[:, 68:],
+                       2.0, rtol=0.05)
     creases = {}
     for with_sigma in (False, True):
         em = DETECTORS[name](_two_noise_plane(with_sigma))
@@ -518,3 +522,19 @@ def test_predicted_noise_ignores_sigma_raised_at_the_edge_itself():
     assert np.allclose(got[23:, 28:], 0.8)
     assert got[5, 30] == np.float32(0.1)
     assert predicted_noise(SimpleNamespace(sigma=None)) is None
+
+
+def test_curvature_direction_projects_by_the_scans_geometry():
+    """Across-crease directions: pinhole projection of the 3D direction, or its (x, y) on a
+    grid of constant spacing (a sweep scanner's depth need not be a camera distance)."""
+    from types import SimpleNamespace
+
+    from rangesim.edges._curvature import _image_angle
+    xyz = np.array([[[100.0, 0.0, 100.0]]])
+    d = np.array([[[0.0, 0.0, 1.0]]])               # straight away from a camera at the origin
+    scan = SimpleNamespace(xyz=xyz)
+    # pinhole: moving along +z at x = z shrinks x / z, the image moves along -x
+    assert np.isclose(_image_angle(d, scan, xyz[..., 2])[0, 0], 0.0, atol=1e-6)
+    d = np.array([[[1.0, 1.0, 0.0]]]) / np.sqrt(2)
+    assert np.isclose(_image_angle(d, scan, xyz[..., 2], perspective=False)[0, 0], np.pi / 4)
+    assert np.isclose(_image_angle(d, scan, np.zeros((1, 1)), perspective=False)[0, 0], np.pi / 4)

@@ -119,7 +119,8 @@ def curvature(
     >>> edges.method, bool(edges.mask.any())
     ('curvature', True)
     >>> corners = rs.edges.curvature(scan, rule="both")     # Fig. 12: corners only
-    >>> bool((corners.mask & (corners.labels != 3)).sum() <= (edges.mask & (edges.labels != 3)).sum())
+    >>> jump = rs.core.constants.EdgeLabel.JUMP
+    >>> bool((corners.mask & (corners.labels != jump)).sum() <= (edges.mask & (edges.labels != jump)).sum())
     True
 
     References
@@ -153,7 +154,8 @@ def curvature(
     else:
         first = np.abs(k1) >= np.abs(k2)
         strength = np.where(first, np.abs(k1), np.abs(k2))
-        direction = _image_angle(np.where(first[..., None], curv["dir1"], curv["dir2"]), scan, z)
+        direction = _image_angle(np.where(first[..., None], curv["dir1"], curv["dir2"]), scan, z,
+                                 geo.perspective)
         if threshold is None:
             relative_strength = strength * scale
             relative = EXTREMA_RELATIVE_THRESHOLD
@@ -162,7 +164,7 @@ def curvature(
             if noise >= NOISE_FLOOR:
                 relative = noise_threshold(relative_strength, valid, relative, NOISE_K_CURVATURE)
                 # per pixel: raised where the noise model predicts more noise than the median
-                scale = local_noise_scale(scan, valid)
+                scale = local_noise_scale(scan, valid, geo.footprint)
                 pixel_relative = relative if scale is None else relative * scale
             with np.errstate(invalid="ignore"):
                 above = relative_strength > pixel_relative
@@ -200,16 +202,22 @@ def curvature(
                    method="curvature", params=params)
 
 
-def _image_angle(d: np.ndarray, scan: Any, z: np.ndarray) -> np.ndarray:
+def _image_angle(d: np.ndarray, scan: Any, z: np.ndarray, perspective: bool = True) -> np.ndarray:
     """Angle in [0, pi) of the image motion along 3D directions ``d`` (H, W, 3) at each pixel.
 
     A step ``d`` from the camera-frame point (x, y, z) moves its image by
     ``f / z * (d_x - x d_z / z, d_y - y d_z / z)`` (pinhole): the direction, not the length,
-    is kept. NaN where ``d`` or the point is undefined.
+    is kept. Without ``perspective`` (a grid of constant spacing, such as a sweep scanner's,
+    whose depth need not be a distance from a camera) by ``(d_x, d_y)``. NaN where ``d`` or
+    the point is undefined.
     """
-    xyz = np.asarray(scan.xyz, np.float64)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = d[..., 0] - xyz[..., 0] / z * d[..., 2]
-        v = d[..., 1] - xyz[..., 1] / z * d[..., 2]
+    if perspective:
+        xyz = np.asarray(scan.xyz, np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = d[..., 0] - xyz[..., 0] / z * d[..., 2]
+            v = d[..., 1] - xyz[..., 1] / z * d[..., 2]
+    else:
+        u, v = d[..., 0], d[..., 1]
+    with np.errstate(invalid="ignore"):
         angle = np.mod(np.arctan2(v, u), np.pi)
     return angle.astype(np.float32)

@@ -540,7 +540,7 @@ def gradient(
     # per pixel: raised where the noise model predicts more noise than at the median pixel
     pixel_threshold: float | np.ndarray = threshold
     if auto_threshold and noisy:
-        scale = local_noise_scale(scan, valid)
+        scale = local_noise_scale(scan, valid, fp)
         if scale is not None:
             pixel_threshold = np.minimum(np.float32(threshold) * scale, np.float32(89.0))
 

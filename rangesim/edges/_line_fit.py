@@ -12,7 +12,7 @@ from skimage.morphology import thin as skeleton_thin
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import NEIGHBOURS
-from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, predicted_noise
+from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, noise_in_footprints
 from rangesim.edges._scan_access import scan_depth, scan_points
 from rangesim.edges.edgemap import RIM, EdgeMap
 
@@ -44,6 +44,9 @@ def line_fit_points(
     k = int(k)
     if k < 2:
         raise ValueError(f"k must be at least 2, got {k}")
+    tol = np.asarray(angle_tol_deg, np.float64)
+    if tol.ndim and tol.shape != (len(pts),):
+        raise ValueError(f"angle_tol_deg must be a number or one per point ({len(pts)}), got shape {tol.shape}")
     out = np.zeros(len(pts), bool)
     finite = np.isfinite(pts).all(axis=1)
     p = pts[finite]
@@ -53,9 +56,6 @@ def line_fit_points(
     if n <= k:
         out[finite] = True                         # too few points for any line pair
         return out
-    tol = np.asarray(angle_tol_deg, np.float64)
-    if tol.ndim and tol.shape != (len(pts),):
-        raise ValueError(f"angle_tol_deg must be a number or one per point ({len(pts)}), got shape {tol.shape}")
     cos_opp = np.cos(np.radians(tol if tol.ndim == 0 else tol[finite]))
     cos_sep = np.cos(np.radians(line_sep_deg))
     tree = cKDTree(p)
@@ -104,14 +104,12 @@ def _noise_tolerance(scan: Any, valid: np.ndarray, footprint: np.ndarray, noise:
     ``noise`` times its predicted noise in footprints over the median of that.
     """
     k, local = NOISE_K_LINE, noise
-    sigma = predicted_noise(scan)
-    if sigma is not None:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sigma_fp = sigma / footprint
-        ok = valid & (sigma_fp > 0)
-        if ok.sum() >= 100:
-            k = NOISE_K_LINE_LOCAL
-            local = noise * np.where(ok, sigma_fp / np.median(sigma_fp[ok]), 1.0)
+    relative = noise_in_footprints(scan, valid, footprint)
+    if relative is not None:
+        ok, sigma_fp = relative
+        # pixels without a usable sigma keep the scan-wide figure and its margin
+        k = np.where(ok, NOISE_K_LINE_LOCAL, NOISE_K_LINE)
+        local = noise * np.where(ok, sigma_fp / np.median(sigma_fp[ok]), 1.0)
     tolerance = np.clip(np.degrees(np.arctan(k * np.sqrt(2) * local)), 15.0, 60.0)
     return float(tolerance) if np.ndim(tolerance) == 0 else tolerance.astype(np.float32)
 
@@ -152,8 +150,8 @@ def line_fit(
     on the near side of a jump, else none, so a hole in a flat face or the image border is
     not an edge. The technique itself cannot tell convex from concave; on a scan, with
     ``label_creases``, a crease pixel is CONVEX where it lies nearer the camera than the
-    mean depth of the valid pixels of its 5 x 5 neighbourhood (a roof: the faces fall away
-    on both sides), else CONCAVE (label 0 without).
+    mean depth of the valid pixels of its 5 x 5 neighbourhood that are not across a depth
+    jump (a roof: the faces fall away on both sides), else CONCAVE (label 0 without).
 
     On a scan the crease points form bands 2-3 px wide (every point within a neighbour's
     reach of the crease sees no straight line across it): with ``thin`` they are thinned to
@@ -252,7 +250,7 @@ def line_fit(
     labels = np.where(disc.occluding, EdgeLabel.JUMP, EdgeLabel.NONE).astype(np.uint8)
     if label_creases:
         crease = edge & ~disc.occluding & ~disc.rim
-        labels[crease] = _crease_type(z, valid, crease)
+        labels[crease] = _crease_type(z, valid, crease, geo.footprint * np.float32(jump_threshold))
     labels[disc.rim & ~disc.occluding] = RIM
     strength = np.where(valid, edge.astype(np.float32), np.float32(np.nan))
     params = {
@@ -282,23 +280,27 @@ def _thin_creases(edge: np.ndarray, fixed: np.ndarray, min_px: int) -> np.ndarra
     return crease | (edge & fixed)
 
 
-def _crease_type(z: np.ndarray, valid: np.ndarray, crease: np.ndarray) -> np.ndarray:
+def _crease_type(z: np.ndarray, valid: np.ndarray, crease: np.ndarray, jump_mm: np.ndarray) -> np.ndarray:
     """CONVEX or CONCAVE (uint8) for each ``crease`` pixel, in ``np.flatnonzero`` order.
 
     Convex where the pixel's depth is below the mean depth of the valid pixels of its
     5 x 5 neighbourhood: across a roof both faces fall away from the camera, so their
     mean lies farther than the crest (a plane gives the pixel's own depth to first order).
+    Neighbours farther in depth than the jump rule allows over their distance (``jump_mm``
+    per pixel step, the pixel's jump threshold) lie across a depth jump and are left out.
     """
-    h, w = z.shape
     r = 2
     zp = np.pad(np.where(valid, z, 0.0), r)
     vp = np.pad(valid, r)
     ii, jj = np.nonzero(crease)
+    zc, limit = z[ii, jj], jump_mm[ii, jj]
     total = np.zeros(ii.size)
     count = np.zeros(ii.size)
     for dr in range(-r, r + 1):
         for dc in range(-r, r + 1):
-            total += zp[ii + r + dr, jj + r + dc]
-            count += vp[ii + r + dr, jj + r + dc]
-    farther = total / np.maximum(count, 1) > z[ii, jj]
+            zq = zp[ii + r + dr, jj + r + dc]
+            use = vp[ii + r + dr, jj + r + dc] & (np.abs(zq - zc) <= max(abs(dr), abs(dc)) * limit)
+            total += np.where(use, zq, 0.0)
+            count += use
+    farther = total / np.maximum(count, 1) > zc
     return np.where(farther, EdgeLabel.CONVEX, EdgeLabel.CONCAVE).astype(np.uint8)

@@ -28,7 +28,8 @@ import numpy as np
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
-    "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "predicted_noise",
+    "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
+    "predicted_noise",
     "NOISE_FLOOR",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_NORMAL_LOCAL", "NOISE_K_PCL",
 ]
@@ -283,28 +284,51 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     return least
 
 
-def local_noise_scale(scan: Any, valid: np.ndarray) -> np.ndarray | None:
-    """How much noisier each pixel is than the scan's median pixel: ``max(1, sigma / median)``.
+def local_noise_scale(scan: Any, valid: np.ndarray, footprint: np.ndarray) -> np.ndarray | None:
+    """How much noisier each pixel is than the scan's median pixel, in pixel footprints:
+    ``max(1, s / median(s))`` with ``s = sigma / footprint``.
 
     ``sigma`` is :func:`predicted_noise`, the noise model's predicted depth std around the
-    pixel (mm; simulated laser-stripe scans carry it). Noise grows steeply with incidence and range, so a face
-    seen near grazing or a far table is several times noisier than the median pixel that
-    :func:`noise_threshold` calibrates on; a detector multiplies its noise-derived threshold
-    by this scale there (the strength's noise is proportional to the depth noise for small
-    angles). Never below 1: a quieter pixel keeps the scan's threshold.
+    pixel (mm; simulated laser-stripe scans carry it), and ``footprint`` the pixel's lateral
+    size (``z / f`` mm): the detectors' strengths (bend angles, normal angles, ``|k| R``) are
+    relative to the footprint, so their noise goes as ``sigma / footprint``. Noise grows
+    steeply with incidence and range, so a face seen near grazing or a far table is several
+    times noisier than the median pixel that :func:`noise_threshold` calibrates on; a
+    detector multiplies its noise-derived threshold by this scale there (the strength's
+    noise is proportional to the depth noise for small angles). Never below 1: a quieter
+    pixel keeps the scan's threshold.
 
     Returns
     -------
     (H, W) float32, or None
         None when the scan carries no usable ``sigma`` (recorded scans, noise-free ones).
     """
+    relative = noise_in_footprints(scan, valid, footprint)
+    if relative is None:
+        return None
+    ok, s = relative
+    median = np.float32(np.median(s[ok]))
+    scale = np.ones(s.shape, np.float32)
+    np.divide(s, median, out=scale, where=ok & (s > median))
+    return scale
+
+
+def noise_in_footprints(scan: Any, valid: np.ndarray,
+                        footprint: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`predicted_noise` over the pixel footprint, and where it is usable.
+
+    Returns
+    -------
+    (ok, s) : (H, W) bool, (H, W) float32
+        ``s = sigma / footprint``; ``ok`` where it is finite and positive on a valid pixel.
+        None when the scan carries no sigma or fewer than 100 pixels have one.
+    """
     sigma = predicted_noise(scan)
     if sigma is None:
         return None
-    ok = valid & np.isfinite(sigma) & (sigma > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (sigma / np.asarray(footprint, np.float32)).astype(np.float32)
+    ok = valid & np.isfinite(s) & (s > 0)
     if ok.sum() < 100:
         return None
-    median = np.float32(np.median(sigma[ok]))
-    scale = np.ones(sigma.shape, np.float32)
-    np.divide(sigma, median, out=scale, where=ok & (sigma > median))
-    return scale
+    return ok, s

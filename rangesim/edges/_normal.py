@@ -162,7 +162,7 @@ def normal(
     if auto_threshold and noisy:
         # per pixel where the noise model predicts each pixel's noise: raised where it is
         # above the median's, and without the margin a scan-wide figure needs for them
-        scale = local_noise_scale(scan, valid)
+        scale = local_noise_scale(scan, valid, geo.footprint)
         k = NOISE_K_NORMAL if scale is None else NOISE_K_NORMAL_LOCAL
         threshold_deg = noise_threshold(strength, valid, threshold_deg, k)
         pixel_threshold = threshold_deg if scale is None else np.minimum(np.float32(threshold_deg) * scale, 179.0)
