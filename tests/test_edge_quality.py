@@ -13,10 +13,10 @@ Documented F1 (measured; the floors asserted below are these minus a small margi
 =============  ==========  ======================  ============  ======================
 detector       noise-free  noise-free, stripe 0    preset noise  flagged at preset noise
 =============  ==========  ======================  ============  ======================
-gradient       0.893       0.913                   0.836         1.2 % of valid pixels
-normal         0.897       0.923                   0.790         1.1 %
+gradient       0.893       0.913                   0.839         1.2 % of valid pixels
+normal         0.897       0.923                   0.792         1.1 %
 line_fit       0.840       0.880                   0.633         0.7 %
-curvature      0.871       0.903                   0.797         1.1 %
+curvature      0.871       0.903                   0.798         1.1 %
 pcl_organized  0.747       0.733                   0.654         1.7 %
 =============  ==========  ======================  ============  ======================
 
