@@ -10,7 +10,13 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import pad_last2, padded_view
-from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, local_noise_scale, noise_threshold
+from rangesim.edges._noise import (
+    NOISE_FLOOR,
+    estimate_depth_noise,
+    local_noise_scale,
+    noise_threshold,
+    raised_threshold,
+)
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import nonmax_suppress, thin_staircases
 from rangesim.edges.edgemap import RIM, EdgeMap
@@ -141,14 +147,14 @@ def curvature(
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     curv = curvature_scan(scan, window=window)
     k1, k2, mean = curv["k1"], curv["k2"], curv["H"]
-    scale = (r * geo.footprint).astype(np.float64)    # R, mm: curvature in units of 1 / R
+    half_width = (r * geo.footprint).astype(np.float64)    # R, mm: curvature in units of 1 / R
     direction = None
     relative = None
     if rule == "both":
         strength = np.fmin(np.abs(k1), np.abs(k2))
         if threshold is None:
             relative = DEFAULT_RELATIVE_THRESHOLD
-            points = curvature_edges(k1 * scale, k2 * scale, relative)
+            points = curvature_edges(k1 * half_width, k2 * half_width, relative)
         else:
             points = curvature_edges(k1, k2, float(threshold))
     else:
@@ -157,15 +163,14 @@ def curvature(
         direction = _image_angle(np.where(first[..., None], curv["dir1"], curv["dir2"]), scan, z,
                                  geo.perspective)
         if threshold is None:
-            relative_strength = strength * scale
+            relative_strength = strength * half_width
             relative = EXTREMA_RELATIVE_THRESHOLD
             noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
             pixel_relative: float | np.ndarray = relative
             if noise >= NOISE_FLOOR:
                 relative = noise_threshold(relative_strength, valid, relative, NOISE_K_CURVATURE)
                 # per pixel: raised where the noise model predicts more noise than the median
-                scale = local_noise_scale(scan, valid, geo.footprint)
-                pixel_relative = relative if scale is None else relative * scale
+                pixel_relative = raised_threshold(relative, local_noise_scale(scan, valid, geo.footprint, disc.noise))
             with np.errstate(invalid="ignore"):
                 above = relative_strength > pixel_relative
         else:

@@ -98,7 +98,8 @@ def discontinuities(
     the least over the pixel's 5 x 5 neighbourhood, :func:`~rangesim.edges._noise.predicted_noise`):
     noise grows steeply with incidence, and a face seen at 70-75 degrees, whose neighbours
     already differ by 3 footprints, is otherwise a band of jumps wherever the noise adds
-    the rest (on the machined parts' seeds 0-7, inria_laser's noisy gradient F1 0.63 -> 0.81). Rounding moves each of two neighbours by at most half a quantum, so their
+    the rest (on the machined parts' seeds 0-7, inria_laser's noisy gradient F1 0.63 -> 0.81).
+    Rounding moves each of two neighbours by at most half a quantum, so their
     difference by at most one, and a structured-light matcher errs by whole disparity
     levels on top of that: a Kinect's quantised table (steps of 1.5-3 footprints at 1-2 m)
     is then no band of jump dashes, while real depth edges (tens of quanta) stay. Folds
@@ -116,6 +117,7 @@ def discontinuities(
     empty, certain = empty_pixels(scan, np.isfinite(z))
     disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
                                 empty=empty, empty_certain=certain)
+    disc.noise = sigma
     return disc, geo
 
 
@@ -144,6 +146,10 @@ class Discontinuities:
         certain, occluded): the measured
         surface ends there against nothing measured (a through-hole's rim over an absent
         floor, a part's silhouette against empty space). All False when ``empty`` is None.
+    noise : (H, W) float32 or None
+        The predicted depth noise (mm) the jump threshold allowed for
+        (:func:`~rangesim.edges._noise.predicted_noise`; set by :func:`discontinuities`),
+        None where the scan carries none.
     """
 
     occluding: np.ndarray
@@ -152,6 +158,7 @@ class Discontinuities:
     pairs: np.ndarray
     direction: np.ndarray
     rim: np.ndarray | None = None
+    noise: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.rim is None:

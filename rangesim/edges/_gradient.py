@@ -15,6 +15,7 @@ from rangesim.edges._noise import (
     estimate_depth_noise,
     local_noise_scale,
     noise_threshold,
+    raised_threshold,
 )
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
@@ -540,9 +541,7 @@ def gradient(
     # per pixel: raised where the noise model predicts more noise than at the median pixel
     pixel_threshold: float | np.ndarray = threshold
     if auto_threshold and noisy:
-        scale = local_noise_scale(scan, valid, fp)
-        if scale is not None:
-            pixel_threshold = np.minimum(np.float32(threshold) * scale, np.float32(89.0))
+        pixel_threshold = raised_threshold(threshold, local_noise_scale(scan, valid, fp, disc.noise), 89.0)
 
     # bend angle: the slopes on either side are t -+ d / 2 around the mean slope t across
     # the edge (central first difference, which straddles a crease at the centre); d is

@@ -96,7 +96,8 @@ NOISE_K_LINE = 3.0
 NOISE_K_LINE_LOCAL = 2.25
 
 
-def _noise_tolerance(scan: Any, valid: np.ndarray, footprint: np.ndarray, noise: float) -> float | np.ndarray:
+def _noise_tolerance(scan: Any, valid: np.ndarray, footprint: np.ndarray, noise: float,
+                     sigma: np.ndarray | None = None) -> float | np.ndarray:
     """The opposite-pair tolerance (degrees) of a noisy scan: a number, or (H, W) per pixel.
 
     ``noise`` is the scan's depth noise in footprints; where the scan carries its noise
@@ -104,7 +105,7 @@ def _noise_tolerance(scan: Any, valid: np.ndarray, footprint: np.ndarray, noise:
     ``noise`` times its predicted noise in footprints over the median of that.
     """
     k, local = NOISE_K_LINE, noise
-    relative = noise_in_footprints(scan, valid, footprint)
+    relative = noise_in_footprints(scan, valid, footprint, sigma)
     if relative is not None:
         ok, sigma_fp = relative
         # pixels without a usable sigma keep the scan-wide figure and its margin
@@ -231,7 +232,7 @@ def line_fit(
         noise = estimate_depth_noise(scan, z, fp=geo.footprint)
         tolerance = 15.0
         if noise >= NOISE_FLOOR:
-            tolerance = _noise_tolerance(scan, valid, geo.footprint, noise)
+            tolerance = _noise_tolerance(scan, valid, geo.footprint, noise, disc.noise)
     else:
         tolerance = float(angle_tol_deg)
     edge = np.zeros(z.shape, bool)

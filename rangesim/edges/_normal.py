@@ -16,6 +16,7 @@ from rangesim.edges._noise import (
     estimate_depth_noise,
     local_noise_scale,
     noise_threshold,
+    raised_threshold,
     stencil_window,
 )
 from rangesim.edges._scan_access import scan_depth, scan_points
@@ -162,10 +163,10 @@ def normal(
     if auto_threshold and noisy:
         # per pixel where the noise model predicts each pixel's noise: raised where it is
         # above the median's, and without the margin a scan-wide figure needs for them
-        scale = local_noise_scale(scan, valid, geo.footprint)
+        scale = local_noise_scale(scan, valid, geo.footprint, disc.noise)
         k = NOISE_K_NORMAL if scale is None else NOISE_K_NORMAL_LOCAL
         threshold_deg = noise_threshold(strength, valid, threshold_deg, k)
-        pixel_threshold = threshold_deg if scale is None else np.minimum(np.float32(threshold_deg) * scale, 179.0)
+        pixel_threshold = raised_threshold(threshold_deg, scale, 179.0)
     # direction across the crease: dominant second harmonic of the four axis strengths
     theta = 0.5 * np.arctan2(angles[1] - angles[3], angles[0] - angles[2])
 
