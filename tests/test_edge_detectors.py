@@ -108,6 +108,26 @@ def with_hole(scan: RangeScan, centre: tuple[int, int], half: int) -> RangeScan:
     return dataclasses.replace(scan, depth=depth, xyz=xyz, valid=valid)
 
 
+def pinhole_rays(size: int, f: float) -> tuple[np.ndarray, np.ndarray]:
+    """K and the camera-frame rays (z = 1) through the pixel centres of a size x size pinhole."""
+    K = np.array([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
+    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    return K, rays
+
+
+def grid_scan(xyz: np.ndarray, K: np.ndarray, sigma: np.ndarray | None = None) -> RangeScan:
+    """A fully valid RangeScan of camera-frame points (H, W, 3), with the noise model's sigma or none."""
+    xyz = np.asarray(xyz, np.float32)
+    shape = xyz.shape[:2]
+    return RangeScan(
+        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
+        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
+        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
+        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=sigma,
+    )
+
+
 def synthetic_roof(bend_deg: float, edge_deg: float, convex: bool, offset_px: float = 0.3,
                    size: int = 61, f: float = 400.0, z0: float = 500.0) -> RangeScan:
     """A pinhole view of two planes meeting in a straight crease through the image centre.
@@ -115,9 +135,7 @@ def synthetic_roof(bend_deg: float, edge_deg: float, convex: bool, offset_px: fl
     The faces are tilted by -+ bend / 2 about the crease (towards the camera for a valley,
     away for a roof); ``edge_deg`` is the angle of the (x, y) vector across the crease.
     """
-    K = np.array([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
-    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
-    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    K, rays = pinhole_rays(size, f)
     a = np.radians(edge_deg)
     across = np.array([np.cos(a), np.sin(a), 0.0])
     p0 = np.array([0.0, 0.0, z0]) + across * offset_px * z0 / f
@@ -129,14 +147,7 @@ def synthetic_roof(bend_deg: float, edge_deg: float, convex: bool, offset_px: fl
         return rays * ((p0 @ n) / (rays @ n))[..., None]
 
     pa, pb = face(-sign * bend_deg / 2), face(sign * bend_deg / 2)
-    xyz = np.where((((pa - p0) @ across) < 0)[..., None], pa, pb).astype(np.float32)
-    shape = (size, size)
-    return RangeScan(
-        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
-        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
-        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
-        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()},
-    )
+    return grid_scan(np.where((((pa - p0) @ across) < 0)[..., None], pa, pb), K)
 
 
 def roof_distance(scan: RangeScan, edge_deg: float, offset_px: float = 0.3) -> np.ndarray:
@@ -423,24 +434,14 @@ def _steep_plane(sigma_mm: float, with_sigma: bool, step_col: int = 64, step_mm:
     above), with heavy-tailed depth noise of std ``sigma_mm`` (Student t, 3 degrees of
     freedom, as a laser scanner's errors near grazing incidence), a 15 mm step down at
     column ``step_col``; the noise model's ``sigma`` is attached or not."""
-    size, f, z0 = 96, 300.0, 400.0
-    K = np.array([[f, 0, size / 2], [0, f, size / 2], [0, 0, 1]])
-    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
-    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    size, z0 = 96, 400.0
+    K, rays = pinhole_rays(size, 300.0)
     t = np.arctan(3.0)
     n = np.array([np.sin(t), 0.0, -np.cos(t)])
     depth = ((np.array([0, 0, z0]) @ n) / (rays @ n))
     depth[:, step_col:] += step_mm
     depth = depth + sigma_mm / np.sqrt(3.0) * np.random.default_rng(0).standard_t(3, depth.shape)
-    xyz = (rays * depth[..., None]).astype(np.float32)
-    shape = (size, size)
-    return RangeScan(
-        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
-        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
-        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
-        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()},
-        sigma=np.full(shape, sigma_mm, np.float32) if with_sigma else None,
-    )
+    return grid_scan(rays * depth[..., None], K, np.full(depth.shape, sigma_mm, np.float32) if with_sigma else None)
 
 
 @pytest.mark.parametrize("name", ["gradient", "normal", "line_fit", "curvature"])
@@ -466,20 +467,10 @@ def test_jump_rule_allows_for_the_predicted_noise(name):
 def _two_noise_plane(with_sigma: bool) -> RangeScan:
     """A frontal plane at 400 mm, depth noise 0.15 mm on the left two thirds, 0.6 mm on the
     right third (a far or grazing part of a scene), the noise model's sigma attached or not."""
-    size, f, z0 = 96, 300.0, 400.0
-    K = np.array([[f, 0, size / 2], [0, f, size / 2], [0, 0, 1]])
-    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
-    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
-    sigma = np.where(jj < 64, 0.15, 0.6).astype(np.float32)
-    depth = z0 + sigma * np.random.default_rng(1).standard_normal(sigma.shape)
-    xyz = (rays * depth[..., None]).astype(np.float32)
-    shape = (size, size)
-    return RangeScan(
-        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
-        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
-        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
-        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=sigma if with_sigma else None,
-    )
+    K, rays = pinhole_rays(96, 300.0)
+    sigma = np.where(np.arange(96) < 64, 0.15, 0.6).astype(np.float32)[None, :].repeat(96, 0)
+    depth = 400.0 + sigma * np.random.default_rng(1).standard_normal(sigma.shape)
+    return grid_scan(rays * depth[..., None], K, sigma if with_sigma else None)
 
 
 @pytest.mark.parametrize("name", ["gradient", "normal", "curvature"])
@@ -538,3 +529,13 @@ def test_curvature_direction_projects_by_the_scans_geometry():
     d = np.array([[[1.0, 1.0, 0.0]]]) / np.sqrt(2)
     assert np.isclose(_image_angle(d, scan, xyz[..., 2], perspective=False)[0, 0], np.pi / 4)
     assert np.isclose(_image_angle(d, scan, np.zeros((1, 1)), perspective=False)[0, 0], np.pi / 4)
+
+
+def test_window_minimum_matches_scipy():
+    from scipy.ndimage import minimum_filter
+
+    from rangesim.edges._noise import _window_min
+    a = np.random.default_rng(3).random((37, 11)).astype(np.float32)
+    a[::7, ::5] = np.inf
+    for r in (1, 2, 3):
+        assert np.array_equal(_window_min(a, r), minimum_filter(a, 2 * r + 1, mode="nearest"))
