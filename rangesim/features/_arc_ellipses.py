@@ -24,6 +24,7 @@ from rangesim.core.conics import (
     real_ellipses,
     sampson_distance_rows,
 )
+from rangesim.features._conic_kernels import band_moments
 
 #: tile sizes (px) of the arc pieces; each tiling also shifted by half a tile (diagonally)
 TILES_PX = (16, 32, 64, 128, 256)
@@ -340,7 +341,6 @@ def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2
     hyp, point : (P,) int
         (ellipse, edge point) pairs of the inliers: within the last band and agreeing.
     """
-    K = len(conics)
     conics = conics.copy()
     cos_tol = np.cos(np.deg2rad(direction_tol_deg))
     # candidates, once: the points within ``bands[0] + margin`` px of the first conic (a
@@ -351,19 +351,15 @@ def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2
     hyp, pt = box_candidates(np.where(ok[:, None], c, np.inf), np.where(ok, reach, 0.0), xy)
     near = sampson_distance_rows(conics[hyp], xy[pt]) <= bands[0] + margin
     hyp, pt = hyp[near], pt[near]
-    p, ct, st = xy[pt], np.cos(theta[pt]), np.sin(theta[pt])
+    px, py = xy[pt, 0].copy(), xy[pt, 1].copy()
+    ct, st = np.cos(theta[pt]), np.sin(theta[pt])
     for band in bands:
-        q = conics[hyp]
-        gx = 2 * q[:, 0] * p[:, 0] + q[:, 1] * p[:, 1] + q[:, 3]
-        gy = q[:, 1] * p[:, 0] + 2 * q[:, 2] * p[:, 1] + q[:, 4]
-        val = q[:, 0] * p[:, 0] ** 2 + q[:, 1] * p[:, 0] * p[:, 1] + q[:, 2] * p[:, 1] ** 2 + q[:, 3] * p[:, 0] \
-            + q[:, 4] * p[:, 1] + q[:, 5]
-        gn = np.maximum(np.hypot(gx, gy), 1e-12)
-        sel = (np.abs(gx * ct + gy * st) >= cos_tol * gn) & (np.abs(val) <= band * gn)
+        # the agreeing points within the band and the moments of their direct fit, in one pass
+        sel, m, s, mom = band_moments(conics, hyp, px, py, ct, st, float(band), float(cos_tol))
         if band == bands[-1]:
             break
-        new, nok = fit_conics_grouped(p[sel], hyp[sel], K)
-        nok &= (np.bincount(hyp[sel], minlength=K) >= 6) & real_ellipses(new)
+        new, nok, _ = fit_conics_moments(mom, m, s)
+        nok &= (mom[:, 0] >= 6) & real_ellipses(new)
         conics[nok & ok] = new[nok & ok]
     ok &= real_ellipses(conics)
     return conics, ok, hyp[sel], pt[sel]

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rangesim.features._circle_kernels import accumulate, block_peaks, block_voters
+
 
 @dataclass(frozen=True)
 class Band:
@@ -93,49 +95,26 @@ def vote_table(bands: list[Band], angle_tol: float) -> tuple[np.ndarray, ...]:
 
 
 def cast_votes(xy: np.ndarray, theta: np.ndarray, bands: list[Band],
-               angle_tol: float) -> tuple[np.ndarray, np.ndarray, int]:
-    """Flat accumulator index of every vote, and the accumulator.
+               angle_tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The accumulator: votes per cell, all bands back to back.
+
+    Each point votes in both senses along its edge normal at every column of
+    :func:`vote_table` (cos/sin of (theta + a) by angle addition, cells by truncation in a
+    padded grid, so no bounds tests), in one compiled pass (:func:`._circle_kernels.accumulate`).
 
     Returns
     -------
-    flat : (2, M, N) int32
-        Cell of each vote (sense, column, point).
     acc : (total cells,) int64
-        Votes per cell, all bands back to back.
-    m : int
-        Columns per point and sense.
+    flat : (N, M, 2) int32
+        The cell of every vote (point, column, sense), for :func:`voters`.
     """
     rc, rs, _, _, _, _, band, _ = vote_table(bands, angle_tol)
-    total = n_cells(bands)
-    n, m = len(xy), len(rc)
-    # per band (scalar cell and padding), float32, laid out (column, point) so that the inner
-    # loops run over the points; cos/sin of (theta + a) by angle addition from per-point and
-    # per-column tables (no trig over the grid); the minus sense as 2 u - (u + d); cells by
-    # truncation in a padded grid (no bounds masks); then one np.bincount over all the bands
-    ct, st = np.cos(theta).astype(np.float32), np.sin(theta).astype(np.float32)
-    x = xy[:, 0].astype(np.float32) + np.float32(0.5)
-    y = xy[:, 1].astype(np.float32) + np.float32(0.5)
-    flat = np.empty((2, m, n), np.int32)
-    for b, bd in enumerate(bands):
-        cols = np.nonzero(band == b)[0]
-        sl = slice(cols[0], cols[-1] + 1)
-        inv, pad = np.float32(1 / bd.cell), np.float32(bd.pad)
-        u, v = x * inv + pad, y * inv + pad
-        rcb, rsb = rc[sl, None], rs[sl, None]
-        if np.any(rsb):
-            dx, dy = rcb * ct - rsb * st, rcb * st + rsb * ct
-        else:  # no angle offsets in this band: votes on the normal only
-            dx, dy = rcb * ct, rcb * st
-        dx += u
-        dy += v
-        for s, (fu, fv) in enumerate(((dx, dy), (2 * u - dx, 2 * v - dy))):
-            iv = fv.astype(np.int32)
-            iv *= bd.cols
-            iv += fu.astype(np.int32)
-            iv += bd.offset
-            flat[s, sl] = iv
-    acc = np.bincount(flat.ravel(), minlength=total)
-    return flat, acc, m
+    return accumulate(np.ascontiguousarray(xy[:, 0], np.float64), np.ascontiguousarray(xy[:, 1], np.float64),
+                      np.cos(theta).astype(np.float64), np.sin(theta).astype(np.float64),
+                      rc.astype(np.float64), rs.astype(np.float64), band.astype(np.int64),
+                      np.array([1.0 / b.cell for b in bands]), np.array([float(b.pad) for b in bands]),
+                      np.array([b.cols for b in bands], np.int64), np.array([b.offset for b in bands], np.int64),
+                      n_cells(bands))
 
 
 def peaks(acc: np.ndarray, bands: list[Band], shape: tuple[int, int],
@@ -160,63 +139,26 @@ def peaks(acc: np.ndarray, bands: list[Band], shape: tuple[int, int],
         Flat accumulator indices of the block's cells.
     """
     H, W = shape
-    blks, ts, bs = [], [], []
-    for b, bd in enumerate(bands):
-        a = acc[bd.offset:bd.offset + bd.rows * bd.cols]
-        C = bd.cols
-        t = max(4, int(np.ceil(threshold * 4 * np.pi * bd.lo)))
-        hot = np.nonzero(a >= (t + 3) // 4)[0]
-        if len(hot) == 0:
-            continue
-        # the 4 blocks (by top-left cell) holding each hot cell, whose corner lies in the
-        # image (the padding leaves room for the neighbour tests)
-        mark = np.zeros(len(a), bool)
-        for o in (0, 1, C, C + 1):
-            mark[hot - o] = True
-        y1, x1 = bd.pad + int(np.ceil(H / bd.cell)), bd.pad + int(np.ceil(W / bd.cell))
-        mark = mark.reshape(bd.rows, C)[bd.pad - 1:y1, bd.pad - 1:x1]
-        yy, xx = np.nonzero(mark)
-        blks.append(bd.offset + (yy + bd.pad - 1) * C + xx + bd.pad - 1)
-        ts.append(np.full(len(yy), t))
-        bs.append(np.full(len(yy), b))
-    if not blks:
-        return np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, int), np.zeros((0, 4), int)
-    # all bands at once from here: flat indices into acc, each with its band's row length
-    blk, t, band = np.concatenate(blks), np.concatenate(ts), np.concatenate(bs)
+    as_int = lambda f: np.array([f(bd) for bd in bands], np.int64)  # noqa: E731
+    t = as_int(lambda bd: max(4, int(np.ceil(threshold * 4 * np.pi * bd.lo))))
+    pad = as_int(lambda bd: bd.pad)
+    blk, band, v = block_peaks(acc, as_int(lambda bd: bd.offset), as_int(lambda bd: bd.rows),
+                               as_int(lambda bd: bd.cols), pad, pad + as_int(lambda bd: int(np.ceil(H / bd.cell))),
+                               pad + as_int(lambda bd: int(np.ceil(W / bd.cell))), t)
     C = np.array([bd.cols for bd in bands])[band]
-    v = _box(acc, blk, C)
-    keep = v >= t
-    blk, v, band, C = blk[keep], v[keep], band[keep], C[keep]
-    ok = np.ones(len(blk), bool)
-    for oy in (-1, 0, 1):
-        for ox in (-1, 0, 1):
-            if oy or ox:
-                nb = _box(acc, blk + oy * C + ox, C)
-                ok &= (v > nb) if (oy, ox) < (0, 0) else (v >= nb)
-    blk, v, band, C = blk[ok], v[ok], band[ok], C[ok]
     cell = np.array([bd.cell for bd in bands])[band]
-    pad = np.array([bd.pad for bd in bands])[band]
     local = blk - np.array([bd.offset for bd in bands])[band]
-    cx = (local % C + 1 - pad) * cell - 0.5
-    cy = (local // C + 1 - pad) * cell - 0.5
+    cx = (local % C + 1 - pad[band]) * cell - 0.5
+    cy = (local // C + 1 - pad[band]) * cell - 0.5
     inside = (cx >= -0.5) & (cx <= W - 0.5) & (cy >= -0.5) & (cy <= H - 0.5)
     blk, v, band, C, cx, cy = blk[inside], v[inside], band[inside], C[inside], cx[inside], cy[inside]
     return (np.column_stack([cx, cy]), band, v.astype(int),
             np.column_stack([blk, blk + 1, blk + C, blk + C + 1]))
 
 
-def _box(a: np.ndarray, f: np.ndarray, cols: int | np.ndarray) -> np.ndarray:
-    """Sums of the 2 x 2 blocks whose top-left cells are ``f`` (flat indices, ``cols`` wide)."""
-    return a[f] + a[f + 1] + a[f + cols] + a[f + cols + 1]
-
-
-def voters(flat: np.ndarray, cells: np.ndarray, n_cells: int, n_points: int,
-           m: int) -> tuple[np.ndarray, np.ndarray]:
-    """(candidate, point) pairs: the points that voted into each candidate's block, once each."""
-    lookup = np.full(n_cells, -1, np.int32)
+def voters(flat: np.ndarray, acc: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(candidate, point) pairs: the points that voted into each candidate's block, once each
+    (a point's ray may cross its block with two radius samples), in point order."""
+    lookup = np.full(len(acc), -1, np.int32)
     lookup[cells.ravel()] = np.repeat(np.arange(len(cells), dtype=np.int32), 4)
-    lab = lookup[flat.ravel()]
-    vid = np.nonzero(lab >= 0)[0]
-    # once each: a point's ray may cross its block with two radius samples
-    key = np.unique(lab[vid].astype(np.int64) * n_points + vid % n_points)
-    return key // n_points, key % n_points
+    return block_voters(flat, lookup, len(cells), int(acc[cells.ravel()].sum()))

@@ -3,15 +3,15 @@ point votes only along its edge normal, both senses, at each radius."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-from rangesim.core.conics import ellipse_params, fit_circles_batched
+from rangesim.core.conics import ellipse_params
 from rangesim.core.memory import check_memory
 from rangesim.features._arc_ellipses import coverage as ellipse_coverage
-from rangesim.features._arc_ellipses import grow, ranges
+from rangesim.features._arc_ellipses import grow
+from rangesim.features._circle_kernels import centres_and_radii, refine
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._edge_points import angular_coverage, edge_points
 
@@ -70,12 +70,13 @@ def circle_hypotheses(
     candidate's histogram of voter distances (``radius_step`` px bins; every peak is a
     hypothesis, so concentric rims each get one). The centre of a candidate starts at the
     least-squares intersection of its voters' normal lines; each hypothesis is refined by
-    batched geometric fits (:func:`~rangesim.core.conics.fit_circles_batched`) on the edge
-    points of a ring around it (looked up pixel by pixel, :func:`ring_points`) whose direction
-    is radial within ``DIRECTION_TOL_DEG`` (15), the ring narrowing to ``band_px`` (+0.5) over
-    three passes, then once more on the stretches where the ring is one edge thick
-    (:func:`_thin_ring_fit`). All of it is batched over the hypotheses: the work follows the
-    edge pixels and the rings' areas, with no dense 3D accumulator and no per-candidate loop.
+    geometric (Gauss-Newton) fits on the edge points of a ring around it (its pixels looked up
+    row by row) whose direction is radial within ``DIRECTION_TOL_DEG`` (15), the ring
+    narrowing to ``band_px`` (+0.5) over three passes, then once more on the stretches where
+    the ring is one edge thick. The work follows the edge pixels and the rings' areas, with no
+    dense 3D accumulator; the loops over votes, blocks and rings are compiled
+    (:mod:`~._circle_kernels`, Numba), which makes the finder as fast as OpenCV's
+    HOUGH_GRADIENT at 512^2 and about twice as fast at 1024^2 (``benchmarks/bench_hough.py``).
 
     Returns
     -------
@@ -105,8 +106,9 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii
     bands = radius_bands(shape, radii, cell_px, rel_cell)
     tol = np.deg2rad(angle_tol_deg)
     _check_accumulator(n_cells(bands), len(xy) * 2 * sum(
-        np.ceil((b.hi - b.lo) / b.cell) * (2 * np.floor(tol * b.hi / b.cell) + 1) for b in bands), radii)
-    flat, acc, m = cast_votes(xy, theta, bands, tol)
+        np.ceil((b.hi - b.lo) / b.cell) * (2 * np.floor(tol * b.hi / b.cell) + 1) for b in bands),
+        max_hypotheses * ((bands[-1].hi + bands[-1].cell) / radius_step + 3), radii)
+    acc, flat = cast_votes(xy, theta, bands, tol)
     cen, band, votes, cells = peaks(acc, bands, shape, threshold)
     if len(cen) == 0:
         return None
@@ -115,156 +117,28 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii
     cen, band, votes, cells, lo = cen[cap], band[cap], votes[cap], cells[cap], lo[cap]
     cell = np.array([b.cell for b in bands])[band]
     hi = np.array([b.hi for b in bands])[band]
-    k, i = voters(flat, cells, len(acc), len(xy), m)
+    k, i = voters(flat, acc, cells)
     del flat
-    K = len(cen)
-    # centre: least-squares intersection of the voters' normal lines (t = tangent), which
-    # needs no radius; kept near the block (a clutter of unrelated voters can pull it away)
-    tx, ty = -np.sin(theta[i]), np.cos(theta[i])
-    px, py = xy[i, 0], xy[i, 1]
-
-    def s(w):
-        return np.bincount(k, weights=w, minlength=K)
-
-    a11, a12, a22 = s(tx * tx), s(tx * ty), s(ty * ty)
-    b1 = s(tx * tx * px + tx * ty * py)
-    b2 = s(tx * ty * px + ty * ty * py)
-    det = a11 * a22 - a12 * a12
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c0 = np.column_stack([(a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det])
-    bad = ~(np.abs(det) > 1e-6 * np.maximum(s(np.ones(len(k))), 1) ** 2)
-    bad |= ~np.isfinite(c0).all(1) | (np.abs(c0 - cen).max(1) > 1.5 * cell)
-    c0[bad] = cen[bad]
-    # radius: peaks of each candidate's histogram of voter distances (1 px bins; a bin plus
-    # its larger neighbour at least threshold * 2 pi r), within the band (+- 1 px): the
-    # band's voters are the points at that range, so a concentric rim of another band (a
-    # hole's wall inside its rim) is left to that band
-    step = float(radius_step)
-    rho = np.hypot(px - c0[k, 0], py - c0[k, 1])
-    nb = int(np.ceil((hi.max() + cell.max()) / step)) + 3
-    b = np.minimum((rho / step).astype(np.int64), nb - 1)
-    hist = np.bincount(k * nb + b, minlength=K * nb).reshape(K, nb).astype(float)
-    rb = (np.arange(nb) + 0.5) * step
-    left = np.concatenate([np.full((K, 1), -1.0), hist[:, :-1]], 1)
-    right = np.concatenate([hist[:, 1:], np.full((K, 1), -1.0)], 1)
-    pair = hist + np.maximum(left, right)
-    ok = (hist > left) & (hist >= right) & (pair >= threshold * 2 * np.pi * rb[None])
-    ok &= (rb[None] >= (lo - 1)[:, None]) & (rb[None] <= (hi + 1)[:, None])
-    hk, hb = np.nonzero(ok)
+    ct, st = np.cos(theta), np.sin(theta)
+    px, py = xy[:, 0].copy(), xy[:, 1].copy()
+    # centres (the voters' normal lines' intersection) and radii (peaks of the histogram of
+    # voter distances within the band +- 1 px: the band's voters are the points at that range,
+    # so a concentric rim of another band, a hole's wall inside its rim, is left to that band)
+    nb = int(np.ceil((hi.max() + cell.max()) / radius_step)) + 3
+    c0, hk, r = centres_and_radii(px, py, ct, st, k, i, cen, cell, lo, hi, float(threshold), float(radius_step), nb)
     if len(hk) == 0:
         return None
-    # sub-bin radius: centroid of the 3 bins
-    w0, w1, w2 = np.maximum(left[hk, hb], 0), hist[hk, hb], np.maximum(right[hk, hb], 0)
-    r0 = rb[hb] + step * (w2 - w0) / np.maximum(w0 + w1 + w2, 1)
-    c, r, votes = c0[hk].copy(), r0, votes[hk]
-    # refinement on a ring of edge points around each hypothesis, narrowing
-    index = np.full(shape[0] * shape[1], -1, np.int32)
+    c, votes = c0[hk], votes[hk]
+    # refinement on a ring of edge points around each hypothesis, narrowing; the first ring is
+    # as wide as the candidate's cell (its centre is known to about that)
+    index = np.full(shape[0] * shape[1], -1, np.int32)  # int32: half the cache lines of int64
     index[xy[:, 1].astype(np.int64) * shape[1] + xy[:, 0].astype(np.int64)] = np.arange(len(xy), dtype=np.int32)
-    # the first ring is as wide as the candidate's cell (its centre is known to about that)
     hcell = cell[hk]
     reach = band_px + 1.0 + 0.5 * hcell
-    ph, pp = ring_points(c, r, reach, index, shape)
-    cos_tol = np.cos(np.deg2rad(DIRECTION_TOL_DEG))
-    ct, st = np.cos(theta[pp]), np.sin(theta[pp])
-    for width in (reach, np.full(len(r), band_px + 0.5), np.full(len(r), band_px + 0.5)):
-        d = xy[pp] - c[ph]
-        dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-        radial = np.abs(d[:, 0] * ct + d[:, 1] * st) >= cos_tol * dist
-        sel = radial & (np.abs(dist - r[ph]) <= width[ph])
-        c, r, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=1 + (width is not reach),
-                                      max_step=float(hcell.max()) + 3.0)
-    c, r = _thin_ring_fit(xy, theta, c, r, index, shape, cos_tol)
-    ph, pp = ring_points(c, r, band_px + 0.5, index, shape)
-    ct, st = np.cos(theta[pp]), np.sin(theta[pp])
-    d = xy[pp] - c[ph]
-    dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    sel = (np.abs(d[:, 0] * ct + d[:, 1] * st) >= cos_tol * dist) & (np.abs(dist - r[ph]) <= band_px)
-    return c, r, votes, ph[sel], pp[sel]
-
-
-def _thin_ring_fit(xy, theta, c, r, index, shape, cos_tol, reach: float = 3.0, thick: float = 1.5):
-    """Refit each circle on the stretches of arc where its ring is one edge thick.
-
-    Where a second edge runs beside the circle (the wall seen inside a hole's rim, a
-    crescent of edge pixels), the radially oriented pixels within ``reach`` px of it, per
-    2 px of arc, spread over more than ``thick`` px: those stretches are left out, so the
-    fit follows the thin rim rather than the middle of the band.
-    """
-    ph, pp = ring_points(c, r, reach, index, shape)
-    d = xy[pp] - c[ph]
-    dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    e = dist - r[ph]
-    radial = np.abs(d[:, 0] * np.cos(theta[pp]) + d[:, 1] * np.sin(theta[pp])) >= cos_tol * dist
-    keep = radial & (np.abs(e) <= reach)
-    ph, pp, d, e = ph[keep], pp[keep], d[keep], e[keep]
-    if len(ph) == 0:
-        return c, r
-    nb = np.maximum(np.rint(np.pi * r).astype(np.int64), 8)  # bins of about 2 px of arc
-    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)
-    key = ph * int(nb.max()) + np.minimum((ang / (2 * np.pi) * nb[ph]).astype(np.int64), nb[ph] - 1)
-    o = np.argsort(key, kind="stable")
-    ks, es = key[o], e[o]
-    first = np.concatenate([[0], np.nonzero(np.diff(ks))[0] + 1])
-    spread = np.maximum.reduceat(es, first) - np.minimum.reduceat(es, first)
-    thin = np.repeat(spread <= thick, np.diff(np.concatenate([first, [len(ks)]])))
-    sel = o[thin]
-    sel = sel[np.abs(e[sel]) <= 2.0]
-    c2, r2, _ = fit_circles_batched(xy[pp[sel]], ph[sel], len(r), c, r, iterations=3, max_step=3.0)
-    # keep the thin fit only where enough of the circle is thin
-    n_thin = np.bincount(ph[sel], minlength=len(r))
-    use = n_thin >= 0.25 * 2 * np.pi * r  # circles, not arcs (a short arc alone is ill-conditioned)
-    c[use], r[use] = c2[use], r2[use]
-    return c, r
-
-
-@lru_cache(maxsize=4)
-def _offsets(r_max: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Integer pixel offsets within ``r_max`` px, sorted by length: (length, dx, dy)."""
-    g = np.arange(-r_max, r_max + 1)
-    dx, dy = np.meshgrid(g, g)
-    d = np.hypot(dx, dy).ravel()
-    o = np.argsort(d, kind="stable")
-    out = d[o], dx.ravel()[o].astype(np.int64), dy.ravel()[o].astype(np.int64)
-    for a in out:
-        a.flags.writeable = False
-    return out
-
-
-def ring_points(c: np.ndarray, r: np.ndarray, width: float | np.ndarray, index: np.ndarray,
-                shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Edge points within ``width`` px of each circle, by looking up the pixels of its ring.
-
-    Parameters
-    ----------
-    c : (K, 2) float, r : (K,) float
-        Circles, pixels.
-    width : float or (K,) float, pixels
-    index : (H * W,) int32
-        Edge point number of each pixel (row-major), -1 off the edges.
-    shape : (H, W)
-
-    Returns
-    -------
-    hyp, point : (P,) int
-        (circle, edge point) pairs; work proportional to the rings' areas, not the image's.
-    """
-    H, W = shape
-    if len(r) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    width = np.broadcast_to(np.asarray(width, float), r.shape)
-    reach = int(np.ceil(max(float((r + width).max()), 0) + 2))
-    d, ox, oy = _offsets(-(-reach // 32) * 32)  # a few table sizes, so the cache hits
-    ci = np.rint(c).astype(np.int64)
-    s0 = np.searchsorted(d, np.maximum(r - width - 0.75, 0), "left")  # 0.75: the rounding of c
-    s1 = np.searchsorted(d, r + width + 0.75, "right")
-    hyp, j = ranges(s0, s1 - s0)
-    x = ci[hyp, 0] + ox[j]
-    y = ci[hyp, 1] + oy[j]
-    inside = (x >= 0) & (x < W) & (y >= 0) & (y < H)
-    hyp, x, y = hyp[inside], x[inside], y[inside]
-    pt = index[y * W + x]
-    on = pt >= 0
-    return hyp[on], pt[on].astype(np.int64)
+    c, r, ph, pp = refine(px, py, ct, st, index, shape[0],
+                          shape[1], c, r, reach, float(band_px), float(np.cos(np.deg2rad(DIRECTION_TOL_DEG))),
+                          float(hcell.max()) + 3.0)
+    return c, r, votes, ph, pp
 
 
 def _support(xy: np.ndarray, c: np.ndarray, r: float) -> tuple[np.ndarray, float, float, float, float]:
@@ -286,12 +160,17 @@ def _dedupe(items: list, key_c, key_r, dist_px: float) -> list:
     return kept
 
 
-def _check_accumulator(cells: int, n_votes: float, radii) -> None:
-    """Refuse (one line, naming the radius range) a Hough accumulator that would not fit in memory."""
-    ring = (2 * float(radii[1]) + 7) ** 2  # the ring lookup's offset table (ring_points)
-    estimate = float(cells) * 8 + n_votes * 16 + ring * 24  # int64 counts; int32 cells + lookups
+def _check_accumulator(cells: int, n_votes: float, hist_bins: float, radii) -> None:
+    """Refuse (one line, naming the radius range) a Hough accumulator that would not fit in memory.
+
+    ``cells``: the bands' centre cells (int64 counts, an int32 candidate lookup, a bool mark);
+    ``n_votes``: the votes (an int32 cell each); ``hist_bins``: the candidates' radius
+    histograms (float, plus a hypothesis index and radius per bin).
+    """
+    estimate = float(cells) * 13 + n_votes * 4 + hist_bins * 24
     check_memory(estimate, f"circle radii {radii[0]:g}..{radii[1]:g} px (--rmin/--rmax, a Hough accumulator of "
-                           f"{cells:,.0f} cells and {n_votes:,.0f} votes)")
+                           f"{cells:,.0f} cells, {n_votes:,.0f} votes and {hist_bins:,.0f} radius bins)")
+
 
 def circles(
     edge_map: Any,
