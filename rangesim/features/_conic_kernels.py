@@ -6,6 +6,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rangesim.features._circle_kernels import _norm
+
 
 @numba.njit(cache=True, nogil=True)
 def band_moments(conics, hyp, px, py, ct, st, band, cos_tol):  # pragma: no cover - compiled
@@ -38,7 +40,7 @@ def band_moments(conics, hyp, px, py, ct, st, band, cos_tol):  # pragma: no cove
         gx = 2 * a * x + b * y + d
         gy = b * x + 2 * c * y + e
         val = a * x * x + b * x * y + c * y * y + d * x + e * y + f
-        gn = max(np.hypot(gx, gy), 1e-12)
+        gn = max(_norm(gx, gy), 1e-12)
         if abs(gx * ct[k] + gy * st[k]) >= cos_tol * gn and abs(val) <= band * gn:
             sel[k] = True
             m[hyp[k], 0] += x
