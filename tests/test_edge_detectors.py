@@ -537,5 +537,7 @@ def test_window_minimum_matches_scipy():
     from rangesim.edges._noise import _window_min
     a = np.random.default_rng(3).random((37, 11)).astype(np.float32)
     a[::7, ::5] = np.inf
+    a[::3, ::4] = np.nan  # no information: read as +inf
     for r in (1, 2, 3):
-        assert np.array_equal(_window_min(a, r), minimum_filter(a, 2 * r + 1, mode="nearest"))
+        expected = minimum_filter(np.where(np.isnan(a), np.inf, a), 2 * r + 1, mode="nearest")
+        assert np.array_equal(_window_min(a, r), expected)

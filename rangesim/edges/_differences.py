@@ -9,6 +9,7 @@ into unit normals facing the camera, sharp at creases.
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from rangesim.edges._discontinuities import segment_broken
@@ -153,37 +154,64 @@ def eno_tangent(xyz: np.ndarray, axis: int, pairs: np.ndarray | None, step: int 
     dr, dc = AXES[axis]
     s = int(step)
     shape = xyz.shape[-2:]
-    r = 2 * s
-    ok = ~np.isnan(xyz[0])
     if pairs is not None:
-        ok_step = [~segment_broken(pairs, axis, k * s, (k + 1) * s) for k in (-2, -1, 0, 1)]
+        ok_step = np.stack([~segment_broken(pairs, axis, k * s, (k + 1) * s) for k in (-2, -1, 0, 1)])
     else:
-        ok_step = [np.ones(shape, bool)] * 4
-    okp = pad_last2(ok, r, False)
-    pp = pad_last2(xyz, r, np.nan)
+        ok_step = np.ones((4,) + shape, bool)
+    return _weno_blend(np.ascontiguousarray(xyz), ok_step, s * dr, s * dc)
 
-    def at(k: int) -> tuple[np.ndarray, np.ndarray]:
-        return (padded_view(pp, r, k * s * dr, k * s * dc, shape),
-                padded_view(okp, r, k * s * dr, k * s * dc, shape))
 
-    (pm2, om2), (pm1, om1), (pp1, op1), (pp2, op2) = at(-2), at(-1), at(1), at(2)
-    fok = ok & op1 & ok_step[2]
-    bok = ok & om1 & ok_step[1]
-    fwd = np.where(fok, pp1 - xyz, 0).astype(xyz.dtype, copy=False)
-    bwd = np.where(bok, xyz - pm1, 0).astype(xyz.dtype, copy=False)
-    big = np.float32(1e30)
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        f2 = pp2 - 2 * pp1 + xyz
-        f2 = np.where(fok & op2 & ok_step[3], dot3(f2, f2), big)
-        b2 = xyz - 2 * pm1 + pm2
-        b2 = np.where(bok & om2 & ok_step[0], dot3(b2, b2), big)
-        eps = np.float32(_WENO_EPS) * (dot3(fwd, fwd) + dot3(bwd, bwd)) + np.float32(1e-30)
-        wf = fok / (eps + f2) ** 2
-        wb = bok / (eps + b2) ** 2
-        total = wf + wb
-        wf /= total
-        wb /= total
-    return fwd * wf + bwd * wb
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _weno_blend(xyz, ok_step, dr, dc):  # pragma: no cover - compiled
+    """:func:`eno_tangent` per pixel, in xyz's precision and the order of operations of its
+    array form (to the bit): sides ``fwd = P(p + d) - P(p)``, ``bwd = P(p) - P(p - d)``
+    where usable (valid, ``ok_step`` of the step), continuation energies ``f2``, ``b2``
+    (1e30 where unknown), weights ``1 / (eps + S)^2`` normalised, blended."""
+    _, h, w = xyz.shape
+    out = np.empty_like(xyz)
+    # float32 constants, as the array form's (float64 points promote them, as NumPy does)
+    one, two, zero = np.float32(1), np.float32(2), np.float32(0)
+    big, weno, tiny = np.float32(1e30), np.float32(_WENO_EPS), np.float32(1e-30)
+    f = np.empty(3, xyz.dtype)
+    b = np.empty(3, xyz.dtype)
+    for i in range(h):
+        for j in range(w):
+            ok = not np.isnan(xyz[0, i, j])
+            i1, j1, i2, j2 = i + dr, j + dc, i + 2 * dr, j + 2 * dc
+            k1, l1, k2, l2 = i - dr, j - dc, i - 2 * dr, j - 2 * dc
+            op1 = 0 <= i1 < h and 0 <= j1 < w and not np.isnan(xyz[0, i1, j1])
+            op2 = 0 <= i2 < h and 0 <= j2 < w and not np.isnan(xyz[0, i2, j2])
+            om1 = 0 <= k1 < h and 0 <= l1 < w and not np.isnan(xyz[0, k1, l1])
+            om2 = 0 <= k2 < h and 0 <= l2 < w and not np.isnan(xyz[0, k2, l2])
+            fok = ok and op1 and ok_step[2, i, j]
+            bok = ok and om1 and ok_step[1, i, j]
+            for c in range(3):
+                f[c] = xyz[c, i1, j1] - xyz[c, i, j] if fok else zero
+                b[c] = xyz[c, i, j] - xyz[c, k1, l1] if bok else zero
+            f2 = big
+            if fok and op2 and ok_step[3, i, j]:
+                v0 = (xyz[0, i2, j2] - two * xyz[0, i1, j1]) + xyz[0, i, j]
+                v1 = (xyz[1, i2, j2] - two * xyz[1, i1, j1]) + xyz[1, i, j]
+                v2 = (xyz[2, i2, j2] - two * xyz[2, i1, j1]) + xyz[2, i, j]
+                f2 = (v0 * v0 + v1 * v1) + v2 * v2
+            b2 = big
+            if bok and om2 and ok_step[0, i, j]:
+                v0 = (xyz[0, i, j] - two * xyz[0, k1, l1]) + xyz[0, k2, l2]
+                v1 = (xyz[1, i, j] - two * xyz[1, k1, l1]) + xyz[1, k2, l2]
+                v2 = (xyz[2, i, j] - two * xyz[2, k1, l1]) + xyz[2, k2, l2]
+                b2 = (v0 * v0 + v1 * v1) + v2 * v2
+            ff = (f[0] * f[0] + f[1] * f[1]) + f[2] * f[2]
+            bb = (b[0] * b[0] + b[1] * b[1]) + b[2] * b[2]
+            eps = weno * (ff + bb) + tiny
+            df, db = eps + f2, eps + b2
+            wf = (one if fok else zero) / (df * df)
+            wb = (one if bok else zero) / (db * db)
+            total = wf + wb
+            wf /= total
+            wb /= total
+            for c in range(3):
+                out[c, i, j] = f[c] * wf + b[c] * wb
+    return out
 
 
 def measured_normals(xyz: np.ndarray, pairs: np.ndarray | None, step: int = 1) -> np.ndarray:

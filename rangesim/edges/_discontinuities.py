@@ -20,6 +20,7 @@ import numpy as np
 
 from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
 from rangesim.edges._noise import depth_quantum, predicted_noise
+from rangesim.edges._pair_kernels import pair_tests
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
 
 __all__ = [
@@ -337,49 +338,10 @@ def find_discontinuities(
     else:
         thr = np.asarray(threshold, dtype=np.float32)
     zt = z + thr                                  # a neighbour beyond zt_p is a jump away
-    # padded by 2 (NaN: never a jump) for the fold test's second neighbour
-    zp = np.pad(z, 2, constant_values=np.nan)
-    ztp = np.pad(zt, 2, constant_values=np.nan)
-    w2 = w + 4
-    zp_flat, ztp_flat = zp.ravel(), ztp.ravel()
-    thp_flat = np.pad(thr, 2, constant_values=np.nan).ravel() if folds else None
-    inv_flat = None
-    if folds and perspective:
-        with np.errstate(divide="ignore"):
-            inv_flat = (np.float32(1) / zp).ravel()
-    occluding = np.zeros((h, w), bool)
-    occluded = np.zeros((h, w), bool)
-    pairs = np.zeros((4, h, w), bool)
     dominant = rule == "dominant"
-    far = np.full((h, w), -np.inf, np.float32) if dominant else None
-    near = np.full((h, w), -np.inf, np.float32) if dominant else None
-    # each axis pair (p, p + d) once: "fwd" p near / p + d far, "bwd" the other way round
-    fwd = np.empty((h, w), bool)
-    bwd = np.empty((h, w), bool)
-    for a, (dr, dc) in enumerate(AXES):
-        view = (slice(2 + dr, 2 + dr + h), slice(2 + dc, 2 + dc + w))
-        np.greater(zp[view], zt, out=fwd)                # NaN compares False
-        np.greater(z, ztp[view], out=bwd)
-        if folds:
-            step = dr * w2 + dc
-            _unfold(fwd, inv_flat, ztp_flat, w2, 0, step, perspective, zp_flat, thp_flat)
-            _unfold(bwd, inv_flat, ztp_flat, w2, step, 0, perspective, zp_flat, thp_flat)
-        np.logical_or(fwd, bwd, out=pairs[a])
-        if connectivity == 4 and dr != 0 and dc != 0:
-            continue
-        occluding |= fwd
-        occluded |= bwd
-        _or_shifted(occluding, bwd, dr, dc)
-        _or_shifted(occluded, fwd, dr, dc)
-        if dominant:
-            e = zp[view] - z                              # neighbour minus pixel
-            np.fmax(far, e, out=far)
-            np.fmax(near, -e, out=near)
-            back = np.full((h, w), np.nan, np.float32)    # at p + d: neighbour p minus p + d
-            r0, r1, c0, c1 = max(dr, 0), h + min(dr, 0), max(dc, 0), w + min(dc, 0)
-            back[r0:r1, c0:c1] = -e[r0 - dr:r1 - dr, c0 - dc:c1 - dc]
-            np.fmax(far, back, out=far)
-            np.fmax(near, -back, out=near)
+    # every axis pair (p, p + d) once, with the fold test, in one compiled pass
+    occluding, occluded, pairs, far, near = pair_tests(z, thr, bool(folds), bool(perspective),
+                                                        connectivity == 4, dominant)
     # valid pixels with an invalid neighbour (an out-of-image neighbour is not one: PCL
     # skips the border instead)
     invp = np.pad(~valid, 1, constant_values=False)
@@ -484,8 +446,12 @@ def find_discontinuities(
         gy = np.zeros(ei.size, np.float32)
         zc, ztc = z[ei, ej], zt[ei, ej]
         for dr, dc in NEIGHBOURS:
-            zq = zp[ei + 2 + dr, ej + 2 + dc]
-            step = (zq > ztc).astype(np.float32) - (zc > ztp[ei + 2 + dr, ej + 2 + dc])
+            ri, rj = ei + dr, ej + dc
+            inside = (ri >= 0) & (ri < h) & (rj >= 0) & (rj < w)   # outside: NaN, never a jump
+            zq = np.full(ei.size, np.nan, np.float32)
+            ztq = np.full(ei.size, np.nan, np.float32)
+            zq[inside], ztq[inside] = z[ri[inside], rj[inside]], zt[ri[inside], rj[inside]]
+            step = (zq > ztc).astype(np.float32) - (zc > ztq)
             gx += step * dc
             gy += step * dr
         direction[ei, ej] = np.mod(np.arctan2(gy, gx), np.pi)

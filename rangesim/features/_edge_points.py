@@ -111,7 +111,7 @@ def mask_normals(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.nda
                          np.asarray(cols, np.int64), w * dx * dx, w * dy * dy, w * dx * dy)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _mask_normals(mask, rows, cols, wxx, wyy, wxy):  # pragma: no cover - compiled
     H, W = mask.shape
     out = np.empty(len(rows))
