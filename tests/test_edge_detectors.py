@@ -541,3 +541,41 @@ def test_window_minimum_matches_scipy():
     for r in (1, 2, 3):
         expected = minimum_filter(np.where(np.isnan(a), np.inf, a), 2 * r + 1, mode="nearest")
         assert np.array_equal(_window_min(a, r), expected)
+
+
+def test_compiled_box_and_smoothing_match_scipy():
+    # the compiled 3x3 sums and 5-tap smoothing against scipy's filters (NaN read as 0)
+    from scipy.ndimage import correlate1d, uniform_filter
+
+    from rangesim.edges._gradient import _box3, _smooth5, _taps5
+    a = np.random.default_rng(4).normal(size=(23, 31)).astype(np.float32)
+    a[3, 4] = a[10, 0] = np.nan
+    a0 = np.nan_to_num(a)
+    assert np.allclose(_box3(a), uniform_filter(a0.astype(np.float64), 3, mode="constant") * 9, atol=1e-5)
+    taps = np.array(_taps5(1.0), np.float64)[[2, 1, 0, 1, 2]]
+    ref = correlate1d(correlate1d(a0.astype(np.float64), taps, axis=1, mode="constant"), taps, axis=0, mode="constant")
+    assert np.allclose(_smooth5(a0, 1.0), ref, atol=1e-5)
+
+
+def test_second_differences_of_a_roof_and_a_plane():
+    # a plane (depth linear in x and y) gives 0 from every operator; a roof along the
+    # columns gives the slope change per pixel from the 0 degree operator on its crest
+    from rangesim.edges._gradient import second_differences
+    yy, xx = np.mgrid[0:9, 0:9].astype(np.float32)
+    plane = 100 + 0.5 * xx - 0.25 * yy
+    for r in second_differences(plane):
+        assert np.allclose(r[1:-1, 1:-1], 0, atol=1e-4)
+    roof = 100 + np.abs(xx - 4) * 2.0
+    r0, _, r90, _ = second_differences(roof)
+    assert np.isclose(r0[4, 4], 4.0) and np.allclose(r0[4, 1:3], 0) and np.allclose(r90[4, 1:-1], 0)
+
+
+def test_weno_tangent_is_one_sided_at_a_crease():
+    # on a roof the tangent along x at the crest's neighbours is that pixel's own face's
+    from rangesim.edges._differences import eno_tangent
+    yy, xx = np.mgrid[0:7, 0:9].astype(np.float32)
+    z = 100 + np.abs(xx - 4) * 2.0
+    xyz = np.stack([xx, yy, z])
+    t = eno_tangent(xyz, 0, None)
+    assert np.allclose(t[2, 3, 1:4], -2.0, atol=1e-3) and np.allclose(t[2, 3, 5:8], 2.0, atol=1e-3)
+    assert np.allclose(t[0], 1.0)
