@@ -218,6 +218,53 @@ def _box3_sum(a):  # pragma: no cover - compiled
     return out
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _hessian(r0, r45, r90, r135):  # pragma: no cover - compiled
+    """The second-derivative tensor from the four responses, summed over 3x3 (float32):
+    ``Dxx`` from 0 deg, ``Dyy`` from 90, ``Dxy`` from the diagonals' difference times
+    sqrt(2) / 6; its eigenvalues ``mean +- rad`` (rad by the square root of the squares:
+    float32 cannot overflow here), whether the minor one dominates, and the arctan2 terms
+    ``2 Dxy`` and ``Dxx - Dyy``."""
+    h, w = r0.shape
+    dxx = _box3_sum(r0)
+    dyy = _box3_sum(r90)
+    diff = np.empty((h, w), np.float32)
+    for i in range(h):
+        for j in range(w):
+            diff[i, j] = r45[i, j] - r135[i, j]
+    dxy = _box3_sum(diff)
+    k = np.float32(np.sqrt(2.0) / 6.0)
+    two = np.float32(2)
+    mean = np.empty((h, w), np.float32)
+    rad = np.empty((h, w), np.float32)
+    minor = np.empty((h, w), np.bool_)
+    for i in range(h):
+        for j in range(w):
+            xy = dxy[i, j] * k
+            xx, yy = dxx[i, j], dyy[i, j]
+            m = (xx + yy) / two
+            hd = (xx - yy) / two
+            r = np.sqrt(hd * hd + xy * xy)
+            mean[i, j], rad[i, j] = m, r
+            minor[i, j] = abs(m - r) > abs(m + r)
+            diff[i, j] = two * xy                 # reused: 2 Dxy
+            dxy[i, j] = xx - yy                   # reused: Dxx - Dyy
+    return mean, rad, minor, diff, dxy
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _to_direction(theta, minor, mag):  # pragma: no cover - compiled
+    """In place: the dominant eigenvector's angle in [0, pi) (a quarter turn where the minor
+    eigenvalue dominates), NaN where no operator responded."""
+    quarter, half = np.float32(np.pi / 2), np.float32(np.pi)
+    for i in range(theta.shape[0]):
+        for j in range(theta.shape[1]):
+            t = theta[i, j] + quarter if minor[i, j] else theta[i, j] + np.float32(0)
+            if t < 0:
+                t = t + half
+            theta[i, j] = np.float32(np.nan) if np.isnan(mag[i, j]) else t
+
+
 def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
                        skip: np.ndarray | None = None) -> list[np.ndarray]:
     """The four operators' responses, NaN-aware, each normalised to a slope change.
@@ -513,20 +560,10 @@ def gradient(
     for r in resp[1:]:
         np.fmax(mag, np.abs(r), out=mag)     # fmax: an undefined operator does not veto
     # Hessian from the operators: 0 -> Dxx, 90 -> Dyy, 45/135 -> +-(6 / 2 sqrt 2) Dxy
-    dxx, dyy = _box3(resp[0]), _box3(resp[2])
-    dxy = _box3(resp[1] - resp[3])
-    dxy *= np.float32(np.sqrt(2.0) / 6.0)
-    mean = (dxx + dyy) / 2
-    half_diff = (dxx - dyy) / 2
-    # sqrt of the squares, not np.hypot: ~10x faster, and float32 cannot overflow here
-    rad = half_diff * half_diff
-    rad += dxy * dxy
-    np.sqrt(rad, out=rad)
-    minor_wins = np.abs(mean - rad) > np.abs(mean + rad)
-    theta = 0.5 * np.arctan2(2 * dxy, dxx - dyy)
-    theta += minor_wins * np.float32(np.pi / 2)
-    np.add(theta, np.float32(np.pi), out=theta, where=theta < 0)
-    np.copyto(theta, np.nan, where=np.isnan(mag))
+    mean, rad, minor_wins, two_dxy, dxx_dyy = _hessian(*resp)
+    # the dominant eigenvector's angle; arctan2 in NumPy (vectorised, and its bits)
+    theta = 0.5 * np.arctan2(two_dxy, dxx_dyy)
+    _to_direction(theta, minor_wins, mag)
     direction = theta
 
     if auto_threshold and noisy:
