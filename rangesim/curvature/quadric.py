@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -157,13 +158,38 @@ def _smallest_eigvec_sym3(c00, c01, c02, c11, c12, c22):
 
 def _pca_normals_components(rel: np.ndarray, w: np.ndarray) -> np.ndarray:
     """PCA normals from (3, k, n) coordinates (zeros where w == 0) and (k, n) weights."""
-    wsum = w.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = (rel * w).sum(axis=1) / wsum  # (3, n)
-    d = (rel - mean[:, None, :]) * (w > 0)
-    wd = d * w
-    c = {(i, j): (wd[i] * d[j]).sum(axis=0) for i in range(3) for j in range(i, 3)}
-    return _smallest_eigvec_sym3(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2])
+    return _smallest_eigvec_sym3(*_weighted_covariance(rel, w))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _weighted_covariance(rel, w):  # pragma: no cover - compiled
+    """The 6 distinct entries (n,) of each neighbourhood's weighted covariance: the weighted
+    mean, then sums over k of ``w d_i d_j`` with ``d = (rel - mean) [w > 0]``, in the
+    array form's order (sequential over k)."""
+    _, k, n = rel.shape
+    out = np.zeros((6, n))
+    for m in range(n):
+        wsum = 0.0
+        s0 = s1 = s2 = 0.0
+        for q in range(k):
+            wsum += w[q, m]
+            s0 += rel[0, q, m] * w[q, m]
+            s1 += rel[1, q, m] * w[q, m]
+            s2 += rel[2, q, m] * w[q, m]
+        m0, m1, m2 = s0 / wsum, s1 / wsum, s2 / wsum
+        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+        for q in range(k):
+            on = 1.0 if w[q, m] > 0 else 0.0
+            d0, d1, d2 = (rel[0, q, m] - m0) * on, (rel[1, q, m] - m1) * on, (rel[2, q, m] - m2) * on
+            wq = w[q, m]
+            c00 += (d0 * wq) * d0
+            c01 += (d0 * wq) * d1
+            c02 += (d0 * wq) * d2
+            c11 += (d1 * wq) * d1
+            c12 += (d1 * wq) * d2
+            c22 += (d2 * wq) * d2
+        out[0, m], out[1, m], out[2, m], out[3, m], out[4, m], out[5, m] = c00, c01, c02, c11, c12, c22
+    return out[0], out[1], out[2], out[3], out[4], out[5]
 
 
 def pca_normals(points: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -232,46 +258,108 @@ def monge_curvature(coeffs: np.ndarray) -> dict[str, np.ndarray]:
 _BASIS = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _relative(coords, weights, centres_t):  # pragma: no cover - compiled
+    """``w`` (k, n): the weights of neighbours with finite coordinates (0 elsewhere);
+    ``rel`` (3, k, n): their offsets from the centre (0 where w is 0); ``n_points`` (n,)."""
+    _, k, n = coords.shape
+    w = np.zeros((k, n))
+    rel = np.zeros((3, k, n))
+    n_points = np.zeros(n, np.int64)
+    for q in range(k):
+        for m in range(n):
+            c0, c1, c2 = coords[0, q, m], coords[1, q, m], coords[2, q, m]
+            wq = weights[q, m]
+            if np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2) and wq > 0:
+                w[q, m] = wq
+                rel[0, q, m] = c0 - centres_t[0, m]
+                rel[1, q, m] = c1 - centres_t[1, m]
+                rel[2, q, m] = c2 - centres_t[2, m]
+                n_points[m] += 1
+    return w, rel, n_points
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _normal_equations(rel, w, fr):  # pragma: no cover - compiled
+    """The least-squares system of ``h = a x^2 + b xy + c y^2 + d x + e y + f`` per centre.
+
+    ``rel`` (3, k, n) neighbour offsets, ``w`` (k, n) weights, ``fr`` (n, 3, 3) frames
+    (rows t1, t2, n; NaN as 0). Coordinates in the frame over ``s``, the weighted RMS
+    tangent radius (1 where that is 0 or undefined); every sum sequential over k, in the
+    order of the array form this replaces.
+
+    Returns
+    -------
+    A : (n, 6, 6), rhs : (n, 6), s : (n,)
+    """
+    _, k, n = rel.shape
+    A = np.empty((n, 6, 6))
+    rhs = np.empty((n, 6))
+    s_out = np.empty(n)
+    x = np.empty(k)
+    y = np.empty(k)
+    z = np.empty(k)
+    S = np.empty((5, 5))
+    for m in range(n):
+        wsum = 0.0
+        r2 = 0.0
+        for q in range(k):
+            a0, a1, a2 = rel[0, q, m], rel[1, q, m], rel[2, q, m]
+            x[q] = (fr[m, 0, 0] * a0 + fr[m, 0, 1] * a1) + fr[m, 0, 2] * a2
+            y[q] = (fr[m, 1, 0] * a0 + fr[m, 1, 1] * a1) + fr[m, 1, 2] * a2
+            z[q] = (fr[m, 2, 0] * a0 + fr[m, 2, 1] * a1) + fr[m, 2, 2] * a2
+            wsum += w[q, m]
+            r2 += w[q, m] * (x[q] * x[q] + y[q] * y[q])
+        s = np.sqrt(r2 / wsum)
+        s = s if s > 0 else 1.0
+        s_out[m] = s
+        S[:, :] = 0.0
+        t20 = t11 = t02 = t10 = t01 = t00 = 0.0
+        for q in range(k):
+            xq, yq, zq = x[q] / s, y[q] / s, z[q] / s
+            wx = w[q, m]
+            y2 = yq * yq
+            ypow = (1.0, yq, y2, y2 * yq, y2 * y2)
+            for p in range(5):
+                for qq in range(5 - p):
+                    S[p, qq] += wx if qq == 0 else wx * ypow[qq]
+                wx = wx * xq
+            wz = w[q, m] * zq
+            wzx, wzy = wz * xq, wz * yq
+            t20 += wzx * xq
+            t11 += wzx * yq
+            t02 += wzy * yq
+            t10 += wzx
+            t01 += wzy
+            t00 += wz
+        basis = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
+        for i in range(6):
+            pi, qi = basis[i]
+            for j in range(6):
+                pj, qj = basis[j]
+                A[m, i, j] = S[pi + pj, qi + qj]
+        rhs[m, 0], rhs[m, 1], rhs[m, 2], rhs[m, 3], rhs[m, 4], rhs[m, 5] = t20, t11, t02, t10, t01, t00
+    return A, rhs, s_out
+
+
 def _fit_chunk(centres, coords, weights, normals, orient):
     """fit_quadric on one batch, neighbour-major layout (sums over k run on contiguous rows).
 
     centres (n, 3); coords (3, k, n) neighbour coordinates; weights (k, n); normals (n, 3)
     or None; orient (n, 3). All float64.
     """
-    finite = np.isfinite(coords).all(axis=0)
-    w = np.where(finite & (weights > 0), weights, 0.0)
-    n_points = np.count_nonzero(w, axis=0)
-    # coordinates relative to the centre, 0 where excluded
-    rel = np.where(w > 0, coords - centres.T[:, None, :], 0.0)
+    # weights (0 for non-finite neighbours) and coordinates relative to the centre (0 where
+    # excluded), compiled
+    w, rel, n_points = _relative(coords, weights, np.ascontiguousarray(centres.T))
     if normals is None:
         normals = _pca_normals_components(rel, w)
         flip = np.einsum("ni,ni->n", normals, orient) < 0
         normals[flip] *= -1
     frame = tangent_frames(normals)
-    fr = np.nan_to_num(frame)
-    x, y, z = (fr[:, i, 0] * rel[0] + fr[:, i, 1] * rel[1] + fr[:, i, 2] * rel[2]
-               for i in range(3))
-    # scale by the neighbourhood's RMS tangent radius so the 6x6 systems are O(1)
-    wsum = w.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.sqrt((w * (x * x + y * y)).sum(axis=0) / wsum)
-    s = np.where(s > 0, s, 1.0)
-    x, y, z = x / s, y / s, z / s
-    # weighted moments S[p, q] = sum w x^p y^q (p + q <= 4) and T[p, q] = sum w z x^p y^q
-    wxp = [w]
-    for _ in range(4):
-        wxp.append(wxp[-1] * x)
-    ypow = [None, y, y * y, y * y * y, (y * y) ** 2]
-    S = {(p, q): (wxp[p] if q == 0 else wxp[p] * ypow[q]).sum(axis=0)
-         for p in range(5) for q in range(5 - p)}
-    wz = w * z
-    wzx, wzy = wz * x, wz * y
-    T = {(2, 0): (wzx * x).sum(axis=0), (1, 1): (wzx * y).sum(axis=0),
-         (0, 2): (wzy * y).sum(axis=0), (1, 0): wzx.sum(axis=0), (0, 1): wzy.sum(axis=0),
-         (0, 0): wz.sum(axis=0)}
-    A = np.stack([np.stack([S[pi + pj, qi + qj] for pj, qj in _BASIS], axis=-1)
-                  for pi, qi in _BASIS], axis=-2)  # (n, 6, 6)
-    rhs = np.stack([T[b] for b in _BASIS], axis=-1)
+    # in the tangent frame, scaled by the neighbourhood's RMS tangent radius s (so the 6x6
+    # systems are O(1)): the weighted moments S[p, q] = sum w x^p y^q (p + q <= 4) and
+    # T[p, q] = sum w z x^p y^q, as the normal equations A (n, 6, 6) and rhs (n, 6)
+    A, rhs, s = _normal_equations(rel, w, np.nan_to_num(frame))
     # conditioning: Hadamard ratio det(A) / prod(diag A) in (0, 1], ~0 when degenerate
     diag = np.diagonal(A, axis1=1, axis2=2)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
