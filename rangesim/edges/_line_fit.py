@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -70,18 +71,49 @@ def line_fit_points(
         is_self[no_self, -1] = True
         is_self &= np.cumsum(is_self, axis=1) == 1
         idx = idx[~is_self].reshape(i1 - i0, k)
-        d = (p[idx] - p[i0:i1, None, :]).astype(np.float32)      # (m, k, 3)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u = d / np.linalg.norm(d, axis=2, keepdims=True)     # coincident points: NaN
-        g = u @ u.transpose(0, 2, 1)                               # (m, k, k) cosines
-        # neighbour j lies on a line through the centre if some neighbour is opposite it
-        c = cos_opp if cos_opp.ndim == 0 else cos_opp[i0:i1, None, None]
-        on_line = (g < -c).any(axis=2)                             # (m, k)
-        # two lines are distinct if their directions are not (anti)parallel
-        distinct = np.abs(g) < cos_sep
-        planar = (distinct & on_line[:, :, None] & on_line[:, None, :]).any(axis=(1, 2))
-        edge[i0:i1] = ~planar
+        # the tolerances stay float64 (the float32 cosines are compared in float64)
+        c = np.ascontiguousarray(np.broadcast_to(cos_opp, (n,))[i0:i1], np.float64)
+        edge[i0:i1] = ~_planar(p, idx, i0, c, float(cos_sep))
     out[finite] = edge
+    return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _planar(p, idx, i0, cos_opp, cos_sep):  # pragma: no cover - compiled
+    """Whether each centre ``i0 + m`` has two distinct lines through it among its neighbours
+    ``idx[m]``: unit vectors to them (float32; coincident points give NaN, on no line),
+    neighbour j on a line when some neighbour is opposite it (cosine below ``-cos_opp``),
+    two lines distinct when their directions' |cosine| is below ``cos_sep``."""
+    m_all, k = idx.shape
+    out = np.zeros(m_all, np.bool_)
+    u = np.empty((k, 3), np.float32)
+    on = np.empty(k, np.bool_)
+    for m in range(m_all):
+        ci = i0 + m
+        for j in range(k):
+            d0 = np.float32(p[idx[m, j], 0] - p[ci, 0])
+            d1 = np.float32(p[idx[m, j], 1] - p[ci, 1])
+            d2 = np.float32(p[idx[m, j], 2] - p[ci, 2])
+            nrm = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+            u[j, 0], u[j, 1], u[j, 2] = d0 / nrm, d1 / nrm, d2 / nrm
+        lim = -cos_opp[m]
+        for j in range(k):
+            on[j] = False
+            for l in range(k):
+                if (u[j, 0] * u[l, 0] + u[j, 1] * u[l, 1]) + u[j, 2] * u[l, 2] < lim:
+                    on[j] = True
+                    break
+        found = False
+        for j in range(k):
+            if not on[j]:
+                continue
+            for l in range(k):
+                if on[l] and abs((u[j, 0] * u[l, 0] + u[j, 1] * u[l, 1]) + u[j, 2] * u[l, 2]) < cos_sep:
+                    found = True
+                    break
+            if found:
+                break
+        out[m] = found
     return out
 
 
