@@ -538,8 +538,9 @@ def test_window_minimum_matches_scipy():
     a = np.random.default_rng(3).random((37, 11)).astype(np.float32)
     a[::7, ::5] = np.inf
     a[::3, ::4] = np.nan  # no information: read as +inf
+    a[5, 6] = -np.inf     # likewise
     for r in (1, 2, 3):
-        expected = minimum_filter(np.where(np.isnan(a), np.inf, a), 2 * r + 1, mode="nearest")
+        expected = minimum_filter(np.where(np.isfinite(a), a, np.inf), 2 * r + 1, mode="nearest")
         assert np.array_equal(_window_min(a, r), expected)
 
 
@@ -579,3 +580,15 @@ def test_weno_tangent_is_one_sided_at_a_crease():
     t = eno_tangent(xyz, 0, None)
     assert np.allclose(t[2, 3, 1:4], -2.0, atol=1e-3) and np.allclose(t[2, 3, 5:8], 2.0, atol=1e-3)
     assert np.allclose(t[0], 1.0)
+
+
+def test_jump_threshold_row_broadcasts_like_the_full_image():
+    # a threshold per column (1, W) means the same as that row repeated over the image; the
+    # compiled pair tests read the broadcast copy, never past a short array
+    from rangesim.edges._discontinuities import find_discontinuities
+    z = np.random.default_rng(0).uniform(100, 200, (6, 8)).astype(np.float32)
+    row = np.linspace(10, 40, 8, dtype=np.float32)[None]
+    a = find_discontinuities(z, row, folds=True)
+    b = find_discontinuities(z, np.repeat(row, 6, axis=0), folds=True)
+    assert np.array_equal(a.pairs, b.pairs) and np.array_equal(a.occluding, b.occluding)
+    assert a.pairs.any()

@@ -164,8 +164,8 @@ def _pca_normals_components(rel: np.ndarray, w: np.ndarray) -> np.ndarray:
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _weighted_covariance(rel, w):  # pragma: no cover - compiled
     """The 6 distinct entries (n,) of each neighbourhood's weighted covariance: the weighted
-    mean, then sums over k of ``w d_i d_j`` with ``d = (rel - mean) [w > 0]``, in the
-    array form's order (sequential over k)."""
+    mean, then sums over k of ``w d_i d_j`` with ``d = (rel - mean) [w > 0]``, sequential
+    over k (NumPy's sums over a contiguous k were pairwise: equal to about 1e-16)."""
     _, k, n = rel.shape
     out = np.zeros((6, n))
     for m in range(n):
@@ -285,8 +285,8 @@ def _normal_equations(rel, w, fr):  # pragma: no cover - compiled
 
     ``rel`` (3, k, n) neighbour offsets, ``w`` (k, n) weights, ``fr`` (n, 3, 3) frames
     (rows t1, t2, n; NaN as 0). Coordinates in the frame over ``s``, the weighted RMS
-    tangent radius (1 where that is 0 or undefined); every sum sequential over k, in the
-    order of the array form this replaces.
+    tangent radius (1 where that is 0 or undefined); every sum sequential over k (as
+    NumPy's over the non-contiguous k of a batch; a one-centre batch summed pairwise).
 
     Returns
     -------

@@ -336,7 +336,8 @@ def find_discontinuities(
     if np.ndim(threshold) == 0:
         thr = np.abs(z) * np.float32(threshold)
     else:
-        thr = np.asarray(threshold, dtype=np.float32)
+        # broadcast to the image (a row or column of thresholds works), contiguous for the kernel
+        thr = np.ascontiguousarray(np.broadcast_to(np.asarray(threshold, dtype=np.float32), z.shape))
     zt = z + thr                                  # a neighbour beyond zt_p is a jump away
     dominant = rule == "dominant"
     # every axis pair (p, p + d) once, with the fold test, in one compiled pass

@@ -282,21 +282,24 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _window_min(a: np.ndarray, r: int) -> np.ndarray:  # pragma: no cover - compiled
-    """Minimum over the (2r + 1)^2 window of each pixel, clipped to the image, NaN ignored
-    (as ``scipy.ndimage.minimum_filter(a, 2r + 1, mode="nearest")`` with NaN read as +inf,
-    to the bit, in a tenth of its time: separable, rows then columns, compiled)."""
+    """Minimum over the (2r + 1)^2 window of each pixel, clipped to the image, non-finite
+    values ignored (as ``scipy.ndimage.minimum_filter(a, 2r + 1, mode="nearest")`` with NaN
+    and +-inf read as +inf, to the bit, in a tenth of its time: separable, compiled)."""
     h, w = a.shape
     rows = np.empty((h, w), np.float32)
+    src = np.empty(w, np.float32)
+    inf = np.float32(np.inf)
     for i in range(h):
         ar, rr = a[i], rows[i]
         for j in range(w):
-            rr[j] = ar[j] if ar[j] < np.inf else np.float32(np.inf)  # NaN -> +inf
+            src[j] = ar[j] if np.isfinite(ar[j]) else inf  # NaN and +-inf: no information
+            rr[j] = src[j]
         for k in range(1, r + 1):  # shifted minima: simple loops the compiler vectorises
             for j in range(k, w):
-                v = ar[j - k]
+                v = src[j - k]
                 rr[j] = v if v < rr[j] else rr[j]
             for j in range(w - k):
-                v = ar[j + k]
+                v = src[j + k]
                 rr[j] = v if v < rr[j] else rr[j]
     out = rows.copy()
     for i in range(h):

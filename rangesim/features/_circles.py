@@ -164,10 +164,11 @@ def _check_accumulator(cells: int, n_votes: float, hist_bins: float, radii) -> N
     """Refuse (one line, naming the radius range) a Hough accumulator that would not fit in memory.
 
     ``cells``: the bands' centre cells (int64 counts, an int32 candidate lookup, a bool mark);
-    ``n_votes``: the votes (an int32 cell each); ``hist_bins``: the candidates' radius
-    histograms (float, plus a hypothesis index and radius per bin).
+    ``n_votes``: the votes (an int32 cell each, and at most one (candidate, point) pair of
+    two int64 per vote); ``hist_bins``: the candidates' radius histograms (float, plus a
+    hypothesis index and radius per bin).
     """
-    estimate = float(cells) * 13 + n_votes * 4 + hist_bins * 24
+    estimate = float(cells) * 13 + n_votes * 20 + hist_bins * 24
     check_memory(estimate, f"circle radii {radii[0]:g}..{radii[1]:g} px (--rmin/--rmax, a Hough accumulator of "
                            f"{cells:,.0f} cells, {n_votes:,.0f} votes and {hist_bins:,.0f} radius bins)")
 
