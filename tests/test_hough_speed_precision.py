@@ -127,3 +127,22 @@ def test_arcs_still_found():
     arcs = F.arcs(m, radii=(5, 40))
     assert any(np.hypot(a.center[0] - 60, a.center[1] - 62) <= 1.0 and abs(a.radius - 20) <= 1.0 for a in arcs)
     assert all(a.coverage < 0.5 for a in arcs)
+
+
+def test_ring_lookup_matches_brute_force():
+    # the compiled ring gather returns exactly the edge pixels whose integer offset from the
+    # rounded centre has a length within width + 0.75 of r (row by row, clipped to the image)
+    from rangesim.features._circle_kernels import _gather
+    rng = np.random.default_rng(11)
+    H, W = 60, 80
+    mask = rng.random((H, W)) < 0.3
+    index = np.full(H * W, -1, np.int32)
+    flat = np.flatnonzero(mask)
+    index[flat] = np.arange(flat.size, dtype=np.int32)
+    rows, cols = np.divmod(flat, W)
+    out = np.empty(flat.size, np.int64)
+    for cx, cy, r, width in ((40.3, 30.6, 12.2, 1.5), (2.0, 57.4, 9.0, 3.0), (70.5, 5.5, 30.0, 0.5), (10, 10, 0.4, 1.0)):
+        n = _gather(cx, cy, r, width, index, H, W, out)
+        d = np.hypot(cols - round(cx), rows - round(cy))
+        expected = np.flatnonzero((d >= max(r - width - 0.75, 0)) & (d <= r + width + 0.75))
+        assert sorted(out[:n].tolist()) == expected.tolist()
