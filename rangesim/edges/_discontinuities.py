@@ -341,7 +341,7 @@ def find_discontinuities(
     zt = z + thr                                  # a neighbour beyond zt_p is a jump away
     dominant = rule == "dominant"
     # every axis pair (p, p + d) once, with the fold test, in one compiled pass
-    occluding, occluded, pairs, far, near = pair_tests(z, thr, bool(folds), bool(perspective),
+    occluding, occluded, pairs, far, near = pair_tests(z, thr, zt, bool(folds), bool(perspective),
                                                         connectivity == 4, dominant)
     # valid pixels with an invalid neighbour (an out-of-image neighbour is not one: PCL
     # skips the border instead)

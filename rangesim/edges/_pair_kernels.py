@@ -47,13 +47,13 @@ def _fold(zn_i, zn_j, zf_i, zf_j, dr, dc, z, thr, perspective):  # pragma: no co
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def pair_tests(z, thr, folds, perspective, conn4, dominant):  # pragma: no cover - compiled
+def pair_tests(z, thr, zt, folds, perspective, conn4, dominant):  # pragma: no cover - compiled
     """The jump rule's neighbour tests.
 
     Parameters
     ----------
-    z, thr : (H, W) float32
-        Depth (NaN invalid) and the per-pixel jump threshold, mm.
+    z, thr, zt : (H, W) float32
+        Depth (NaN invalid), the per-pixel jump threshold and ``z + thr``, mm.
     folds, perspective, conn4, dominant : bool
         As :func:`~rangesim.edges._discontinuities.find_discontinuities` (``conn4``:
         connectivity 4; diagonal pairs then only enter ``pairs``).
@@ -80,11 +80,10 @@ def pair_tests(z, thr, folds, perspective, conn4, dominant):  # pragma: no cover
         j0, j1 = max(0, -dc), min(w, w - dc)
         for i in range(max(0, -dr), min(h, h - dr)):
             qi = i + dr
-            zr, tr, zqr, tqr, pr = z[i], thr[i], z[qi], thr[qi], pairs[a, i]
+            zr, zqr, ztr, ztqr, pr = z[i], z[qi], zt[i], zt[qi], pairs[a, i]
             # a plain pass first (vectorised: jumps are a few per cent of the pairs) ...
             for j in range(j0, j1):
-                zp, zq = zr[j], zqr[j + dc]
-                pr[j] = (zq > zp + tr[j]) | (zp > zq + tqr[j + dc])   # NaN compares False
+                pr[j] = (zqr[j + dc] > ztr[j]) | (zr[j] > ztqr[j + dc])   # NaN compares False
             if dominant and marks:
                 for j in range(j0, j1):
                     e = zqr[j + dc] - zr[j]                           # neighbour minus pixel
@@ -98,9 +97,8 @@ def pair_tests(z, thr, folds, perspective, conn4, dominant):  # pragma: no cover
                 if not pr[j]:
                     continue
                 qj = j + dc
-                zp, zq = zr[j], zqr[qj]
-                fwd = zq > zp + tr[j]                     # p near, q far
-                bwd = zp > zq + tqr[qj]                   # q near, p far
+                fwd = zqr[qj] > ztr[j]                    # p near, q far
+                bwd = zr[j] > ztqr[qj]                    # q near, p far
                 if folds:
                     if fwd and _fold(i, j, qi, qj, dr, dc, z, thr, perspective):
                         fwd = False
