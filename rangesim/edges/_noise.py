@@ -341,9 +341,20 @@ def local_noise_scale(scan: Any, valid: np.ndarray, footprint: np.ndarray,
     # the median of every 4th row and column: plenty for a level, 16x cheaper (noise_threshold)
     sub = ok[::4, ::4]
     median = np.float32(np.median(s[::4, ::4][sub] if sub.any() else s[ok]))
-    scale = np.ones(s.shape, np.float32)
-    np.divide(s, median, out=scale, where=ok & (s > median))
-    return scale
+    return _over_median(s, ok, median)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _over_median(s, ok, median):  # pragma: no cover - compiled
+    """``max(1, s / median)`` where ``ok``, else 1 (float32, one pass)."""
+    h, w = s.shape
+    out = np.empty((h, w), np.float32)
+    one = np.float32(1)
+    for i in range(h):
+        for j in range(w):
+            v = s[i, j]
+            out[i, j] = v / median if ok[i, j] and v > median else one
+    return out
 
 
 def noise_in_footprints(scan: Any, valid: np.ndarray, footprint: np.ndarray,
@@ -361,12 +372,30 @@ def noise_in_footprints(scan: Any, valid: np.ndarray, footprint: np.ndarray,
         sigma = predicted_noise(scan)
     if sigma is None:
         return None
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = (sigma / np.asarray(footprint, np.float32)).astype(np.float32)
-    ok = valid & np.isfinite(s) & (s > 0)
-    if ok.sum() < 100:
+    s, ok, n = _per_footprint(np.ascontiguousarray(sigma, np.float32),
+                              np.ascontiguousarray(np.broadcast_to(np.asarray(footprint, np.float32), sigma.shape)),
+                              np.ascontiguousarray(np.broadcast_to(valid, sigma.shape)))
+    if n < 100:
         return None
     return ok, s
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _per_footprint(sigma, footprint, valid):  # pragma: no cover - compiled
+    """``sigma / footprint`` (float32), where it is finite and positive on a valid pixel, and
+    how many such pixels there are (one pass)."""
+    h, w = sigma.shape
+    s = np.empty((h, w), np.float32)
+    ok = np.empty((h, w), np.bool_)
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            v = sigma[i, j] / footprint[i, j]
+            s[i, j] = v
+            good = valid[i, j] and np.isfinite(v) and v > 0
+            ok[i, j] = good
+            n += good
+    return s, ok, n
 
 
 def raised_threshold(threshold: float, scale: np.ndarray | None, cap: float | None = None) -> float | np.ndarray:
