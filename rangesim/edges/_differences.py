@@ -161,6 +161,17 @@ def eno_tangent(xyz: np.ndarray, axis: int, pairs: np.ndarray | None, step: int 
     return _weno_blend(np.ascontiguousarray(xyz), ok_step, s * dr, s * dc)
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _energy(xyz, ai, aj, bi, bj, ci, cj):  # pragma: no cover - compiled
+    """``|P(a) - 2 P(b) + P(c)|^2`` in the array form's order: ``((a - 2 b) + c)`` per
+    component, the squares summed x, y, then z."""
+    two = np.float32(2)
+    v0 = (xyz[0, ai, aj] - two * xyz[0, bi, bj]) + xyz[0, ci, cj]
+    v1 = (xyz[1, ai, aj] - two * xyz[1, bi, bj]) + xyz[1, ci, cj]
+    v2 = (xyz[2, ai, aj] - two * xyz[2, bi, bj]) + xyz[2, ci, cj]
+    return (v0 * v0 + v1 * v1) + v2 * v2
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _weno_blend(xyz, ok_step, dr, dc):  # pragma: no cover - compiled
     """:func:`eno_tangent` per pixel, in xyz's precision and the order of operations of its
@@ -170,7 +181,7 @@ def _weno_blend(xyz, ok_step, dr, dc):  # pragma: no cover - compiled
     _, h, w = xyz.shape
     out = np.empty_like(xyz)
     # float32 constants, as the array form's (float64 points promote them, as NumPy does)
-    one, two, zero = np.float32(1), np.float32(2), np.float32(0)
+    one, zero = np.float32(1), np.float32(0)
     big, weno, tiny = np.float32(1e30), np.float32(_WENO_EPS), np.float32(1e-30)
     f = np.empty(3, xyz.dtype)
     b = np.empty(3, xyz.dtype)
@@ -188,18 +199,9 @@ def _weno_blend(xyz, ok_step, dr, dc):  # pragma: no cover - compiled
             for c in range(3):
                 f[c] = xyz[c, i1, j1] - xyz[c, i, j] if fok else zero
                 b[c] = xyz[c, i, j] - xyz[c, k1, l1] if bok else zero
-            f2 = big
-            if fok and op2 and ok_step[3, i, j]:
-                v0 = (xyz[0, i2, j2] - two * xyz[0, i1, j1]) + xyz[0, i, j]
-                v1 = (xyz[1, i2, j2] - two * xyz[1, i1, j1]) + xyz[1, i, j]
-                v2 = (xyz[2, i2, j2] - two * xyz[2, i1, j1]) + xyz[2, i, j]
-                f2 = (v0 * v0 + v1 * v1) + v2 * v2
-            b2 = big
-            if bok and om2 and ok_step[0, i, j]:
-                v0 = (xyz[0, i, j] - two * xyz[0, k1, l1]) + xyz[0, k2, l2]
-                v1 = (xyz[1, i, j] - two * xyz[1, k1, l1]) + xyz[1, k2, l2]
-                v2 = (xyz[2, i, j] - two * xyz[2, k1, l1]) + xyz[2, k2, l2]
-                b2 = (v0 * v0 + v1 * v1) + v2 * v2
+            # continuation energies |a - 2 b + c|^2 of each side (1e30 where unknown)
+            f2 = _energy(xyz, i2, j2, i1, j1, i, j) if fok and op2 and ok_step[3, i, j] else big
+            b2 = _energy(xyz, i, j, k1, l1, k2, l2) if bok and om2 and ok_step[0, i, j] else big
             ff = (f[0] * f[0] + f[1] * f[1]) + f[2] * f[2]
             bb = (b[0] * b[0] + b[1] * b[1]) + b[2] * b[2]
             eps = weno * (ff + bb) + tiny

@@ -183,44 +183,6 @@ def _or_shifted(dst: np.ndarray, src: np.ndarray, dr: int, dc: int) -> None:
     dst[r0:r1, c0:c1] |= src[r0 - dr:r1 - dr, c0 - dc:c1 - dc]
 
 
-def _unfold(broken: np.ndarray, inv_flat: np.ndarray | None, zt_flat: np.ndarray, w2: int,
-            off_near: int, off_far: int, perspective: bool, z_flat: np.ndarray,
-            thr_flat: np.ndarray) -> None:
-    """Clear the pairs of ``broken`` that are folds of one continuous surface, not jumps.
-
-    ``broken`` (H, W) marks pairs (near pixel n, far pixel f) by the pixel ``p`` they are
-    stored at; on the arrays padded by 2 (row length ``w2``) the near pixel is at flat
-    offset ``off_near`` from ``p`` and the far pixel at ``off_far``. Each side's surface is
-    continued linearly one step across the pair (from the pixel and the one behind it; in
-    inverse depth when ``perspective``, exact for planes): the pair is a fold if the far
-    surface continued back reaches the near pixel (``pred <= z_n + t_n``: a face below a
-    convex rim, e.g. a lit hole wall) or the near surface continued forward reaches the far
-    one (``pred >= z_f - t_n``: the foot of a steep face on a floor, a concave crease).
-    Sparse: only the broken pairs are looked at.
-    """
-    h, w = broken.shape
-    idx = np.flatnonzero(broken)
-    if idx.size == 0:
-        return
-    r, c = np.divmod(idx, w)
-    p = (r + 2) * w2 + (c + 2)
-    n = p + off_near
-    f = p + off_far
-    beyond = f + (off_far - off_near)            # behind the far pixel, on its side
-    behind = n - (off_far - off_near)            # behind the near pixel, on its side
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        if perspective:
-            far_back = 2 * inv_flat[f] - inv_flat[beyond]        # 1 / (far surface at n)
-            fold = far_back * zt_flat[n] >= 1                    # pred <= zt_n, pred > 0
-            near_fwd = 2 * inv_flat[n] - inv_flat[behind]        # 1 / (near surface at f)
-            # pred >= z_f - t_n; a surface receding to infinity (1 / pred <= 0) reaches it
-            fold |= near_fwd * (z_flat[f] - thr_flat[n]) <= 1
-        else:
-            fold = 2 * z_flat[f] - z_flat[beyond] <= zt_flat[n]
-            fold |= 2 * z_flat[n] - z_flat[behind] >= z_flat[f] - thr_flat[n]
-    broken.ravel()[idx[fold]] = False
-
-
 def find_discontinuities(
     z: np.ndarray,
     threshold: float | np.ndarray = 0.02,

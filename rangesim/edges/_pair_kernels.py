@@ -29,7 +29,7 @@ def _at(a, i, j):  # pragma: no cover - compiled
 def _fold(zn_i, zn_j, zf_i, zf_j, dr, dc, z, thr, perspective):  # pragma: no cover - compiled
     """Whether the broken pair (near pixel n, far pixel f = n + (dr, dc)) is a fold of one
     continuous surface: the far surface continued back reaches the near pixel, or the near
-    surface continued forward reaches the far one (``_unfold`` of the array version)."""
+    surface continued forward reaches the far one (in inverse depth with ``perspective``)."""
     z_n, z_f = z[zn_i, zn_j], z[zf_i, zf_j]
     t_n = thr[zn_i, zn_j]
     zt_n = z_n + t_n

@@ -65,33 +65,24 @@ def vote_table(bands: list[Band], angle_tol: float) -> tuple[np.ndarray, ...]:
     -------
     rc, rs : (M,) float32
         ``r cos a / cell`` and ``r sin a / cell`` of each column (cells).
-    inv_cell, pad, cols, offset : (M,) float32 / int32
-        The column's band constants.
     band : (M,) int
         Band index of each column.
     r : (M,) float
         Radius sample, px.
     """
-    cols = {k: [] for k in ("rc", "rs", "inv", "pad", "cols", "off", "band", "r")}
+    cols = {k: [] for k in ("rc", "rs", "band", "r")}
     for b, bd in enumerate(bands):
         n_r = max(1, int(np.ceil((bd.hi - bd.lo) / bd.cell)))
         r = bd.lo + bd.cell * (np.arange(n_r) + 0.5)
         n_k = np.floor(angle_tol * r / bd.cell).astype(int)
         r_of = np.repeat(r, 2 * n_k + 1)
         a_of = np.concatenate([np.arange(-k, k + 1) for k in n_k]) * bd.cell / r_of
-        m = len(r_of)
         cols["rc"].append(r_of * np.cos(a_of) / bd.cell)
         cols["rs"].append(r_of * np.sin(a_of) / bd.cell)
-        cols["inv"].append(np.full(m, 1.0 / bd.cell))
-        cols["pad"].append(np.full(m, bd.pad))
-        cols["cols"].append(np.full(m, bd.cols))
-        cols["off"].append(np.full(m, bd.offset))
-        cols["band"].append(np.full(m, b))
+        cols["band"].append(np.full(len(r_of), b))
         cols["r"].append(r_of)
     cat = {k: np.concatenate(v) for k, v in cols.items()}
-    return (cat["rc"].astype(np.float32), cat["rs"].astype(np.float32), cat["inv"].astype(np.float32),
-            cat["pad"].astype(np.float32), cat["cols"].astype(np.int32), cat["off"].astype(np.int32),
-            cat["band"], cat["r"])
+    return cat["rc"].astype(np.float32), cat["rs"].astype(np.float32), cat["band"], cat["r"]
 
 
 def cast_votes(xy: np.ndarray, theta: np.ndarray, bands: list[Band],
@@ -108,7 +99,7 @@ def cast_votes(xy: np.ndarray, theta: np.ndarray, bands: list[Band],
     flat : (N, M, 2) int32
         The cell of every vote (point, column, sense), for :func:`voters`.
     """
-    rc, rs, _, _, _, _, band, _ = vote_table(bands, angle_tol)
+    rc, rs, band, _ = vote_table(bands, angle_tol)
     return accumulate(np.ascontiguousarray(xy[:, 0], np.float64), np.ascontiguousarray(xy[:, 1], np.float64),
                       np.cos(theta).astype(np.float64), np.sin(theta).astype(np.float64),
                       rc.astype(np.float64), rs.astype(np.float64), band.astype(np.int64),
