@@ -41,8 +41,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
     for method, result in results.items():
         edge_map = result["edge_map"]
         arrays = {"mask": edge_map.mask, "labels": edge_map.labels, "strength": edge_map.strength}
-        if edge_map.direction is not None:
-            arrays["direction"] = edge_map.direction
+        for name in ("direction", "offset"):
+            if getattr(edge_map, name) is not None:
+                arrays[name] = getattr(edge_map, name)
         target = out / f"{method}_edges.npz"
         with writing(target), atomic_path(target) as tmp:
             np.savez_compressed(tmp, **arrays)

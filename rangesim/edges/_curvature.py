@@ -204,7 +204,7 @@ def curvature(
         "window": window, "jump_threshold": float(jump_threshold), "max_search": int(max_search),
     }
     return EdgeMap(mask=mask, labels=labels, strength=strength, direction=direction,
-                   method="curvature", params=params)
+                   method="curvature", params=params, offset=disc.offsets_at(jump | disc.rim))
 
 
 def _image_angle(d: np.ndarray, scan: Any, z: np.ndarray, perspective: bool = True) -> np.ndarray:

@@ -151,6 +151,11 @@ class Discontinuities:
         The predicted depth noise (mm) the jump threshold allowed for
         (:func:`~rangesim.edges._noise.predicted_noise`; set by :func:`discontinuities`),
         None where the scan carries none.
+    contour : (H, W, 2) float32
+        At occluding, occluded and rim pixels: (dx, dy), pixels, from the pixel's centre to
+        the expected position of the contour it borders (:func:`contour_offsets`); 0
+        elsewhere. A jump lies somewhere between the pixel's centre and its neighbour's
+        across it, so the pixel's centre is half a pixel spacing off, always to one side.
     """
 
     occluding: np.ndarray
@@ -160,10 +165,21 @@ class Discontinuities:
     direction: np.ndarray
     rim: np.ndarray | None = None
     noise: np.ndarray | None = None
+    contour: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.rim is None:
             self.rim = np.zeros(self.occluding.shape, bool)
+        if self.contour is None:
+            self.contour = np.zeros(self.occluding.shape + (2,), np.float32)
+
+    def offsets_at(self, where: np.ndarray) -> np.ndarray:
+        """``contour`` at the pixels ``where`` (H, W) bool, 0 elsewhere: an
+        :attr:`EdgeMap.offset <rangesim.edges.EdgeMap.offset>` for a detector's jump and rim pixels."""
+        out = np.zeros_like(self.contour)
+        at = np.flatnonzero(where)
+        out.reshape(-1, 2)[at] = self.contour.reshape(-1, 2)[at]
+        return out
 
     @property
     def touching(self) -> np.ndarray:
@@ -318,6 +334,7 @@ def find_discontinuities(
         occluding &= (far >= near) & ~has_invalid
         occluded &= (near > far) & ~has_invalid
     direction = np.full((h, w), np.nan, np.float32)
+    across = []  # (rows, cols, x, y): a vector towards the other side, any length; last wins
     nan_boundary = np.zeros((h, w), bool)
     rim = np.zeros((h, w), bool)
 
@@ -394,13 +411,24 @@ def find_discontinuities(
         nan_boundary[si[~ok], sj[~ok]] = True
         jump = occl | occd
         direction[si[jump], sj[jump]] = np.mod(np.arctan2(sy[jump], sx[jump]), np.pi)
+        # either side of a jump across a gap: the contour lies towards the gap
+        across.append((si[jump], sj[jump], sx[jump], sy[jump]))
     if ii.size and empty is not None:
         # the measured surface ends against nothing: see the docstring
         e_i, e_j = ii[near_empty], jj[near_empty]
         keep = ~occluding[e_i, e_j]
         if not empty_certain:
             keep &= ~occluded[e_i, e_j]
-        rim[e_i[keep], e_j[keep]] = True
+        e_i, e_j = e_i[keep], e_j[keep]
+        rim[e_i, e_j] = True
+        # the surface ends towards its empty neighbours (their mean offset)
+        ex = np.zeros(e_i.size, np.float32)
+        ey = np.zeros(e_i.size, np.float32)
+        for dr, dc in nbrs:
+            e = epad[e_i + 1 + dr, e_j + 1 + dc]
+            ex += e * dc
+            ey += e * dr
+        across.append((e_i, e_j, ex, ey))
 
     # direction across the jump from the broken neighbour pairs (gradient of "is far")
     ei, ej = nonzero2((occluding | occluded) & np.isnan(direction))
@@ -418,7 +446,53 @@ def find_discontinuities(
             gx += step * dc
             gy += step * dr
         direction[ei, ej] = np.mod(np.arctan2(gy, gx), np.pi)
-    return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim)
+        # (gx, gy) points to the far side: the other side of an occluding pixel, away from
+        # it for an occluded one (a pixel that is both, a sliver, counts as occluding)
+        sense = np.where(occluding[ei, ej], 1.0, -1.0).astype(np.float32)
+        across.append((ei, ej, sense * gx, sense * gy))
+    contour = np.zeros((h, w, 2), np.float32)
+    if across:
+        ci, cj, cx, cy = (np.concatenate(v) for v in zip(*across))
+        contour[ci, cj] = contour_offsets(np.column_stack([cx, cy]), connectivity)
+    return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim, contour=contour)
+
+
+def contour_offsets(across: np.ndarray, connectivity: int = 4) -> np.ndarray:
+    """Where a contour lies from the centres of the pixels that border it.
+
+    A straight contour with unit normal u (towards the other side) is bordered by the
+    pixels with a neighbour across it: with 4-neighbours (8) those whose centre lies within
+    ``m = max(|ux|, |uy|)`` (``|ux| + |uy|``) px of it. Over the positions of the contour
+    in the pixel grid that distance is uniform on (0, m), so the expected contour lies
+    ``m / 2`` px from the pixel's centre along u: half a pixel for a contour along a row or
+    column, 0.35 px (4-neighbours) or 0.71 px (8) for a diagonal one. Sub-pixel fits of rims
+    and lines through the centres alone are off by that much, always outwards.
+
+    Parameters
+    ----------
+    across : (..., 2) float
+        A vector (x, y) towards the other side of the contour at pixels that border it, of
+        any length; zero (or non-finite) where there is none.
+    connectivity : {4, 8}
+        The neighbours that made the pixels border the contour.
+
+    Returns
+    -------
+    (..., 2) float32
+        (dx, dy), pixels; 0 where ``across`` is zero.
+
+    Examples
+    --------
+    >>> a = np.zeros((1, 2, 2)); a[0, 0] = (3.0, 0.0); a[0, 1] = (1.0, 1.0)
+    >>> contour_offsets(a).round(3).tolist()
+    [[[0.5, 0.0], [0.25, 0.25]]]
+    """
+    a = np.nan_to_num(np.asarray(across, np.float64))
+    norm = np.hypot(a[..., 0], a[..., 1])
+    u = a / np.where(norm > 0, norm, 1.0)[..., None]
+    ax, ay = np.abs(u[..., 0]), np.abs(u[..., 1])
+    spacing = np.maximum(ax, ay) if connectivity == 4 else ax + ay
+    return (0.5 * spacing[..., None] * u).astype(np.float32)
 
 
 def segment_broken(pairs: np.ndarray, axis: int, k0: int, k1: int) -> np.ndarray:

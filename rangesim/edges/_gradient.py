@@ -618,4 +618,5 @@ def gradient(
         "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=bend, direction=direction,
+                   offset=disc.offsets_at(jump | rim),
                    method="gradient", params=params)

@@ -293,7 +293,7 @@ def line_fit(
         "min_crease_px": int(min_crease_px), "label_creases": bool(label_creases),
     }
     return EdgeMap(mask=edge & valid, labels=labels, strength=strength, method="line_fit",
-                   params=params)
+                   params=params, offset=disc.offsets_at(disc.occluding | disc.rim))
 
 
 def _thin_creases(edge: np.ndarray, fixed: np.ndarray, min_px: int) -> np.ndarray:

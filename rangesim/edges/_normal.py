@@ -193,4 +193,4 @@ def normal(
         "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=strength,
-                   method="normal", params=params)
+                   method="normal", params=params, offset=disc.offsets_at(jump | rim))

@@ -296,9 +296,11 @@ def pcl_organized(
         labels[high_curvature] = hc_label[high_curvature]
     if "nan_boundary" in edge_types:
         labels[disc.nan_boundary] = EdgeLabel.NONE
+    jumps = np.zeros(shape, bool)
     for name in ("occluding", "occluded"):
         if name in edge_types:
             labels[classes[name]] = EdgeLabel.JUMP
+            jumps |= classes[name]
     params = {
         "depth_discontinuity": float(depth_discontinuity), "max_search": int(max_search),
         "distance": _distance_source(z, valid, geo, distance_mm),
@@ -307,6 +309,6 @@ def pcl_organized(
     }
     return OrganizedEdgeMap(
         mask=mask & valid, labels=labels, strength=magnitude, method="pcl_organized",
-        params=params, occluding=disc.occluding, occluded=disc.occluded,
+        params=params, offset=disc.offsets_at(jumps), occluding=disc.occluding, occluded=disc.occluded,
         nan_boundary=disc.nan_boundary, high_curvature=high_curvature,
     )

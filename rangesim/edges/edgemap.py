@@ -46,6 +46,14 @@ class EdgeMap:
         The detector's name.
     params : dict
         The parameters it ran with.
+    offset : (H, W, 2) float32 or None
+        (dx, dy), pixels, from each edge pixel's centre to where the edge most likely lies,
+        read at edge pixels only. The detectors set it at jump and rim pixels: an occluding
+        contour lies between the last pixel of the near surface and the first beyond it, on
+        average half a pixel spacing from the near pixel's centre
+        (:func:`~rangesim.edges._discontinuities.contour_offsets`); 0 at creases, whose
+        pixels straddle them. The feature finders fit their circles, ellipses and lines to
+        the edge pixels moved by it. None: the pixel centres.
     """
 
     mask: np.ndarray
@@ -54,6 +62,7 @@ class EdgeMap:
     direction: np.ndarray | None = None
     method: str = ""
     params: dict[str, Any] = field(default_factory=dict)
+    offset: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.mask = np.asarray(self.mask, dtype=bool)
@@ -66,6 +75,10 @@ class EdgeMap:
             self.direction = np.asarray(self.direction, dtype=np.float32)
             if self.direction.shape != shape:
                 raise ValueError(f"EdgeMap.direction must have shape {shape}")
+        if self.offset is not None:
+            self.offset = np.asarray(self.offset, dtype=np.float32)
+            if self.offset.shape != shape + (2,):
+                raise ValueError(f"EdgeMap.offset must have shape {shape + (2,)}")
         # labels only on edge pixels (NONE = 0); a product is ~20x cheaper than np.where
         self.labels = self.labels * self.mask
 
