@@ -131,7 +131,7 @@ def test_arcs_still_found():
 
 def test_ring_lookup_matches_brute_force():
     # the compiled ring gather returns exactly the edge pixels whose integer offset from the
-    # rounded centre has a length within width + 0.75 of r (row by row, clipped to the image)
+    # rounded centre has a length within width + 1.25 of r (row by row, clipped to the image)
     from rangesim.features._circle_kernels import _gather
     rng = np.random.default_rng(11)
     H, W = 60, 80
@@ -144,5 +144,5 @@ def test_ring_lookup_matches_brute_force():
     for cx, cy, r, width in ((40.3, 30.6, 12.2, 1.5), (2.0, 57.4, 9.0, 3.0), (70.5, 5.5, 30.0, 0.5), (10, 10, 0.4, 1.0)):
         n = _gather(cx, cy, r, width, index, H, W, out)
         d = np.hypot(cols - round(cx), rows - round(cy))
-        expected = np.flatnonzero((d >= max(r - width - 0.75, 0)) & (d <= r + width + 0.75))
+        expected = np.flatnonzero((d >= max(r - width - 1.25, 0)) & (d <= r + width + 1.25))
         assert sorted(out[:n].tolist()) == expected.tolist()

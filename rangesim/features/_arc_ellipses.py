@@ -412,7 +412,7 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
 
 def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float = 0.5, min_inliers: float = 0.6,
                        min_arc_deg: float = 60.0, axes_range: tuple[float, float] = (4.0, 200.0),
-                       min_ratio: float = 0.2, gap_px: int = 1):
+                       min_ratio: float = 0.2, gap_px: int = 1, pixels: np.ndarray | None = None):
     """Ellipses fitted to the outer outline of each group of edge pixels (as ``cv2.fitEllipse``
     on a contour): the rim around a hole's clutter (thread crests, a floor's edges) that links
     to the rim's arcs and spoils their pieces.
@@ -422,7 +422,8 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     outline is its points with a 4-neighbour in the group's outer background (the background
     region left of its leftmost pixel; not the regions it encloses, and not the region of a
     group it lies in). Each outline is fitted and checked as the pieces of
-    :func:`arc_hypotheses`.
+    :func:`arc_hypotheses`. ``pixels`` (N, 2) int: the points' pixels (default: ``xy``
+    truncated), which make the groups; the fits are to ``xy``.
 
     Returns
     -------
@@ -434,7 +435,8 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
         return none
     g = max(int(gap_px), 0)
     pad = g + 1  # room for the dilation (g px every way) and the neighbour tests beyond it
-    x, y = xy[:, 0].astype(np.int64) + pad, xy[:, 1].astype(np.int64) + pad
+    pix = (xy if pixels is None else pixels).astype(np.int64)
+    x, y = pix[:, 0] + pad, pix[:, 1] + pad
     m = np.zeros((int(y.max()) + pad + 1, int(x.max()) + pad + 1), bool)
     m[y, x] = True
     # a symmetric (2 g + 1)-square dilation: gaps of up to 2 g missing pixels are bridged
@@ -474,10 +476,14 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
 
 def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, min_support: float = 0.5,
                   max_residual: float = 0.8, axes_range: tuple[float, float] = (4.0, 200.0),
-                  min_ratio: float = 0.2) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
+                  min_ratio: float = 0.2, pixels: np.ndarray | None = None
+                  ) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
     """Ellipses of edge points without a model: arc hypotheses, grown, one claim per point
     (a candidate whose unclaimed inliers cover less than ``min_support`` is dropped; the
     returned inliers of an accepted ellipse are all of them, claimed before or not).
+
+    ``pixels`` (N, 2) int: the points' pixels (default ``xy``), which link the points into
+    curves and groups; the conics are fitted to ``xy`` (edge points to a fraction of a pixel).
 
     Returns
     -------
@@ -486,9 +492,9 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     """
     if len(xy) < min_points:
         return []
-    curve = smooth_curves(xy, theta)
+    curve = smooth_curves(xy if pixels is None else pixels, theta)
     conics, n = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
-    c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio)
+    c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
     conics, n = np.concatenate([conics, c2]), np.concatenate([n, n2])
     conics = conics[np.argsort(-n, kind="stable")]
     conics = conics[distinct(conics)]

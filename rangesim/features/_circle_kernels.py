@@ -202,10 +202,11 @@ def centres_and_radii(x, y, ct, st, k, i, cen, cell, lo, hi, threshold, step,
 @_jit
 def _gather(cx, cy, r, width, index, H, W, out):  # pragma: no cover - compiled
     """Edge points on the pixels whose offset (dx, dy) from the rounded centre has a length
-    within ``width`` (+0.75, the rounding of the centre) of ``r``, row by row (in memory
-    order); written to ``out``, their number returned."""
-    lo = max(r - width - 0.75, 0.0)
-    hi = r + width + 0.75
+    within ``width`` (+1.25: the rounding of the centre, 0.71 px, and the points' offsets
+    from their pixels, at most 0.5 px) of ``r``, row by row (in memory order); written to
+    ``out``, their number returned."""
+    lo = max(r - width - 1.25, 0.0)
+    hi = r + width + 1.25
     ix, iy = int(np.rint(cx)), int(np.rint(cy))
     R = int(hi)
     n = 0

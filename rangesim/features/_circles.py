@@ -83,9 +83,9 @@ def circle_hypotheses(
     list of (center (2,), radius, votes, inlier indices into the edge points), best first
     (largest fraction of 2 pi r in inliers).
     """
-    xy, theta = edge_points(edge_map, keep)
+    xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
-    h = _hypotheses(xy, theta, mask.shape, radii, angle_tol_deg, threshold, band_px,
+    h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, band_px,
                     max_hypotheses, cell_px, radius_step, REL_CELL if rel_cell is None else rel_cell)
     if h is None:
         return []
@@ -96,11 +96,12 @@ def circle_hypotheses(
     return [(c[j], float(r[j]), int(votes[j]), by_h[j]) for j in order if n_in[j] >= 6]
 
 
-def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii, angle_tol_deg: float,
-                threshold: float, band_px: float, max_hypotheses: int, cell_px: float,
+def _hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, shape: tuple[int, int], radii,
+                angle_tol_deg: float, threshold: float, band_px: float, max_hypotheses: int, cell_px: float,
                 radius_step: float, rel_cell: float):
     """Refined circle hypotheses as arrays: centres (K, 2), radii (K,), votes (K,), and the
-    (hypothesis, point) pairs of their inliers; None when there are none."""
+    (hypothesis, point) pairs of their inliers; None when there are none. ``xy`` (N, 2): the
+    edge points, ``pixels`` (N, 2) int: their pixels (column, row)."""
     if len(xy) < 5:
         return None
     bands = radius_bands(shape, radii, cell_px, rel_cell)
@@ -132,7 +133,7 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, shape: tuple[int, int], radii
     # refinement on a ring of edge points around each hypothesis, narrowing; the first ring is
     # as wide as the candidate's cell (its centre is known to about that)
     index = np.full(shape[0] * shape[1], -1, np.int32)  # int32: half the cache lines of int64
-    index[xy[:, 1].astype(np.int64) * shape[1] + xy[:, 0].astype(np.int64)] = np.arange(len(xy), dtype=np.int32)
+    index[pixels[:, 1] * shape[1] + pixels[:, 0]] = np.arange(len(xy), dtype=np.int32)
     hcell = cell[hk]
     reach = band_px + 1.0 + 0.5 * hcell
     c, r, ph, pp = refine(px, py, ct, st, index, shape[0],
@@ -231,9 +232,9 @@ def circles(
     .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
-    xy, theta = edge_points(edge_map, keep)
+    xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
-    h = _hypotheses(xy, theta, mask.shape, radii, angle_tol_deg, threshold, 1.0, 200, 1.0, 1.0, REL_CELL)
+    h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, 1.0, 200, 1.0, 1.0, REL_CELL)
     if h is None:
         return []
     c, r, votes, ph, pp = h

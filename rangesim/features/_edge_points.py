@@ -9,27 +9,35 @@ import numba
 import numpy as np
 
 
-def edge_points(edge_map: Any, keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Edge pixels and their edge-normal directions.
+def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
+                return_pixels: bool = False) -> tuple[np.ndarray, ...]:
+    """Edge points (where the edges lie, to a fraction of a pixel) and their edge-normal directions.
 
     Parameters
     ----------
     edge_map : EdgeMap or (H, W) bool array
     keep : (H, W) bool, optional
         Extra mask of the pixels to use.
+    return_pixels : bool
+        Also return the edge pixels themselves.
 
     Returns
     -------
     xy : (N, 2) float64
-        (x = column, y = row) of the edge pixels, pixels.
+        (x = column, y = row) of the edge points, pixels: the edge pixels' centres moved by
+        ``edge_map.offset`` where the detector gives one (half a pixel spacing towards the
+        far side at jumps), else the centres.
     theta : (N,) float64
         Direction across the edge, radians: ``edge_map.direction`` where given, else the
         normal to the local line of edge pixels (:func:`mask_normals`).
+    pixels : (N, 2) int64
+        (column, row) of each point's pixel; only with ``return_pixels``.
     """
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     if keep is not None:
         mask = mask & keep
-    rows, cols = np.divmod(np.flatnonzero(mask), mask.shape[1])  # 5x faster than 2D np.nonzero
+    flat = np.flatnonzero(mask)
+    rows, cols = np.divmod(flat, mask.shape[1])  # 5x faster than 2D np.nonzero
     direction = getattr(edge_map, "direction", None)
     if direction is not None:
         theta = np.asarray(direction, np.float64)[rows, cols]
@@ -39,7 +47,12 @@ def edge_points(edge_map: Any, keep: np.ndarray | None = None) -> tuple[np.ndarr
     if bad.any():
         full = np.asarray(getattr(edge_map, "mask", edge_map), bool)
         theta[bad] = mask_normals(full, rows[bad], cols[bad])
-    return np.column_stack([cols, rows]).astype(np.float64), theta
+    pixels = np.column_stack([cols, rows])
+    xy = pixels.astype(np.float64)
+    offset = getattr(edge_map, "offset", None)
+    if offset is not None:
+        xy += np.asarray(offset).reshape(-1, 2)[flat]
+    return (xy, theta, pixels) if return_pixels else (xy, theta)
 
 
 def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, float]:

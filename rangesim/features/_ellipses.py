@@ -231,9 +231,9 @@ def ellipses(
     """
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     H, W = mask.shape
-    xy, theta = edge_points(edge_map)
+    xy, theta, pixels = edge_points(edge_map, return_pixels=True)
     if not remove_explained and (scene is None or scan is None):
-        return _free(xy, theta, min_points, free_support, axes_range)
+        return _free(xy, theta, pixels, min_points, free_support, axes_range)
     predictions = []
     if scene is not None and scan is not None:
         predictions = predict_ellipses(scan, _scene_circles(scene))
@@ -282,15 +282,15 @@ def ellipses(
                                float(e2[2]), rms, len(sel), name))
         return out
     # -- no model: arcs of the remaining points, grown --
-    return _free(xy[keep], theta[keep], min_points, free_support, axes_range)
+    return _free(xy[keep], theta[keep], pixels[keep], min_points, free_support, axes_range)
 
 
-def _free(xy: np.ndarray, theta: np.ndarray, min_points: int, min_support: float,
+def _free(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, min_points: int, min_support: float,
           axes_range: tuple[float, float]) -> list[Ellipse]:
     """The model-free ellipses (:func:`~._arc_ellipses.free_ellipses`) as Ellipse."""
     out = []
     for conic, _, _, rms, n in free_ellipses(xy, theta, min_points=min_points, min_support=min_support,
-                                             axes_range=axes_range):
+                                             axes_range=axes_range, pixels=pixels):
         e = ellipse_from_conic(conic)
         out.append(Ellipse((float(e[0][0]), float(e[0][1])), (float(e[1][0]), float(e[1][1])), float(e[2]), rms, n))
     return out

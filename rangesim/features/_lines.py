@@ -108,7 +108,7 @@ def lines(
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     if keep is not None:
         mask = mask & keep
-    xy, theta = edge_points(edge_map, keep)
+    xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     if len(xy) < 2:
         return []
     angles = np.deg2rad(np.arange(-90, 90, 0.5))
@@ -119,7 +119,7 @@ def lines(
     out: list[tuple[np.ndarray, np.ndarray, int, float]] = []
     for a, d in zip(pa, pd):
         n = np.array([np.cos(a), np.sin(a)])  # skimage: d = x cos a + y sin a
-        off = xy @ n - d
+        off = pixels @ n - d  # the band about the peak, of the pixels it was voted by; fits to xy
         aligned = np.abs(np.cos(theta - a)) >= cos_tol
         idx = np.nonzero((np.abs(off) <= band_px) & aligned & ~used)[0]
         if len(idx) < min_length / 2:
