@@ -142,15 +142,21 @@ def measured_visibility(ellipse, valid: np.ndarray, samples: int = 360):
     return dataclasses.replace(ellipse, visible=min(float(ellipse.visible), float(seen.mean())))
 
 
-def _dedupe(found: list) -> list:
-    """Drop a found round feature that repeats an earlier one (centre within 2 px, size 20 %)."""
-    kept: list = []
-    for f in found:
-        size = float(np.mean(_axes(f)))
-        if all(np.linalg.norm(np.subtract(f.center, g.center)) > 2 or abs(size - np.mean(_axes(g))) > 0.2 * size
-               for g in kept):
-            kept.append(f)
-    return kept
+def _dedupe(found: list, center_px: float = CENTER_TOL_PX, size: float = SIZE_TOL) -> list:
+    """The found round features (circles and ellipses of one edge map) less those that repeat a
+    better fit: a feature whose centre and mean semi-axis lie within the match tolerance
+    (``center_px``, ``size``) of one with a smaller RMS residual is that rim found twice
+    (a circle and an ellipse of one rim; a circle spanning one rim's arc and the next rim's),
+    and only one of them could match it. Order kept."""
+    order = sorted(range(len(found)), key=lambda k: (found[k].residual, k))
+    kept: list[int] = []
+    for k in order:
+        f = found[k]
+        s = float(np.mean(_axes(f)))
+        if all(np.linalg.norm(np.subtract(f.center, found[j].center)) > center_px
+               or abs(s - np.mean(_axes(found[j]))) > size * s for j in kept):
+            kept.append(k)
+    return [found[k] for k in sorted(kept)]
 
 
 def _axes(f) -> np.ndarray:

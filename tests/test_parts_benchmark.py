@@ -114,3 +114,15 @@ def test_benchmark_case_truth_and_feature_scoring():
     far = type("F", (), {"center": np.array([-500.0, -500.0]), "radius": 5.0})()
     counts = bench.round_feature_counts([far], circles)
     assert sum(e["found"] for e in counts.values()) == 1 and sum(e["matched"] for e in counts.values()) == 0
+
+
+def test_dedupe_keeps_the_better_fit_of_one_rim():
+    from rangesim.features import Circle, Ellipse
+
+    rim = Ellipse((100.0, 80.0), (20.0, 18.0), 0.1, 0.2, 120)                # the rim, fitted well
+    ghost = Circle((100.0, 82.5), 19.5, 90, 0.55, 0.5)                       # 2.5 px off, a worse fit
+    inner = Circle((100.2, 80.1), 12.0, 60, 0.9, 0.3)                        # a concentric rim
+    far = Ellipse((300.0, 80.0), (20.0, 18.0), 0.0, 0.9, 80)                 # another rim altogether
+    kept = bench._dedupe([ghost, rim, inner, far])
+    assert kept == [rim, inner, far]                                         # order kept
+    assert bench._dedupe([rim, ghost]) == [rim]
