@@ -25,6 +25,7 @@ from rangesim.core.conics import (
     sampson_distance_rows,
 )
 from rangesim.features._conic_kernels import band_moments
+from rangesim.features._edge_points import one_edge
 
 #: tile sizes (px) of the arc pieces; each tiling also shifted by half a tile (diagonally)
 TILES_PX = (16, 32, 64, 128, 256)
@@ -476,7 +477,7 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
 
 def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, min_support: float = 0.5,
                   max_residual: float = 0.8, axes_range: tuple[float, float] = (4.0, 200.0),
-                  min_ratio: float = 0.2, pixels: np.ndarray | None = None
+                  min_ratio: float = 0.2, pixels: np.ndarray | None = None, labels: np.ndarray | None = None
                   ) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
     """Ellipses of edge points without a model: arc hypotheses, grown, one claim per point
     (a candidate whose unclaimed inliers cover less than ``min_support`` is dropped; the
@@ -484,6 +485,9 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
 
     ``pixels`` (N, 2) int: the points' pixels (default ``xy``), which link the points into
     curves and groups; the conics are fitted to ``xy`` (edge points to a fraction of a pixel).
+    ``labels`` (N,) uint8, optional: the points' edge labels; a candidate keeps only the
+    inliers of its own edge (:func:`~._edge_points.one_edge`), and is dropped when those cover
+    too little.
 
     Returns
     -------
@@ -512,9 +516,9 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     used = np.zeros(len(xy), bool)
     out = []
     for j in order:
-        pts = by_h[j]
+        pts = one_edge(labels, by_h[j])  # the candidate's own edge's points
         free = pts[~used[pts]]
-        if len(free) < len(pts):
+        if len(free) < len(by_h[j]):
             # a candidate left with too little of its perimeter once stronger ellipses took
             # their points (a near-duplicate, a ghost across two rims) is dropped
             if len(free) < min_points or coverage(conics[j:j + 1], xy, np.zeros(len(free), int), free)[0][0] < min_support:

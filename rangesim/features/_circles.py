@@ -13,7 +13,7 @@ from rangesim.features._arc_ellipses import coverage as ellipse_coverage
 from rangesim.features._arc_ellipses import grow
 from rangesim.features._circle_kernels import centres_and_radii, refine
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
-from rangesim.features._edge_points import angular_coverage, edge_points
+from rangesim.features._edge_points import angular_coverage, edge_points, one_edge, point_labels
 
 DIRECTION_TOL_DEG = 15.0  # an inlier's edge normal is radial within this, degrees
 REL_CELL = 1 / 4  # accumulator cell over the band's smallest radius (radius_bands)
@@ -245,12 +245,14 @@ def circles(
     # once the points of stronger circles are taken (a ghost made of two rims, a crescent
     # inside a rim) is dropped; this also removes near-duplicates
     by_h = np.split(pp[np.argsort(ph, kind="stable")], np.cumsum(np.bincount(ph, minlength=len(r)))[:-1])
+    labels = point_labels(edge_map, pixels)
     used = np.zeros(len(xy), bool)
     found = []
     for j in order:
-        pts = by_h[j]
+        # the candidate's own edge's points (a concave rim's or a convex and occluding one's)
+        pts = one_edge(labels, by_h[j])
         free = pts[~used[pts]]
-        if len(free) < len(pts):
+        if len(free) < len(by_h[j]):
             d = xy[free] - c[j]
             if angular_coverage(np.arctan2(d[:, 1], d[:, 0]), round(2 * np.pi * r[j]))[0] < min_support:
                 continue

@@ -8,6 +8,8 @@ from typing import Any
 import numba
 import numpy as np
 
+from rangesim.core.constants import EdgeLabel
+
 
 def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
                 return_pixels: bool = False) -> tuple[np.ndarray, ...]:
@@ -53,6 +55,39 @@ def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
     if offset is not None:
         xy += np.asarray(offset).reshape(-1, 2)[flat]
     return (xy, theta, pixels) if return_pixels else (xy, theta)
+
+
+def point_labels(edge_map: Any, pixels: np.ndarray) -> np.ndarray | None:
+    """(N,) uint8 :class:`~rangesim.core.constants.EdgeLabel` of the edge points at ``pixels``
+    (N, 2) (column, row); None for a bare mask, which has none."""
+    labels = getattr(edge_map, "labels", None)
+    if labels is None:
+        return None
+    return np.asarray(labels)[pixels[:, 1], pixels[:, 0]]
+
+
+def one_edge(labels: np.ndarray | None, points: np.ndarray) -> np.ndarray:
+    """The points (indices into ``labels``) of a round feature's own edge.
+
+    A rim is one edge all round: concave (a blind hole's floor, a boss's foot), or convex and
+    occluding (a hole's top, a boss's top; where it is an occluding contour, its jump pixels).
+    A concave edge never occludes: the material on either side stands in front of whatever
+    lies beyond. So the supporting points of one circle or ellipse that are of the other
+    kind than most of its labelled ones (jump, convex, concave or rim) belong to another
+    edge: a rim's neighbour within a pixel or two (a hole's wall meeting the floor below its
+    top), or the other half of a ghost made of two rims (a boss top's far arc and its
+    foot's near arc). Those are left out; untyped points (label 0) are kept. Without labels
+    (a bare mask) all points are kept.
+    """
+    if labels is None or len(points) == 0:
+        return points
+    lab = np.asarray(labels)[points]
+    concave = lab == EdgeLabel.CONCAVE
+    other = (lab != EdgeLabel.NONE) & ~concave
+    n_concave, n_other = np.count_nonzero(concave), np.count_nonzero(other)
+    if n_concave == 0 or n_other == 0:
+        return points
+    return points[~other] if n_concave > n_other else points[~concave]
 
 
 def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, float]:

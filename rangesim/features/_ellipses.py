@@ -16,7 +16,7 @@ from rangesim.core.conics import (
     sampson_distance,
 )
 from rangesim.features._arc_ellipses import free_ellipses
-from rangesim.features._edge_points import edge_points
+from rangesim.features._edge_points import edge_points, point_labels
 
 
 @dataclass(frozen=True)
@@ -233,7 +233,7 @@ def ellipses(
     H, W = mask.shape
     xy, theta, pixels = edge_points(edge_map, return_pixels=True)
     if not remove_explained and (scene is None or scan is None):
-        return _free(xy, theta, pixels, min_points, free_support, axes_range)
+        return _free(xy, theta, pixels, point_labels(edge_map, pixels), min_points, free_support, axes_range)
     predictions = []
     if scene is not None and scan is not None:
         predictions = predict_ellipses(scan, _scene_circles(scene))
@@ -282,15 +282,17 @@ def ellipses(
                                float(e2[2]), rms, len(sel), name))
         return out
     # -- no model: arcs of the remaining points, grown --
-    return _free(xy[keep], theta[keep], pixels[keep], min_points, free_support, axes_range)
+    labels = point_labels(edge_map, pixels)
+    return _free(xy[keep], theta[keep], pixels[keep], None if labels is None else labels[keep], min_points,
+                 free_support, axes_range)
 
 
-def _free(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, min_points: int, min_support: float,
-          axes_range: tuple[float, float]) -> list[Ellipse]:
+def _free(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, labels: np.ndarray | None, min_points: int,
+          min_support: float, axes_range: tuple[float, float]) -> list[Ellipse]:
     """The model-free ellipses (:func:`~._arc_ellipses.free_ellipses`) as Ellipse."""
     out = []
     for conic, _, _, rms, n in free_ellipses(xy, theta, min_points=min_points, min_support=min_support,
-                                             axes_range=axes_range, pixels=pixels):
+                                             axes_range=axes_range, pixels=pixels, labels=labels):
         e = ellipse_from_conic(conic)
         out.append(Ellipse((float(e[0][0]), float(e[0][1])), (float(e[1][0]), float(e[1][1])), float(e[2]), rms, n))
     return out
