@@ -261,3 +261,34 @@ def test_outer_outline_holds_every_side_of_a_rim():
             q = rim & (np.sign(p[:, 0] - 50) == sx) & (np.sign(p[:, 1] - 48) == sy)
             q_all = all_rim & (np.sign(xy[:, 0] - 50) == sx) & (np.sign(xy[:, 1] - 48) == sy)
             assert q.sum() >= 0.35 * q_all.sum(), (sx, sy, q.sum(), q_all.sum())
+
+
+def test_compiled_helpers_match_the_numpy_they_replace():
+    # the moments (float32, as np.add.reduceat sums them: first row plus NumPy's pairwise
+    # sum), the first copies of rows (np.unique over rows) and the square dilation
+    from scipy import ndimage
+
+    from rangesim.core.conics import conic_monomials
+    from rangesim.features._arc_ellipses import _first_copies, _square_dilation
+    from rangesim.features._conic_kernels import piece_moments
+
+    rng = np.random.default_rng(3)
+    xy = rng.integers(0, 400, (3000, 2)).astype(float) + rng.uniform(-0.5, 0.5, (3000, 2))
+    pc = np.sort(rng.integers(0, 200, 40000))
+    pt = rng.integers(0, 3000, 40000)
+    frame = np.column_stack([rng.uniform(0, 400, 200), rng.uniform(0, 400, 200), rng.choice([8.0, 64.0, 128.0], 200)])
+    starts = np.searchsorted(pc, np.unique(pc))
+    q = (xy[pt] - frame[pc, :2]) / frame[pc, 2:]
+    expected = np.add.reduceat(conic_monomials(q.astype(np.float32)), starts, axis=0)
+    got = np.empty((len(starts), 15), np.float32)
+    piece_moments(xy, pt, pc, frame, starts, got)
+    assert np.array_equal(got, expected)
+
+    cols = [rng.integers(0, 4, 500), rng.integers(0, 3, 500), rng.integers(0, 5, 500)]
+    _, first, inv = np.unique(np.column_stack(cols), axis=0, return_index=True, return_inverse=True)
+    same, first2 = _first_copies(*cols)
+    assert np.array_equal(first2, first) and np.array_equal(same, first[inv.ravel()])
+
+    m = rng.random((61, 77)) < 0.05
+    for g in (1, 2):
+        assert np.array_equal(_square_dilation(m, g), ndimage.binary_dilation(m, np.ones((2 * g + 1,) * 2, bool)))

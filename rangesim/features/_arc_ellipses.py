@@ -24,7 +24,7 @@ from rangesim.core.conics import (
     real_ellipses,
     sampson_distance_rows,
 )
-from rangesim.features._conic_kernels import band_moments
+from rangesim.features._conic_kernels import band_moments, curve_links, piece_moments
 from rangesim.features._edge_points import one_edge
 
 #: tile sizes (px) of the arc pieces; each tiling also shifted by half a tile (diagonally)
@@ -63,34 +63,9 @@ def smooth_curves(xy: np.ndarray, theta: np.ndarray, link_deg: float = LINK_DEG,
     if n == 0:
         return np.zeros(0, int)
     x, y = xy[:, 0].astype(np.int64), xy[:, 1].astype(np.int64)
-    R = int(gap_px) + 1
-    W = int(x.max()) + 2 * R + 1
-    key = (y + R) * W + (x + R)
-    order = np.argsort(key)
-    ks = key[order]
-    cos_link, sin_link = np.cos(np.deg2rad(link_deg)), np.sin(np.deg2rad(link_deg))
-    cos_adjacent = np.cos(np.deg2rad(ADJACENT_DEG))
-    rows, cols = [], []
-    # half of the (2R+1)^2 offsets: each pair is found once
-    for dy in range(0, R + 1):
-        for dx in range(-R, R + 1):
-            if dy == 0 and dx <= 0:
-                continue
-            target = key + dy * W + dx
-            j = np.minimum(np.searchsorted(ks, target), n - 1)
-            hit = ks[j] == target
-            i, k = np.nonzero(hit)[0], order[j[hit]]
-            agree = np.abs(np.cos(theta[i] - theta[k])) >= cos_link
-            # the step must run along both tangents: within link_deg across a bridged gap, at
-            # least ADJACENT_DEG off the normal between neighbours (a curve's pixel steps are
-            # up to 45 degrees off its tangent; a parallel edge next to it is along the normal)
-            step = np.hypot(dx, dy)
-            lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
-            for t in (theta[i], theta[k]):
-                agree &= np.abs(dx * np.cos(t) + dy * np.sin(t)) <= lim * step
-            rows.append(i[agree])
-            cols.append(k[agree])
-    r, c = np.concatenate(rows), np.concatenate(cols)
+    x, y = x - x.min(), y - y.min()  # the index image covers the points' box only
+    r, c = curve_links(x, y, np.asarray(theta, np.float64), int(gap_px) + 1, float(np.cos(np.deg2rad(link_deg))),
+                       float(np.sin(np.deg2rad(link_deg))), float(np.cos(np.deg2rad(ADJACENT_DEG))))
     g = coo_matrix((np.ones(len(r), np.int8), (r, c)), shape=(n, n))
     return connected_components(g, directed=False)[1]
 
@@ -129,7 +104,8 @@ def arc_hypotheses(xy: np.ndarray, curve: np.ndarray, *, min_points: int = 10, t
     tiles, frames, x, y = [], [], xy[:, 0], xy[:, 1]
     for s in tiles_px:
         for ox, oy in ((0, 0), (s // 2, s // 2)):
-            tx, ty = ((x + ox) // s).astype(np.int64), ((y + oy) // s).astype(np.int64)
+            # floor of a true quotient (the tiles are powers of two: exact) is 3x np.floor_divide's speed
+            tx, ty = np.floor((x + ox) / s).astype(np.int64), np.floor((y + oy) / s).astype(np.int64)
             tiles.append((len(tiles) * 4096 + ty) * 4096 + tx)
             frames.append(np.column_stack([(tx + 0.5) * s - ox, (ty + 0.5) * s - oy, np.full(n, s / 2)]))
     n_curves = int(curve.max()) + 1
@@ -143,18 +119,17 @@ def arc_hypotheses(xy: np.ndarray, curve: np.ndarray, *, min_points: int = 10, t
     pt, pc = np.tile(np.arange(n), len(tiles))[rows], piece[rows]
     o = np.argsort(pc, kind="stable")
     pt, pc = pt[o], pc[o]
-    q = (xy[pt] - frame[pc, :2]) / frame[pc, 2:]
     mom = np.zeros((len(cnt), 15))
     starts = np.searchsorted(pc, np.nonzero(use)[0])
-    # float32 suffices for hypotheses (grow refits in float64) and halves the memory traffic
-    mom[use] = np.add.reduceat(conic_monomials(q.astype(np.float32)), starts, axis=0)
+    # float32 suffices for hypotheses (grow refits in float64); one compiled pass
+    sums = np.empty((len(starts), 15), np.float32)
+    piece_moments(xy, pt, pc, frame, starts, sums)
+    mom[use] = sums
     points = _Pieces(pt, np.where(use, cnt, 0))
     # a piece that recurs in several tilings (a curve whole inside tiles of several shifts and
     # sizes) is fitted once: the same curve, count and sum of point indices
     psum = np.bincount(pc, weights=pt, minlength=len(cnt)).astype(np.int64)
-    _, first, inv = np.unique(np.column_stack([piece_curve, cnt, psum]), axis=0, return_index=True,
-                              return_inverse=True)
-    same_as = first[inv.ravel()]  # the first copy of each piece
+    same_as, first = _first_copies(piece_curve, cnt, psum)  # the first copy of each piece
     quality = dict(max_rms=max_rms, min_inliers=min_inliers, axes_range=axes_range, min_ratio=min_ratio,
                    min_arc_deg=min_arc_deg)
     single = first[use[first]]
@@ -190,6 +165,24 @@ def arc_hypotheses(xy: np.ndarray, curve: np.ndarray, *, min_points: int = 10, t
     conics, npts = np.concatenate(out_c), np.concatenate(out_n)
     o = np.argsort(-npts, kind="stable")
     return conics[o], npts[o]
+
+
+def _first_copies(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For rows made of the (P,) int ``columns``: the index of the first row equal to each
+    row (P,), and those first rows in the rows' sorted order (U,): ``first[inverse]`` and
+    ``first`` of ``np.unique(np.column_stack(columns), axis=0, return_index=True,
+    return_inverse=True)``, through one stable lexsort (about 10x faster)."""
+    o = np.lexsort(columns[::-1])
+    new = np.zeros(len(o), bool)
+    new[:1] = True
+    for c in columns:
+        cs = c[o]
+        new[1:] |= cs[1:] != cs[:-1]
+    run = np.cumsum(new) - 1
+    first = o[new]  # stable: the first row of each run has the smallest index
+    same = np.empty(len(o), np.int64)
+    same[o] = first[run]
+    return same, first
 
 
 class _Pieces:
@@ -411,6 +404,20 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     return cov, rms, perim
 
 
+def _square_dilation(m: np.ndarray, g: int) -> np.ndarray:
+    """``ndimage.binary_dilation(m, np.ones((2 g + 1, 2 g + 1)))`` (outside the image False)
+    as separable slice ORs, rows then columns: the same array, ~10x faster."""
+    rows = m.copy()
+    for s in range(1, g + 1):
+        rows[:, s:] |= m[:, :-s]
+        rows[:, :-s] |= m[:, s:]
+    out = rows.copy()
+    for s in range(1, g + 1):
+        out[s:] |= rows[:-s]
+        out[:-s] |= rows[s:]
+    return out
+
+
 def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float = 0.5, min_inliers: float = 0.6,
                        min_arc_deg: float = 60.0, axes_range: tuple[float, float] = (4.0, 200.0),
                        min_ratio: float = 0.2, gap_px: int = 1, pixels: np.ndarray | None = None):
@@ -441,7 +448,7 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     m = np.zeros((int(y.max()) + pad + 1, int(x.max()) + pad + 1), bool)
     m[y, x] = True
     # a symmetric (2 g + 1)-square dilation: gaps of up to 2 g missing pixels are bridged
-    grown = ndimage.binary_dilation(m, np.ones((2 * g + 1,) * 2, bool)) if g > 0 else m
+    grown = _square_dilation(m, g)
     groups, G = ndimage.label(grown, np.ones((3, 3), bool))
     spaces = ndimage.label(~grown)[0]  # 4-connected background regions
     # each group's outer background: the region left of its leftmost pixel (not enclosed by it)

@@ -70,3 +70,123 @@ def band_moments(conics, hyp, px, py, ct, st, band, cos_tol):  # pragma: no cove
                     col += 1
                 xi *= x
     return sel, m, s, mom
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _pairwise(a, lo, n, col):  # pragma: no cover - compiled
+    """NumPy's pairwise float32 sum of ``a[lo:lo + n, col]`` (``pairwise_sum`` of its loops:
+    8 running sums over blocks of at most 128, halves above), to the same bits."""
+    if n < 8:
+        res = np.float32(0.0)
+        for i in range(n):
+            res += a[lo + i, col]
+        return res
+    if n <= 128:
+        r0, r1, r2, r3 = a[lo, col], a[lo + 1, col], a[lo + 2, col], a[lo + 3, col]
+        r4, r5, r6, r7 = a[lo + 4, col], a[lo + 5, col], a[lo + 6, col], a[lo + 7, col]
+        i = 8
+        while i < n - (n % 8):
+            r0 += a[lo + i, col]
+            r1 += a[lo + i + 1, col]
+            r2 += a[lo + i + 2, col]
+            r3 += a[lo + i + 3, col]
+            r4 += a[lo + i + 4, col]
+            r5 += a[lo + i + 5, col]
+            r6 += a[lo + i + 6, col]
+            r7 += a[lo + i + 7, col]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += a[lo + i, col]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise(a, lo, n2, col) + _pairwise(a, lo + n2, n - n2, col)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def piece_moments(xy, pt, pc, frame, starts, out):  # pragma: no cover - compiled
+    """Moments of pieces of points: ``np.add.reduceat`` of their float32 monomials, to the bits.
+
+    Rows ``r`` (sorted by piece ``pc[r]``): point ``pt[r]`` in the frame of its piece
+    (``q = (xy - frame[:2]) / frame[2]``, float64, then float32); each run of rows starting
+    at ``starts[g]`` sums its :func:`rangesim.core.conics.conic_monomials` (the powers
+    x^i y^j, i + j <= 4, in the order of ``MOMENT_POWERS``) into ``out[g]``, as reduceat
+    does: the run's first row plus NumPy's pairwise sum of the others (:func:`_pairwise`).
+    """
+    G, R = len(starts), len(pt)
+    mono = np.empty((R, 15), np.float32)
+    xp = np.empty(5, np.float32)
+    yp = np.empty(5, np.float32)
+    for r in range(R):
+        f = frame[pc[r]]
+        x = np.float32((xy[pt[r], 0] - f[0]) / f[2])
+        y = np.float32((xy[pt[r], 1] - f[1]) / f[2])
+        xp[0] = 1.0
+        xp[1] = x
+        xp[2] = x * x
+        xp[3] = xp[2] * x
+        xp[4] = xp[3] * x
+        yp[0] = 1.0
+        yp[1] = y
+        yp[2] = y * y
+        yp[3] = yp[2] * y
+        yp[4] = yp[3] * y
+        k = 0
+        for i in range(5):
+            for j in range(5 - i):
+                mono[r, k] = xp[i] * yp[j]
+                k += 1
+    for g in range(G):
+        lo = starts[g]
+        hi = starts[g + 1] if g + 1 < G else R
+        for k in range(15):
+            out[g, k] = mono[lo, k] + _pairwise(mono, lo + 1, hi - lo - 1, k) if hi - lo > 1 else mono[lo, k]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def curve_links(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: no cover - compiled
+    """Pairs (i, k) of edge points that :func:`~._arc_ellipses.smooth_curves` links.
+
+    ``x, y`` (N,) int pixels (distinct), ``theta`` (N,) normals. Each point looks at the
+    pixels of half the (2R+1)^2 window (dy > 0, or dy == 0 and dx > 0, so a pair is seen
+    once) through an index image: linked when the normals agree within ``cos_link`` and the
+    step runs along both tangents (within ``sin_link`` of the tangent across a bridged gap,
+    at least ``cos_adjacent`` off the normal between 8-neighbours).
+    """
+    n = len(x)
+    W = 0
+    H = 0
+    for i in range(n):
+        W = max(W, x[i])
+        H = max(H, y[i])
+    W += 2 * R + 1
+    H += 2 * R + 1
+    index = np.full((H, W), -1, np.int64)
+    for i in range(n):
+        index[y[i] + R, x[i] + R] = i
+    rows = np.empty(n * (2 * R + 1) * (R + 1), np.int64)
+    cols = np.empty_like(rows)
+    m = 0
+    for i in range(n):
+        ci, si = np.cos(theta[i]), np.sin(theta[i])
+        for dy in range(0, R + 1):
+            for dx in range(-R, R + 1):
+                if dy == 0 and dx <= 0:
+                    continue
+                k = index[y[i] + R + dy, x[i] + R + dx]
+                if k < 0:
+                    continue
+                if abs(np.cos(theta[i] - theta[k])) < cos_link:
+                    continue
+                step = np.sqrt(dx * dx + dy * dy)
+                lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
+                if abs(dx * ci + dy * si) > lim * step:
+                    continue
+                if abs(dx * np.cos(theta[k]) + dy * np.sin(theta[k])) > lim * step:
+                    continue
+                rows[m] = i
+                cols[m] = k
+                m += 1
+    return rows[:m], cols[:m]
