@@ -292,3 +292,29 @@ def test_compiled_helpers_match_the_numpy_they_replace():
     m = rng.random((61, 77)) < 0.05
     for g in (1, 2):
         assert np.array_equal(_square_dilation(m, g), ndimage.binary_dilation(m, np.ones((2 * g + 1,) * 2, bool)))
+
+
+def test_grouped_frames_and_sampson_pairs_match_numpy():
+    # fit_conics_grouped's centroids, scales and moments (float64 reduceat sums with the zero
+    # row after the last group; empty groups too) and the Sampson distances, to the bits
+    from rangesim.core import conics as C
+    from rangesim.features._conic_kernels import grouped_frames, sampson_pairs
+
+    rng = np.random.default_rng(8)
+    xy = rng.uniform(0, 500, (2000, 2))
+    for G in (1, 7, 300):
+        group = np.sort(rng.integers(0, G, 5000))
+        pt = rng.integers(0, 2000, 5000)
+        keep = rng.random(5000) < 0.6
+        g2, p2 = group[keep], xy[pt[keep]]
+        n = np.bincount(g2, minlength=G)
+        m = C._group_sums(p2, g2, G) / np.maximum(n, 1)[:, None]
+        q = p2 - m[g2]
+        s = np.maximum(np.maximum.reduceat(np.abs(q).max(1), np.minimum(np.searchsorted(g2, np.arange(G)), len(g2) - 1)),
+                       1e-9)
+        s[n == 0] = 1.0
+        mom = C._group_sums(C.conic_monomials(q / s[g2, None]), g2, G)
+        m2, s2, mom2 = grouped_frames(xy, pt, keep, group, G)
+        assert np.array_equal(m2, m) and np.array_equal(s2, s) and np.array_equal(mom2, mom)
+        conics = rng.normal(size=(G, 6))
+        assert np.array_equal(sampson_pairs(conics, group, xy, pt), C.sampson_distance_rows(conics[group], xy[pt]))

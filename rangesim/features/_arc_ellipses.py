@@ -19,12 +19,10 @@ from scipy.spatial import cKDTree
 from rangesim.core.conics import (
     conic_monomials,
     ellipse_params,
-    fit_conics_grouped,
     fit_conics_moments,
     real_ellipses,
-    sampson_distance_rows,
 )
-from rangesim.features._conic_kernels import band_moments, curve_links, piece_moments
+from rangesim.features._conic_kernels import band_moments, curve_links, grouped_frames, piece_moments, sampson_pairs
 from rangesim.features._edge_points import one_edge
 
 #: tile sizes (px) of the arc pieces; each tiling also shifted by half a tile (diagonally)
@@ -227,13 +225,16 @@ def _fit_pieces(xy, pieces: _Pieces, mom: np.ndarray, frame: np.ndarray, groups:
     # within 1 px of the first fit: a piece of a rim with some clutter linked to it)
     idx = np.nonzero(good)[0]
     gid, pt = pieces.rows([g[idx] for g in groups])
-    inl = sampson_distance_rows(conics[idx][gid], xy[pt]) <= 1.0
+    hyp = idx[gid]
+    inl = sampson_pairs(conics, hyp, xy, pt) <= 1.0
     m = np.bincount(gid, minlength=len(idx))
-    new, nok = fit_conics_grouped(xy[pt[inl]], gid[inl], len(idx))
+    # fit_conics_grouped(xy[pt[inl]], gid[inl], len(idx)), its frames and moments compiled
+    m_in, s_in, mom_in = grouped_frames(xy, pt, inl, gid, len(idx))
+    new, nok, _ = fit_conics_moments(mom_in, m_in, s_in)
     nok &= real_ellipses(new) & (np.bincount(gid[inl], minlength=len(idx)) >= 6)
     conics[idx[nok]] = new[nok]
     c, axes, ang, real = ellipse_params(conics)
-    d = sampson_distance_rows(conics[idx][gid], xy[pt])
+    d = sampson_pairs(conics, hyp, xy, pt)
     inl = d <= 1.0
     with np.errstate(invalid="ignore", divide="ignore"):
         rms = np.sqrt(np.bincount(gid, weights=np.where(inl, d * d, 0), minlength=len(idx))
@@ -343,7 +344,7 @@ def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2
     margin = 3.0
     reach = axes[:, 0] + bands[0] + margin + 1
     hyp, pt = box_candidates(np.where(ok[:, None], c, np.inf), np.where(ok, reach, 0.0), xy)
-    near = sampson_distance_rows(conics[hyp], xy[pt]) <= bands[0] + margin
+    near = sampson_pairs(conics, hyp, xy, pt) <= bands[0] + margin
     hyp, pt = hyp[near], pt[near]
     px, py = xy[pt, 0].copy(), xy[pt, 1].copy()
     ct, st = np.cos(theta[pt]), np.sin(theta[pt])
@@ -395,7 +396,7 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
     occ = np.zeros(int(n_bins.sum()), bool)
     occ[start[hyp] + bins] = True
     cov = np.add.reduceat(occ, start) / n_bins
-    d = sampson_distance_rows(conics[hyp], xy[pt])
+    d = sampson_pairs(conics, hyp, xy, pt)
     cnt = np.bincount(hyp, minlength=K)
     with np.errstate(invalid="ignore", divide="ignore"):
         rms = np.sqrt(np.bincount(hyp, weights=d * d, minlength=K) / cnt)

@@ -74,11 +74,11 @@ def band_moments(conics, hyp, px, py, ct, st, band, cos_tol):  # pragma: no cove
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _pairwise(a, lo, n, col):  # pragma: no cover - compiled
-    """NumPy's pairwise float32 sum of ``a[lo:lo + n, col]`` (``pairwise_sum`` of its loops:
-    8 running sums over blocks of at most 128, halves above), to the same bits."""
+    """NumPy's pairwise sum of ``a[lo:lo + n, col]``, n >= 1, in ``a``'s type (``pairwise_sum``
+    of its loops: 8 running sums over blocks of at most 128, halves above), to the same bits."""
     if n < 8:
-        res = np.float32(0.0)
-        for i in range(n):
+        res = a[lo, col]  # NumPy starts from 0: the same sum (but for the sign of a zero)
+        for i in range(1, n):
             res += a[lo + i, col]
         return res
     if n <= 128:
@@ -190,3 +190,95 @@ def curve_links(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: no
                 cols[m] = k
                 m += 1
     return rows[:m], cols[:m]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def sampson_pairs(conics, hyp, xy, pt):  # pragma: no cover - compiled
+    """(P,) Sampson distance of point ``pt[k]`` to conic ``hyp[k]``:
+    :func:`rangesim.core.conics.sampson_distance_rows` without gathering the rows."""
+    out = np.empty(len(pt))
+    for k in range(len(pt)):
+        q = conics[hyp[k]]
+        a, b, c, d, e, f = q[0], q[1], q[2], q[3], q[4], q[5]
+        x, y = xy[pt[k], 0], xy[pt[k], 1]
+        v = a * x * x + b * x * y + c * y * y + d * x + e * y + f
+        gx = 2 * a * x + b * y + d
+        gy = b * x + 2 * c * y + e
+        out[k] = abs(v) / max(np.hypot(gx, gy), 1e-12)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _reduceat_padded(w, starts, n, out):  # pragma: no cover - compiled
+    """``out[g] = np.add.reduceat(w + one zero row, starts)[g]``, 0 where ``n[g] == 0``: a
+    group's first row plus the pairwise sum of its others; the last group's range runs to
+    the zero row (as it does in :func:`rangesim.core.conics._group_sums`)."""
+    G, R = len(starts), len(w)
+    K = w.shape[1]
+    padded = np.zeros((R + 1, K))
+    padded[:R] = w
+    for g in range(G):
+        if n[g] == 0:
+            out[g] = 0.0
+            continue
+        a = starts[g]
+        e = starts[g + 1] if g + 1 < G else R + 1
+        for k in range(K):
+            out[g, k] = padded[a, k] + _pairwise(padded, a + 1, e - a - 1, k) if e - a > 1 else padded[a, k]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def grouped_frames(xy, pt, keep, group, G):  # pragma: no cover - compiled
+    """Frames and moments of :func:`rangesim.core.conics.fit_conics_grouped`, to the bits.
+
+    The points ``xy[pt[r]]`` of the rows ``r`` with ``keep[r]``, in groups ``group[r]``
+    (sorted, 0 <= group < G). Returns the centroids m (G, 2), scales s (G,) (the largest
+    coordinate offset from m, at least 1e-9; 1 for an empty group) and the (G, 15) sums of
+    the monomials of ``(p - m) / s``, all in float64 as NumPy sums them there.
+    """
+    R = 0
+    for r in range(len(pt)):
+        if keep[r]:
+            R += 1
+    p = np.empty((R, 2))
+    gr = np.empty(R, np.int64)
+    j = 0
+    for r in range(len(pt)):
+        if keep[r]:
+            p[j, 0] = xy[pt[r], 0]
+            p[j, 1] = xy[pt[r], 1]
+            gr[j] = group[r]
+            j += 1
+    n = np.zeros(G, np.int64)
+    for j in range(R):
+        n[gr[j]] += 1
+    starts = np.searchsorted(gr, np.arange(G))
+    m = np.empty((G, 2))
+    _reduceat_padded(p, starts, n, m)
+    for g in range(G):
+        c = max(n[g], 1)
+        m[g, 0] /= c
+        m[g, 1] /= c
+    s = np.full(G, -np.inf)
+    q = np.empty((R, 2))
+    for j in range(R):
+        g = gr[j]
+        q[j, 0] = p[j, 0] - m[g, 0]
+        q[j, 1] = p[j, 1] - m[g, 1]
+        s[g] = max(s[g], max(abs(q[j, 0]), abs(q[j, 1])))
+    for g in range(G):
+        s[g] = max(s[g], 1e-9) if n[g] > 0 else 1.0
+    mono = np.empty((R, 15))
+    for j in range(R):
+        x = q[j, 0] / s[gr[j]]
+        y = q[j, 1] / s[gr[j]]
+        xp = (1.0, x, x * x, x * x * x, x * x * x * x)
+        yp = (1.0, y, y * y, y * y * y, y * y * y * y)
+        k = 0
+        for i in range(5):
+            for jj in range(5 - i):
+                mono[j, k] = xp[i] * yp[jj]
+                k += 1
+    mom = np.empty((G, 15))
+    _reduceat_padded(mono, starts, n, mom)
+    return m, s, mom
