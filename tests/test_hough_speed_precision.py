@@ -146,3 +146,29 @@ def test_ring_lookup_matches_brute_force():
         d = np.hypot(cols - round(cx), rows - round(cy))
         expected = np.flatnonzero((d >= max(r - width - 1.25, 0)) & (d <= r + width + 1.25))
         assert sorted(out[:n].tolist()) == expected.tolist()
+
+
+def test_line_peak_kernels_match_the_array_rule():
+    # the accumulator's window maxima over the threshold (as maximum_filter with a constant 0
+    # border finds them) and the greedy suppression, against the NumPy they replace
+    from scipy import ndimage
+
+    from rangesim.features._line_kernels import suppress_near, window_maxima
+
+    rng = np.random.default_rng(4)
+    acc = rng.poisson(2.0, (300, 180)).astype(np.uint64)
+    acc[rng.integers(0, 300, 40), rng.integers(0, 180, 40)] += rng.integers(5, 40, 40).astype(np.uint64)
+    for rd, ra, thr in ((3, 3, 6.0), (1, 2, 10.0), (0, 0, 4.0)):
+        mx = ndimage.maximum_filter(acc, size=(2 * rd + 1, 2 * ra + 1), mode="constant")
+        di, ai = np.nonzero((acc == mx) & (acc >= thr))
+        got = window_maxima(acc, thr, rd, ra)
+        assert np.array_equal(got[0], di) and np.array_equal(got[1], ai)
+        order = np.argsort(-acc[di, ai], kind="stable")
+        di, ai = di[order], ai[order]
+        kept = []
+        for j in range(len(di)):
+            if len(kept) == 25:
+                break
+            if not any(abs(di[k] - di[j]) <= rd and abs(ai[k] - ai[j]) <= ra for k in kept):
+                kept.append(j)
+        assert suppress_near(di, ai, rd, ra, 25).tolist() == kept

@@ -9,6 +9,7 @@ from scipy import ndimage
 from skimage.transform import hough_line
 
 from rangesim.features._edge_points import edge_points
+from rangesim.features._line_kernels import suppress_near, window_maxima
 
 
 @dataclass(frozen=True)
@@ -120,8 +121,8 @@ def lines(
     for a, d in zip(pa, pd):
         n = np.array([np.cos(a), np.sin(a)])  # skimage: d = x cos a + y sin a
         off = pixels @ n - d  # the band about the peak, of the pixels it was voted by; fits to xy
-        aligned = np.abs(np.cos(theta - a)) >= cos_tol
-        idx = np.nonzero((np.abs(off) <= band_px) & aligned & ~used)[0]
+        idx = np.nonzero((np.abs(off) <= band_px) & ~used)[0]
+        idx = idx[np.abs(np.cos(theta[idx] - a)) >= cos_tol]  # aligned with the line
         if len(idx) < min_length / 2:
             continue
         t = xy[idx] @ np.array([-n[1], n[0]])
@@ -165,19 +166,10 @@ def _line_peaks(acc: np.ndarray, angles: np.ndarray, dists: np.ndarray, min_dist
     Takes the place of ``skimage.transform.hough_line_peaks``, which labels every region above
     the threshold (most of the run time on an edge map of a part).
     """
-    mx = ndimage.maximum_filter(acc, size=(2 * min_distance + 1, 2 * min_angle + 1), mode="constant")
-    di, ai = np.nonzero((acc == mx) & (acc >= threshold))
+    di, ai = window_maxima(acc, float(threshold), int(min_distance), int(min_angle))
     order = np.argsort(-acc[di, ai], kind="stable")
     di, ai = di[order], ai[order]
-    kept: list[int] = []
-    for j in range(len(di)):
-        if len(kept) == num_peaks:
-            break
-        k = np.asarray(kept, int)
-        if len(k) and np.any((np.abs(di[k] - di[j]) <= min_distance) & (np.abs(ai[k] - ai[j]) <= min_angle)):
-            continue
-        kept.append(j)
-    k = np.asarray(kept, int)
+    k = suppress_near(di, ai, int(min_distance), int(min_angle), int(num_peaks))
     return angles[ai[k]], dists[di[k]]
 
 
