@@ -17,7 +17,6 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from rangesim.core.conics import (
-    conic_monomials,
     ellipse_params,
     fit_conics_moments,
     real_ellipses,
@@ -471,13 +470,15 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     n = np.bincount(group, minlength=len(g))
     centre = np.column_stack([np.bincount(group, weights=xy[idx, k], minlength=len(g)) / n for k in (0, 1)])
     scale = np.maximum(np.maximum.reduceat(np.abs(xy[idx] - centre[group]).max(1), np.cumsum(n) - n), 1.0)
-    q = (xy[idx] - centre[group]) / scale[group, None]
-    mom = np.add.reduceat(conic_monomials(q.astype(np.float32)), np.cumsum(n) - n, axis=0).astype(np.float64)
+    frame = np.column_stack([centre, scale])
+    mom = np.empty((len(n), 15), np.float32)
+    piece_moments(xy, idx, group, frame, np.cumsum(n) - n, mom)  # float32, as the arc pieces'
+    mom = mom.astype(np.float64)
     big = np.nonzero(n >= min_points)[0]
     if len(big) == 0:
         return none
     pieces = _Pieces(idx, n)
-    conics, _, good = _fit_pieces(xy, pieces, mom[big], np.column_stack([centre, scale])[big], [big],
+    conics, _, good = _fit_pieces(xy, pieces, mom[big], frame[big], [big],
                                   max_rms=max_rms, min_inliers=min_inliers, axes_range=axes_range,
                                   min_ratio=min_ratio, min_arc_deg=min_arc_deg)
     return conics[good], n[big][good]

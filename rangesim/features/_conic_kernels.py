@@ -106,43 +106,45 @@ def _pairwise(a, lo, n, col):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def _monomials(out, r, x, y):  # pragma: no cover - compiled
+    """Row ``r`` of :func:`rangesim.core.conics.conic_monomials` at (x, y), in their type:
+    x^i y^j, i + j <= 4, in the order of ``MOMENT_POWERS``, the powers multiplied up as
+    NumPy's ``x * x * x`` does."""
+    x2, y2 = x * x, y * y
+    x3, y3 = x2 * x, y2 * y
+    x4, y4 = x3 * x, y3 * y
+    out[r, 0], out[r, 1], out[r, 2], out[r, 3], out[r, 4] = 1.0, y, y2, y3, y4
+    out[r, 5], out[r, 6], out[r, 7], out[r, 8] = x, x * y, x * y2, x * y3
+    out[r, 9], out[r, 10], out[r, 11] = x2, x2 * y, x2 * y2
+    out[r, 12], out[r, 13], out[r, 14] = x3, x3 * y, x4
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _reduceat(w, starts, out):  # pragma: no cover - compiled
+    """``out = np.add.reduceat(w, starts, axis=0)`` for ``starts`` in order, to the bits: a
+    range's first row plus NumPy's pairwise sum of the others (:func:`_pairwise`); an empty
+    range (``starts[g] == starts[g + 1]``) gives the row at ``starts[g]``."""
+    G, R = len(starts), len(w)
+    for g in range(G):
+        a = starts[g]
+        e = starts[g + 1] if g + 1 < G else R
+        for k in range(w.shape[1]):
+            out[g, k] = w[a, k] + _pairwise(w, a + 1, e - a - 1, k) if e - a > 1 else w[a, k]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def piece_moments(xy, pt, pc, frame, starts, out):  # pragma: no cover - compiled
     """Moments of pieces of points: ``np.add.reduceat`` of their float32 monomials, to the bits.
 
     Rows ``r`` (sorted by piece ``pc[r]``): point ``pt[r]`` in the frame of its piece
     (``q = (xy - frame[:2]) / frame[2]``, float64, then float32); each run of rows starting
-    at ``starts[g]`` sums its :func:`rangesim.core.conics.conic_monomials` (the powers
-    x^i y^j, i + j <= 4, in the order of ``MOMENT_POWERS``) into ``out[g]``, as reduceat
-    does: the run's first row plus NumPy's pairwise sum of the others (:func:`_pairwise`).
+    at ``starts[g]`` sums its :func:`rangesim.core.conics.conic_monomials` into ``out[g]``.
     """
-    G, R = len(starts), len(pt)
-    mono = np.empty((R, 15), np.float32)
-    xp = np.empty(5, np.float32)
-    yp = np.empty(5, np.float32)
-    for r in range(R):
+    mono = np.empty((len(pt), 15), np.float32)
+    for r in range(len(pt)):
         f = frame[pc[r]]
-        x = np.float32((xy[pt[r], 0] - f[0]) / f[2])
-        y = np.float32((xy[pt[r], 1] - f[1]) / f[2])
-        xp[0] = 1.0
-        xp[1] = x
-        xp[2] = x * x
-        xp[3] = xp[2] * x
-        xp[4] = xp[3] * x
-        yp[0] = 1.0
-        yp[1] = y
-        yp[2] = y * y
-        yp[3] = yp[2] * y
-        yp[4] = yp[3] * y
-        k = 0
-        for i in range(5):
-            for j in range(5 - i):
-                mono[r, k] = xp[i] * yp[j]
-                k += 1
-    for g in range(G):
-        lo = starts[g]
-        hi = starts[g + 1] if g + 1 < G else R
-        for k in range(15):
-            out[g, k] = mono[lo, k] + _pairwise(mono, lo + 1, hi - lo - 1, k) if hi - lo > 1 else mono[lo, k]
+        _monomials(mono, r, np.float32((xy[pt[r], 0] - f[0]) / f[2]), np.float32((xy[pt[r], 1] - f[1]) / f[2]))
+    _reduceat(mono, starts, out)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -209,22 +211,15 @@ def sampson_pairs(conics, hyp, xy, pt):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _reduceat_padded(w, starts, n, out):  # pragma: no cover - compiled
-    """``out[g] = np.add.reduceat(w + one zero row, starts)[g]``, 0 where ``n[g] == 0``: a
-    group's first row plus the pairwise sum of its others; the last group's range runs to
-    the zero row (as it does in :func:`rangesim.core.conics._group_sums`)."""
-    G, R = len(starts), len(w)
-    K = w.shape[1]
-    padded = np.zeros((R + 1, K))
-    padded[:R] = w
-    for g in range(G):
+def _group_sums(w, starts, n, out):  # pragma: no cover - compiled
+    """:func:`rangesim.core.conics._group_sums` of sorted groups: ``np.add.reduceat`` of ``w``
+    with one zero row after it (the last group's range runs to it), 0 where ``n[g] == 0``."""
+    padded = np.zeros((len(w) + 1, w.shape[1]))
+    padded[:len(w)] = w
+    _reduceat(padded, starts, out)
+    for g in range(len(starts)):
         if n[g] == 0:
             out[g] = 0.0
-            continue
-        a = starts[g]
-        e = starts[g + 1] if g + 1 < G else R + 1
-        for k in range(K):
-            out[g, k] = padded[a, k] + _pairwise(padded, a + 1, e - a - 1, k) if e - a > 1 else padded[a, k]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -254,7 +249,7 @@ def grouped_frames(xy, pt, keep, group, G):  # pragma: no cover - compiled
         n[gr[j]] += 1
     starts = np.searchsorted(gr, np.arange(G))
     m = np.empty((G, 2))
-    _reduceat_padded(p, starts, n, m)
+    _group_sums(p, starts, n, m)
     for g in range(G):
         c = max(n[g], 1)
         m[g, 0] /= c
@@ -270,15 +265,7 @@ def grouped_frames(xy, pt, keep, group, G):  # pragma: no cover - compiled
         s[g] = max(s[g], 1e-9) if n[g] > 0 else 1.0
     mono = np.empty((R, 15))
     for j in range(R):
-        x = q[j, 0] / s[gr[j]]
-        y = q[j, 1] / s[gr[j]]
-        xp = (1.0, x, x * x, x * x * x, x * x * x * x)
-        yp = (1.0, y, y * y, y * y * y, y * y * y * y)
-        k = 0
-        for i in range(5):
-            for jj in range(5 - i):
-                mono[j, k] = xp[i] * yp[jj]
-                k += 1
+        _monomials(mono, j, q[j, 0] / s[gr[j]], q[j, 1] / s[gr[j]])
     mom = np.empty((G, 15))
-    _reduceat_padded(mono, starts, n, mom)
+    _group_sums(mono, starts, n, mom)
     return m, s, mom
