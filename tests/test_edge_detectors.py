@@ -16,7 +16,7 @@ import rangesim as rs
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.geometry import look_at
 from rangesim.core.rangescan import RangeScan
-from rangesim.edges import EdgeMap, OrganizedEdgeMap, curvature, gradient, line_fit, normal, pcl_organized
+from rangesim.edges import RIM, EdgeMap, OrganizedEdgeMap, curvature, gradient, line_fit, normal, pcl_organized
 from rangesim.edges._scan_access import pixel_geometry
 from tests.conftest import box, make_sensor, plane, top_down_pose
 
@@ -404,7 +404,8 @@ def test_line_fit_many_random_points_and_nan_rows():
 
 def test_line_fit_on_a_scan_labels_creases_by_their_neighbourhood(box_scan):
     plain = line_fit(box_scan, label_creases=False)
-    assert set(np.unique(plain.labels[plain.mask])) <= {EdgeLabel.NONE, EdgeLabel.JUMP}
+    # jumps, and rims (the box's edge against its own laser shadow on the floor)
+    assert set(np.unique(plain.labels[plain.mask])) <= {EdgeLabel.NONE, EdgeLabel.JUMP, RIM}
     assert (plain.labels[plain.mask] == EdgeLabel.NONE).sum() >= 90
     labelled = line_fit(box_scan)
     assert np.array_equal(plain.mask, labelled.mask)

@@ -22,6 +22,7 @@ from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_v
 from rangesim.edges._noise import depth_quantum, predicted_noise
 from rangesim.edges._pair_kernels import pair_tests
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
+from rangesim.edges._self_shadow import CasterTest, shadow_gaps
 
 __all__ = [
     "JUMP_THRESHOLD", "QUANTUM_STEPS", "SIGMA_STEPS", "Discontinuities", "discontinuities", "empty_pixels",
@@ -105,7 +106,8 @@ def discontinuities(
     levels on top of that: a Kinect's quantised table (steps of 1.5-3 footprints at 1-2 m)
     is then no band of jump dashes, while real depth edges (tens of quanta) stay. Folds
     are on (a steep continuous surface such as a lit hole wall is not a band of jumps),
-    rims come from :func:`empty_pixels`.
+    rims come from :func:`empty_pixels` and, on synthetic scans, from laser-shadow gaps that
+    no caster explains (:func:`~rangesim.edges._self_shadow.shadow_gaps`).
     """
     geo = pixel_geometry(scan, z)
     thr = np.float32(jump_threshold) * geo.footprint
@@ -115,9 +117,16 @@ def discontinuities(
     sigma = predicted_noise(scan)
     if sigma is not None:
         thr = thr + np.float32(SIGMA_STEPS * np.sqrt(2.0)) * sigma
-    empty, certain = empty_pixels(scan, np.isfinite(z))
+    valid = np.isfinite(z)
+    empty, certain = empty_pixels(scan, valid)
+    # a caster must stand clear of a path by the noise of a pixel pair and a footprint
+    tol = geo.footprint if sigma is None else geo.footprint + np.float32(2.0 * np.sqrt(2.0)) * sigma
+    if quantum is not None:
+        tol = tol + quantum
+    shadows = shadow_gaps(scan, valid, tol) if geo.perspective else None
+    unlit, caster_test = shadows if shadows is not None else (None, None)
     disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
-                                empty=empty, empty_certain=certain)
+                                empty=empty, empty_certain=certain, unlit=unlit, caster_test=caster_test)
     disc.noise = sigma
     return disc, geo
 
@@ -210,6 +219,8 @@ def find_discontinuities(
     folds: bool = False,
     empty: np.ndarray | None = None,
     empty_certain: bool = False,
+    unlit: np.ndarray | None = None,
+    caster_test: "CasterTest | None" = None,
 ) -> Discontinuities:
     """Jump edges: neighbours whose depths differ by more than a threshold; and rims.
 
@@ -297,6 +308,13 @@ def find_discontinuities(
         search extrapolates the pixel's surface from one neighbour, so on noisy scans a
         long gap can make it look occluded). Otherwise (recorded data) an occluded pixel
         is the far end of a shadow and no rim.
+    unlit, caster_test : optional
+        Laser-shadow pixels (H, W) bool and a caster test (:func:`~._self_shadow.shadow_gaps`).
+        A pixel whose search finds no farther surface beyond a gap is a rim when the gap's
+        first shadow pixel, at the depth the pixel's surface continued predicts for it,
+        would have no caster between it and the light: that gap cannot be the surface
+        continued (:mod:`~._self_shadow`; a through-hole whose inside the laser cannot
+        reach). Without them such a pixel is no edge, as described above.
 
     Returns
     -------
@@ -366,8 +384,8 @@ def find_discontinuities(
         # (within k thresholds; a longer base divides the noise of the slope by k, which
         # the search multiplies by the gap's width)
         slope = np.zeros(si.size)        # per step, of 1 / z (perspective) or z
+        todo = np.ones(si.size, bool)    # no pixel behind on the same surface: slope unknown
         if extrapolate:
-            todo = np.ones(si.size, bool)
             for k in (3, 2, 1):
                 bi = si - np.rint(k * sy).astype(np.intp)
                 bj = sj - np.rint(k * sx).astype(np.intp)
@@ -383,6 +401,8 @@ def find_discontinuities(
         found_z = np.full(si.size, np.nan)
         found_t = np.full(si.size, np.nan)
         found_s = np.zeros(si.size)
+        shade = np.asarray(unlit, bool) if unlit is not None and caster_test is not None else None
+        unlit_s = np.zeros(si.size, np.intp)
         active = np.arange(si.size)
         for s in range(1, int(max_search) + 1):
             ri = si[active] + np.rint(sy[active] * s).astype(np.intp)
@@ -394,6 +414,10 @@ def find_discontinuities(
             found_z[active[hit]] = zq[hit]
             found_t[active[hit]] = thr[ri[hit], rj[hit]]
             found_s[active[hit]] = s
+            if shade is not None:
+                # the first laser-shadow pixel of each gap (a dim pixel may come before it)
+                first = ~hit & shade[ri, rj] & (unlit_s[active] == 0)
+                unlit_s[active[first]] = s
             active = active[~hit]
             if active.size == 0:
                 break
@@ -413,6 +437,41 @@ def find_discontinuities(
         direction[si[jump], sj[jump]] = np.mod(np.arctan2(sy[jump], sx[jump]), np.pi)
         # either side of a jump across a gap: the contour lies towards the gap
         across.append((si[jump], sj[jump], sx[jump], sy[jump]))
+        if shade is not None:
+            # a shadow gap that is not the surface continued: no caster could shadow it.
+            # Asked of the occluded too: a nearer surface found across the gap that does not
+            # stand in front of the path to the light did not cast the shadow (and a noisy
+            # slope extrapolated across a wide gap often calls the same surface nearer).
+            # Only of surfaces known behind the pixel (a corner's pixel has none to continue)
+            # that step less than half the jump threshold a pixel: a steep face (a lit hole wall at grazing incidence) continued across a gap is a guess,
+            # and its caster (the hole's far wall, which faces away from the laser) is
+            # itself in shadow, unmeasured, so the test cannot see it.
+            su = unlit_s.astype(np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                if perspective:
+                    step1 = 1.0 / np.fmax(1.0 / z0 + slope, 0.5 / z0)
+                    at_gap = 1.0 / np.fmax(1.0 / z0 + su * slope, 0.5 / z0)
+                else:
+                    step1, at_gap = z0 + slope, z0 + su * slope
+            a = np.flatnonzero(~occl & ~todo & (unlit_s > 0) & (np.abs(step1 - z0) <= 0.5 * t0))
+            gi = si[a] + np.rint(sy[a] * unlit_s[a]).astype(np.intp)
+            gj = sj[a] + np.rint(sx[a] * unlit_s[a]).astype(np.intp)
+            lit = caster_test(z, gi, gj, at_gap[a])
+            # and the next gap pixel when it is shadow too: a path from a shadow's first
+            # pixel can graze its caster's corner by less than the tolerance
+            s2 = unlit_s[a] + 1
+            hi = si[a] + np.rint(sy[a] * s2).astype(np.intp)
+            hj = sj[a] + np.rint(sx[a] * s2).astype(np.intp)
+            deeper = ((s2 < found_s[a]) | ~ok[a]) & (hi >= 0) & (hi < h) & (hj >= 0) & (hj < w)
+            deeper[deeper] = shade[hi[deeper], hj[deeper]]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z2 = 1.0 / np.fmax(1.0 / z0[a] + s2 * slope[a], 0.5 / z0[a]) if perspective else z0[a] + s2 * slope[a]
+            d = np.flatnonzero(lit & deeper)
+            lit[d] = caster_test(z, hi[d], hj[d], z2[d])
+            a = a[lit]
+            rim[si[a], sj[a]] = True
+            direction[si[a], sj[a]] = np.mod(np.arctan2(sy[a], sx[a]), np.pi)
+            across.append((si[a], sj[a], sx[a], sy[a]))
     if ii.size and empty is not None:
         # the measured surface ends against nothing: see the docstring
         e_i, e_j = ii[near_empty], jj[near_empty]

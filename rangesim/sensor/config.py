@@ -15,6 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rangesim.core.errors import RangesimError
+from rangesim.core.light import sheet_tilt_rad
 from rangesim.core.tomlfile import check_keys, read_toml
 
 #: the repository's preset folder (the package is installed in editable mode from the repo)
@@ -147,10 +148,8 @@ class Sensor:
     @property
     def tilt_rad(self) -> float:
         """Translating sweep: angle of the sheet from the optical axis, towards the camera (rad)."""
-        tilt = self.params["laser"]["tilt_deg"]
-        if tilt is None:
-            return math.atan2(self.params["laser"]["baseline"], self.reference_distance)
-        return math.radians(tilt)
+        laser = self.params["laser"]
+        return sheet_tilt_rad(laser["tilt_deg"], laser["baseline"], self.reference_distance)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict with the TOML's keys (what ``load_sensor`` accepts back)."""

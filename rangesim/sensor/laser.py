@@ -20,6 +20,7 @@ import math
 import drjit as dr
 
 from rangesim.core.backend import mitsuba
+from rangesim.core.light import source_x
 
 
 def sheet_through(points, sweep: str, baseline: float, tilt_rad: float):
@@ -44,16 +45,13 @@ def sheet_through(points, sweep: str, baseline: float, tilt_rad: float):
     """
     mi = mitsuba()
     zero = dr.zeros(mi.Float, dr.width(points))
+    source = mi.Vector3f(source_x(points.x, points.z, sweep, baseline, tilt_rad), zero, zero)
     if sweep == "rotating":
-        source = mi.Vector3f(baseline + zero, zero, zero)
         # plane through L containing P - L and the y axis: normal = (P - L) x y
         normal = dr.normalize(mi.Vector3f(-points.z, zero, points.x - baseline))
-    elif sweep == "translating":
-        # sheet direction (-sin t, 0, cos t); normal (cos t, 0, sin t)
-        source = mi.Vector3f(points.x + math.tan(tilt_rad) * points.z, zero, zero)
-        normal = mi.Vector3f(math.cos(tilt_rad) + zero, zero, math.sin(tilt_rad) + zero)
     else:
-        raise ValueError(f"unknown sweep {sweep!r}")
+        # sheet direction (-sin t, 0, cos t); normal (cos t, 0, sin t)
+        normal = mi.Vector3f(math.cos(tilt_rad) + zero, zero, math.sin(tilt_rad) + zero)
     return source, normal
 
 
