@@ -13,12 +13,17 @@ Documented F1 (measured; the floors asserted below are these minus a small margi
 =============  ==========  ======================  ============  ======================
 detector       noise-free  noise-free, stripe 0    preset noise  flagged at preset noise
 =============  ==========  ======================  ============  ======================
-gradient       0.893       0.913                   0.839         1.2 % of valid pixels
-normal         0.897       0.923                   0.792         1.1 %
-line_fit       0.840       0.880                   0.633         0.7 %
-curvature      0.871       0.903                   0.798         1.1 %
+gradient       0.909       0.925                   0.856         1.3 % of valid pixels
+normal         0.913       0.934                   0.813         1.2 %
+line_fit       0.854       0.892                   0.670         0.9 %
+curvature      0.888       0.912                   0.822         1.2 %
 pcl_organized  0.747       0.733                   0.654         1.7 %
 =============  ==========  ======================  ============  ======================
+
+(Since 2026-12-02 the holes' rims over their own laser shadow are edges: a shadow gap that no
+caster explains is not the surface continued, ``rangesim.edges._self_shadow``; before it
+gradient / normal / line_fit / curvature measured 0.893 / 0.897 / 0.840 / 0.871 noise-free
+and 0.839 / 0.792 / 0.633 / 0.798 with the preset noise.)
 
 Truth: mesh creases rasterised 8-connected (1 px on diagonals), kept only where a ray
 from the camera reaches the edge itself and the scan samples both faces next to it. The
@@ -62,9 +67,9 @@ SCENE = Path(__file__).resolve().parents[1] / "scenes" / "green_piece.toml"
 QUIET = {"noise.sigma_px": 0.0, "noise.speckle_contrast": 0.0, "noise.quantization_px": 0.0}
 
 #: F1 floors (documented values above minus ~0.03)
-CLEAN_FLOOR = {"gradient": 0.86, "normal": 0.87, "line_fit": 0.81, "curvature": 0.84,
+CLEAN_FLOOR = {"gradient": 0.88, "normal": 0.88, "line_fit": 0.82, "curvature": 0.86,
                "pcl_organized": 0.72}
-NOISY_FLOOR = {"gradient": 0.81, "normal": 0.77, "curvature": 0.77}
+NOISY_FLOOR = {"gradient": 0.83, "normal": 0.78, "curvature": 0.79}
 #: the flat machined target (shared data), noise-free: measured gradient 0.72, line_fit 0.77,
 #: normal 0.70, curvature 0.73, pcl_organized 0.86 (line_fit was 0.79-0.82 before its crease
 #: pieces under 5 px were dropped: the chamfers show in short pieces; curvature 0.68 with
