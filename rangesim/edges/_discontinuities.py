@@ -50,6 +50,11 @@ QUANTUM_STEPS = 3.0
 #: loses 2 of 69 hole rims on cyberware_3030 with its noise, 1 loses none
 SIGMA_STEPS = 1.0
 
+#: a nearer surface found across a laser-shadow gap by more than this many jump thresholds
+#: (of the pixel's surface continued and of its own depth) is taken for the shadow's caster,
+#: and the border no rim (:func:`find_discontinuities`, ``caster_test``)
+CASTER_STEPS = 3.0
+
 #: RangeScan.status code of a pixel whose camera ray hit no surface
 #: (:class:`rangesim.core.constants.Status` ``MISS``; the value, so that this analysis
 #: module needs nothing from the sensor layer)
@@ -439,13 +444,16 @@ def find_discontinuities(
         across.append((si[jump], sj[jump], sx[jump], sy[jump]))
         if shade is not None:
             # a shadow gap that is not the surface continued: no caster could shadow it.
-            # Asked of the occluded too: a nearer surface found across the gap that does not
-            # stand in front of the path to the light did not cast the shadow (and a noisy
-            # slope extrapolated across a wide gap often calls the same surface nearer).
+            # Asked of the occluded too, unless the nearer surface found across the gap
+            # stands clearly in front (by CASTER_STEPS thresholds, of the depth continued and
+            # of the pixel's own): a noisy slope extrapolated across a wide gap often calls
+            # the same surface nearer, while a clearly nearer one is the likely caster even
+            # where the test cannot see it (a boss whose shadow falls through its own unlit
+            # wall, which the camera sees and the scanner does not measure).
             # Only of surfaces known behind the pixel (a corner's pixel has none to continue)
-            # that step less than half the jump threshold a pixel: a steep face (a lit hole wall at grazing incidence) continued across a gap is a guess,
-            # and its caster (the hole's far wall, which faces away from the laser) is
-            # itself in shadow, unmeasured, so the test cannot see it.
+            # that step less than half the jump threshold a pixel: a steep face (a lit hole
+            # wall at grazing incidence) continued across a gap is a guess, and its caster
+            # (the hole's far wall, which faces away from the laser) is itself in shadow.
             su = unlit_s.astype(np.float64)
             with np.errstate(divide="ignore", invalid="ignore"):
                 if perspective:
@@ -453,7 +461,8 @@ def find_discontinuities(
                     at_gap = 1.0 / np.fmax(1.0 / z0 + su * slope, 0.5 / z0)
                 else:
                     step1, at_gap = z0 + slope, z0 + su * slope
-            a = np.flatnonzero(~occl & ~todo & (unlit_s > 0) & (np.abs(step1 - z0) <= 0.5 * t0))
+                caster = ok & (pred - found_z > CASTER_STEPS * found_t) & (z0 - found_z > CASTER_STEPS * t0)
+            a = np.flatnonzero(~occl & ~caster & ~todo & (unlit_s > 0) & (np.abs(step1 - z0) <= 0.5 * t0))
             gi = si[a] + np.rint(sy[a] * unlit_s[a]).astype(np.intp)
             gj = sj[a] + np.rint(sx[a] * unlit_s[a]).astype(np.intp)
             lit = caster_test(z, gi, gj, at_gap[a])
