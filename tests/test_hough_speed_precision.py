@@ -172,3 +172,33 @@ def test_line_peak_kernels_match_the_array_rule():
             if not any(abs(di[k] - di[j]) <= rd and abs(ai[k] - ai[j]) <= ra for k in kept):
                 kept.append(j)
         assert suppress_near(di, ai, rd, ra, 25).tolist() == kept
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_growth_of_few_conics_is_the_batched_one(seed):
+    # the circle finder's ellipse-end check grows its few circles with one compiled call
+    # (grow_few); it must give the batched grow's conics (up to sign) and inliers
+    from rangesim.features._arc_ellipses import DIRECTION_TOL_DEG, GROW_MARGIN_PX, grow
+    from rangesim.features._conic_kernels import grow_few
+
+    rng = np.random.default_rng(seed)
+    a, b, c = 30.0, 18.0, np.array([60.0, 55.0])
+    t = rng.uniform(0, 2 * np.pi, 400)
+    xy = np.column_stack([c[0] + a * np.cos(t), c[1] + b * np.sin(t)]) + rng.normal(0, 0.2, (400, 2))
+    theta = np.arctan2(a * np.sin(t), b * np.cos(t))  # the ellipse's normal direction
+    xy = np.vstack([xy, rng.uniform(0, 120, (300, 2))])
+    theta = np.concatenate([theta, rng.uniform(-np.pi, np.pi, 300)])
+    # seeds: the osculating circle at the major axis's end, one at the minor's, one off anywhere
+    centres = np.array([[c[0] + a - b * b / a, c[1]], [c[0], c[1] - b + a * a / b], [20.0, 100.0]])
+    radii = np.array([b * b / a, a * a / b, 6.0])
+    one = np.ones(3)
+    conics = np.column_stack([one, 0 * one, one, -2 * centres[:, 0], -2 * centres[:, 1], (centres ** 2).sum(1) - radii ** 2])
+    conics /= np.linalg.norm(conics, axis=1, keepdims=True)
+    bands = (3.0, 1.5, 1.0)
+    g0, ok0, h0, p0 = grow(conics, xy, theta, bands=bands)
+    g1, ok1, h1, p1 = grow_few(conics, xy, np.cos(theta), np.sin(theta), np.array(bands),
+                               float(np.cos(np.deg2rad(DIRECTION_TOL_DEG))), GROW_MARGIN_PX)
+    assert np.array_equal(ok0, ok1) and ok0[0]
+    sign = np.sign(np.sum(g0 * g1, axis=1))
+    assert np.allclose(g0, sign[:, None] * g1, atol=1e-9)
+    assert set(zip(h0.tolist(), p0.tolist())) == set(zip(h1.tolist(), p1.tolist()))

@@ -34,6 +34,9 @@ ADJACENT_DEG = 30.0
 MAX_PERIMETER_PX = 20000.0
 #: a grown point's edge normal must agree with the ellipse's normal within this, degrees
 DIRECTION_TOL_DEG = 25.0
+#: :func:`grow` looks for its points within its first band plus this, px (a refit moves an
+#: ellipse by less)
+GROW_MARGIN_PX = 3.0
 
 
 def smooth_curves(xy: np.ndarray, theta: np.ndarray, link_deg: float = LINK_DEG, gap_px: int = 2) -> np.ndarray:
@@ -340,7 +343,7 @@ def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2
     # candidates, once: the points within ``bands[0] + margin`` px of the first conic (a
     # refit moves an ellipse by less), found through its bounding box (points sorted by x)
     c, axes, _, ok = ellipse_params(conics)
-    margin = 3.0
+    margin = GROW_MARGIN_PX
     reach = axes[:, 0] + bands[0] + margin + 1
     hyp, pt = box_candidates(np.where(ok[:, None], c, np.inf), np.where(ok, reach, 0.0), xy)
     near = sampson_pairs(conics, hyp, xy, pt) <= bands[0] + margin

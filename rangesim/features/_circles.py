@@ -9,11 +9,13 @@ import numpy as np
 
 from rangesim.core.conics import ellipse_params
 from rangesim.core.memory import check_memory
+from rangesim.features._arc_ellipses import DIRECTION_TOL_DEG as GROW_DIRECTION_TOL_DEG
+from rangesim.features._arc_ellipses import GROW_MARGIN_PX
 from rangesim.features._arc_ellipses import coverage as ellipse_coverage
-from rangesim.features._arc_ellipses import grow
 from rangesim.features._circle_kernels import centres_and_radii, refine
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
-from rangesim.features._edge_points import angular_coverage, edge_points, one_edge, point_labels
+from rangesim.features._conic_kernels import grow_few
+from rangesim.features._edge_points import angular_coverage, angular_fraction, edge_points, one_edge, point_labels
 
 DIRECTION_TOL_DEG = 15.0  # an inlier's edge normal is radial within this, degrees
 REL_CELL = 1 / 4  # accumulator cell over the band's smallest radius (radius_bands)
@@ -254,7 +256,7 @@ def circles(
         free = pts[~used[pts]]
         if len(free) < len(by_h[j]):
             d = xy[free] - c[j]
-            if angular_coverage(np.arctan2(d[:, 1], d[:, 0]), round(2 * np.pi * r[j]))[0] < min_support:
+            if angular_fraction(np.arctan2(d[:, 1], d[:, 0]), round(2 * np.pi * r[j])) < min_support:
                 continue
         used[pts] = True
         found.append(Circle((float(c[j, 0]), float(c[j, 1])), float(r[j]), int(votes[j]), float(cov[j]),
@@ -285,13 +287,20 @@ def _ellipse_pieces(found: list[Circle], xy: np.ndarray, theta: np.ndarray,
     one = np.ones(len(r))
     conics = np.column_stack([one, 0 * one, one, -2 * c[:, 0], -2 * c[:, 1], (c ** 2).sum(1) - r ** 2])
     conics /= np.linalg.norm(conics, axis=1, keepdims=True)
-    grown, ok, hyp, pt = grow(conics, xy, theta, bands=(3.0, 1.5, 1.0))
-    cov, _, _ = ellipse_coverage(grown, xy, hyp, pt)
+    # as _arc_ellipses.grow (bands 3, 1.5, 1 px), compiled whole for these few conics
+    grown, ok, hyp, pt = grow_few(conics, xy, np.cos(theta), np.sin(theta), np.array([3.0, 1.5, 1.0]),
+                                  float(np.cos(np.deg2rad(GROW_DIRECTION_TOL_DEG))), GROW_MARGIN_PX)
     _, axes, _, real = ellipse_params(grown)
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = axes[:, 1] / axes[:, 0]
-    support = np.array([f.support for f in found])
-    out[ask] = ok & real & (ratio < max_ratio) & (cov > support)
+    thin = ok & real & (ratio < max_ratio)
+    if thin.any():  # the coverage only of the conics that grew thin (most stay circles)
+        keep = thin[hyp]
+        remap = np.cumsum(thin) - 1
+        cov, _, _ = ellipse_coverage(grown[thin], xy, remap[hyp[keep]], pt[keep])
+        support = np.array([f.support for f in found])[thin]
+        thin[thin] = cov > support
+    out[ask] = thin
     return out
 
 

@@ -107,10 +107,8 @@ def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, flo
         Start and end angles (radians, counter-clockwise in image x-y, i.e. from +x towards
         +y) of the longest run of occupied bins.
     """
-    n_bins = max(int(n_bins), 8)
-    idx = np.floor((np.mod(angles, 2 * np.pi)) / (2 * np.pi) * n_bins).astype(int) % n_bins
-    occ = np.zeros(n_bins, bool)
-    occ[idx] = True
+    occ = _occupied_bins(angles, n_bins)
+    n_bins = len(occ)
     cov = float(occ.mean())
     if occ.all():
         return 1.0, 0.0, 2 * np.pi
@@ -127,6 +125,20 @@ def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, flo
     s = ((starts[k] + shift) % n_bins) * step
     e = s + (ends[k] - starts[k]) * step
     return cov, float(s), float(e)
+
+
+def angular_fraction(angles: np.ndarray, n_bins: int) -> float:
+    """The coverage of :func:`angular_coverage` alone (fraction of bins holding a point)."""
+    return float(_occupied_bins(angles, n_bins).mean())
+
+
+def _occupied_bins(angles: np.ndarray, n_bins: int) -> np.ndarray:
+    """(max(n_bins, 8),) bool: which of the equal bins around the circle hold an angle."""
+    n_bins = max(int(n_bins), 8)
+    idx = np.floor((np.mod(angles, 2 * np.pi)) / (2 * np.pi) * n_bins).astype(int) % n_bins
+    occ = np.zeros(n_bins, bool)
+    occ[idx] = True
+    return occ
 
 
 _R = 2  # half-width of the mask_normals window, px
