@@ -4,6 +4,7 @@ one curve are no circle, and a rim with another edge a pixel away keeps its supp
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import rangesim.features as F
 from rangesim.core.constants import EdgeLabel
@@ -54,3 +55,34 @@ def test_rim_with_a_concave_edge_beside_it_is_found():
     assert np.hypot(*np.subtract(found[0].center, c)) <= 0.5
     ellipses = F.ellipses(em, remove_explained=False)
     assert any(np.hypot(*np.subtract(e.center, c)) <= 0.5 and abs(np.mean(e.axes) - r) <= 0.5 for e in ellipses)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_claim_loop_is_one_edge_and_the_free_coverage(seed):
+    # the circles' claim loop (compiled) against its definition in NumPy: one_edge, then the
+    # free points' angular coverage when any point was dropped or taken
+    from rangesim.features._circle_kernels import claim
+    from rangesim.features._edge_points import angular_coverage
+
+    rng = np.random.default_rng(seed)
+    n, K = 600, 12
+    xy = rng.uniform(0, 100, (n, 2))
+    labels = rng.choice(np.array([0, 1, 2, 3, 4], np.uint8), n, p=[0.1, 0.3, 0.2, 0.3, 0.1])
+    c, r = rng.uniform(30, 70, (K, 2)), rng.uniform(5, 25, K)
+    members = [np.sort(rng.choice(n, rng.integers(20, 120), replace=False)) for _ in range(K)]
+    order = rng.permutation(K)
+    used = np.zeros(n, bool)
+    expected = []
+    for j in order:
+        pts = one_edge(labels, members[j])
+        free = pts[~used[pts]]
+        if len(free) < len(members[j]):
+            d = xy[free] - c[j]
+            if angular_coverage(np.arctan2(d[:, 1], d[:, 0]), round(2 * np.pi * r[j]))[0] < 0.3:
+                continue
+        used[pts] = True
+        expected.append(j)
+    starts = np.concatenate([[0], np.cumsum([len(m) for m in members])])
+    got = claim(order.astype(np.int64), starts, np.concatenate(members).astype(np.int64), labels, xy[:, 0].copy(),
+                xy[:, 1].copy(), c[:, 0].copy(), c[:, 1].copy(), r, 0.3, int(EdgeLabel.CONCAVE), int(EdgeLabel.NONE))
+    assert got.tolist() == expected and 0 < len(expected) < K

@@ -373,3 +373,67 @@ def _thin_fit(px, py, ct, st, index, H, W, cx, cy, r, cos_tol, ring, sel,
     if kept < 0.25 * 2 * np.pi * r:
         return cx, cy, r
     return _gauss_newton(px, py, ring, kept, cx, cy, r, 3, 3.0)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, none):  # pragma: no cover - compiled
+    """The circles' claim loop of :func:`rangesim.features.circles`: each edge point supports
+    one circle, strongest first.
+
+    Candidate ``j`` (in ``order``) has the points ``points[starts[j]:starts[j + 1]]``. It keeps
+    those of its own edge (:func:`rangesim.features._edge_points.one_edge`: the majority of
+    concave against other labelled points, unlabelled ones kept; ``labels`` empty: all), and
+    is kept when all of them are free or the free ones still cover ``min_support`` of
+    ``max(round(2 pi r), 8)`` equal angular bins; a kept candidate takes its points.
+    Returns the kept candidates, in ``order``'s order.
+    """
+    used = np.zeros(len(x), np.bool_)
+    kept = np.empty(len(order), np.int64)
+    n_kept = 0
+    two_pi = 2 * np.pi
+    for j in order:
+        a, b = starts[j], starts[j + 1]
+        drop_concave = False
+        drop_other = False
+        if len(labels) > 0:
+            n_c = 0
+            n_o = 0
+            for k in range(a, b):
+                lab = labels[points[k]]
+                if lab == concave:
+                    n_c += 1
+                elif lab != none:
+                    n_o += 1
+            if n_c > 0 and n_o > 0:
+                if n_c > n_o:
+                    drop_other = True
+                else:
+                    drop_concave = True
+        n_bins = max(int(np.rint(two_pi * r[j])), 8)
+        occ = np.zeros(n_bins, np.bool_)
+        all_free = True
+        for k in range(a, b):
+            p = points[k]
+            if len(labels) > 0:
+                lab = labels[p]
+                if (drop_concave and lab == concave) or (drop_other and lab != concave and lab != none):
+                    all_free = False  # one_edge dropped it: the candidate lost points
+                    continue
+            if used[p]:
+                all_free = False
+                continue
+            ang = np.arctan2(y[p] - cy[j], x[p] - cx[j]) % two_pi
+            occ[int(np.floor(ang / two_pi * n_bins)) % n_bins] = True
+        if not all_free:
+            if np.count_nonzero(occ) / n_bins < min_support:
+                continue
+        for k in range(a, b):
+            p = points[k]
+            if len(labels) > 0:
+                lab = labels[p]
+                if (drop_concave and lab == concave) or (drop_other and lab != concave and lab != none):
+                    continue
+            used[p] = True
+        kept[n_kept] = j
+        n_kept += 1
+    return kept[:n_kept]

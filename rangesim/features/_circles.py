@@ -8,14 +8,15 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.conics import ellipse_params
+from rangesim.core.constants import EdgeLabel
 from rangesim.core.memory import check_memory
 from rangesim.features._arc_ellipses import DIRECTION_TOL_DEG as GROW_DIRECTION_TOL_DEG
 from rangesim.features._arc_ellipses import GROW_MARGIN_PX
 from rangesim.features._arc_ellipses import coverage as ellipse_coverage
-from rangesim.features._circle_kernels import centres_and_radii, refine
+from rangesim.features._circle_kernels import centres_and_radii, claim, refine
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._conic_kernels import grow_few
-from rangesim.features._edge_points import angular_coverage, angular_fraction, edge_points, one_edge, point_labels
+from rangesim.features._edge_points import angular_coverage, edge_points, point_labels
 
 DIRECTION_TOL_DEG = 15.0  # an inlier's edge normal is radial within this, degrees
 REL_CELL = 1 / 4  # accumulator cell over the band's smallest radius (radius_bands)
@@ -246,21 +247,16 @@ def circles(
     # each edge point supports one circle: a candidate that is left with too little support
     # once the points of stronger circles are taken (a ghost made of two rims, a crescent
     # inside a rim) is dropped; this also removes near-duplicates
-    by_h = np.split(pp[np.argsort(ph, kind="stable")], np.cumsum(np.bincount(ph, minlength=len(r)))[:-1])
+    # (compiled: one_edge and the angular coverage of the free points, per candidate)
+    points = pp[np.argsort(ph, kind="stable")]
+    starts = np.concatenate([[0], np.cumsum(np.bincount(ph, minlength=len(r)))])
     labels = point_labels(edge_map, pixels)
-    used = np.zeros(len(xy), bool)
-    found = []
-    for j in order:
-        # the candidate's own edge's points (a concave rim's or a convex and occluding one's)
-        pts = one_edge(labels, by_h[j])
-        free = pts[~used[pts]]
-        if len(free) < len(by_h[j]):
-            d = xy[free] - c[j]
-            if angular_fraction(np.arctan2(d[:, 1], d[:, 0]), round(2 * np.pi * r[j])) < min_support:
-                continue
-        used[pts] = True
-        found.append(Circle((float(c[j, 0]), float(c[j, 1])), float(r[j]), int(votes[j]), float(cov[j]),
-                            float(rms[j])))
+    labels = np.zeros(0, np.uint8) if labels is None else np.ascontiguousarray(labels, np.uint8)
+    kept = claim(order.astype(np.int64), starts, points.astype(np.int64), labels, xy[:, 0].copy(), xy[:, 1].copy(),
+                 c[:, 0].copy(), c[:, 1].copy(), np.asarray(r, np.float64), float(min_support),
+                 int(EdgeLabel.CONCAVE), int(EdgeLabel.NONE))
+    found = [Circle((float(c[j, 0]), float(c[j, 1])), float(r[j]), int(votes[j]), float(cov[j]), float(rms[j]))
+             for j in kept]
     return [f for f, piece in zip(found, _ellipse_pieces(found, xy, theta)) if not piece]
 
 

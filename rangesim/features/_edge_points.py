@@ -77,7 +77,8 @@ def one_edge(labels: np.ndarray | None, points: np.ndarray) -> np.ndarray:
     edge: a rim's neighbour within a pixel or two (a hole's wall meeting the floor below its
     top), or the other half of a ghost made of two rims (a boss top's far arc and its
     foot's near arc). Those are left out; untyped points (label 0) are kept. Without labels
-    (a bare mask) all points are kept.
+    (a bare mask) all points are kept. (The circle finder's claim loop applies the same rule
+    inside its compiled kernel, :func:`rangesim.features._circle_kernels.claim`.)
     """
     if labels is None or len(points) == 0:
         return points
@@ -107,8 +108,10 @@ def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, flo
         Start and end angles (radians, counter-clockwise in image x-y, i.e. from +x towards
         +y) of the longest run of occupied bins.
     """
-    occ = _occupied_bins(angles, n_bins)
-    n_bins = len(occ)
+    n_bins = max(int(n_bins), 8)
+    idx = np.floor((np.mod(angles, 2 * np.pi)) / (2 * np.pi) * n_bins).astype(int) % n_bins
+    occ = np.zeros(n_bins, bool)
+    occ[idx] = True
     cov = float(occ.mean())
     if occ.all():
         return 1.0, 0.0, 2 * np.pi
@@ -125,20 +128,6 @@ def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, flo
     s = ((starts[k] + shift) % n_bins) * step
     e = s + (ends[k] - starts[k]) * step
     return cov, float(s), float(e)
-
-
-def angular_fraction(angles: np.ndarray, n_bins: int) -> float:
-    """The coverage of :func:`angular_coverage` alone (fraction of bins holding a point)."""
-    return float(_occupied_bins(angles, n_bins).mean())
-
-
-def _occupied_bins(angles: np.ndarray, n_bins: int) -> np.ndarray:
-    """(max(n_bins, 8),) bool: which of the equal bins around the circle hold an angle."""
-    n_bins = max(int(n_bins), 8)
-    idx = np.floor((np.mod(angles, 2 * np.pi)) / (2 * np.pi) * n_bins).astype(int) % n_bins
-    occ = np.zeros(n_bins, bool)
-    occ[idx] = True
-    return occ
 
 
 _R = 2  # half-width of the mask_normals window, px
