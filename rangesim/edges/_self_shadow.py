@@ -122,15 +122,18 @@ def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np
     good = np.isfinite(depth) & (depth > 0)
     out = np.zeros(len(depth), bool)
     if good.any():
+        # a path nearer than every measured pixel has nothing left in front of it
+        nearest = float(np.nanmin(z)) if np.isfinite(z).any() else np.inf
         out[good] = _march(np.ascontiguousarray(z, np.float32), np.ascontiguousarray(thr, np.float32),
-                           fx, fy, cx, cy, points[good], sources[good], MAX_MARCH_PX)
+                           fx, fy, cx, cy, points[good], sources[good], MAX_MARCH_PX, nearest)
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def _march(z, thr, fx, fy, cx, cy, points, sources, max_px):  # pragma: no cover - compiled
+def _march(z, thr, fx, fy, cx, cy, points, sources, max_px, nearest):  # pragma: no cover - compiled
     """For each segment point -> source: False when its image crosses a measured pixel nearer
-    than the segment by more than ``thr`` there (a caster), else True."""
+    than the segment by more than ``thr`` there (a caster), else True. The march ends where the
+    path is nearer than ``nearest`` (the least measured depth): no pixel can stand in front."""
     h, w = z.shape
     n = points.shape[0]
     out = np.ones(n, np.bool_)
@@ -160,7 +163,7 @@ def _march(z, thr, fx, fy, cx, cy, points, sources, max_px):  # pragma: no cover
             if not (0.0 < t < 1.0):
                 break
             pz = z0 + t * dz
-            if pz <= 0.0:
+            if pz <= 0.0 or (pz <= nearest and dz <= 0.0):
                 break
             u = fx * (x0 + t * dx) / pz + cx
             v = fy * (y0 + t * dy) / pz + cy
