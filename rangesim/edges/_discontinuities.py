@@ -389,7 +389,9 @@ def find_discontinuities(
         # (within k thresholds; a longer base divides the noise of the slope by k, which
         # the search multiplies by the gap's width)
         slope = np.zeros(si.size)        # per step, of 1 / z (perspective) or z
-        todo = np.ones(si.size, bool)    # no pixel behind on the same surface: slope unknown
+        # no pixel behind on the same surface: slope unknown (without ``extrapolate`` the
+        # surface continues at its own depth, known everywhere)
+        todo = np.full(si.size, bool(extrapolate))
         if extrapolate:
             for k in (3, 2, 1):
                 bi = si - np.rint(k * sy).astype(np.intp)

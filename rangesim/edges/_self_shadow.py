@@ -19,6 +19,9 @@ rendering), from the first gap pixel at the depth the search predicts for it, to
 source (:func:`rangesim.core.light.light_sources`), until it leaves the image or reaches the
 source. It can be wrong where a caster is hidden from the camera or outside the image (a
 false rim), or where a surface in front of the path does not in fact block it (no rim).
+A face turned away from the laser is SHADOW too: the edge of a lit face against it (a
+convex fold whose far face is unlit) is then a rim rather than a crease, which is where
+that edge is, under another label.
 """
 from __future__ import annotations
 
@@ -30,9 +33,6 @@ import numpy as np
 
 from rangesim.core.constants import Status
 from rangesim.core.light import light_sources
-
-#: the march stops after this many pixels (a path longer than the image has left it)
-MAX_MARCH_PX = 4096
 
 #: sensor modes whose scans the test applies to: the laser-stripe ones. A block matcher
 #: (``structured_light``) fattens the near surface over its projector shadows by up to half
@@ -103,7 +103,8 @@ def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np
     thr : (H, W) float32
         How much nearer than the path a measured pixel must be to block it, mm.
     K : (3, 3) float
-        Pinhole intrinsics; pixel (row i, column j) looks along K^-1 (j + 0.5, i + 0.5, 1).
+        Pinhole intrinsics; pixel (row i, column j) looks along K^-1 (j + 0.5, i + 0.5, 1)
+        (no skew: rangesim's cameras have none).
     sensor : dict
         The scan's ``meta["sensor"]`` (:func:`rangesim.core.light.light_sources`).
     rows, cols : (N,) int
@@ -125,7 +126,7 @@ def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np
         # a path nearer than every measured pixel has nothing left in front of it
         nearest = float(np.nanmin(z)) if np.isfinite(z).any() else np.inf
         out[good] = _march(np.ascontiguousarray(z, np.float32), np.ascontiguousarray(thr, np.float32),
-                           fx, fy, cx, cy, points[good], sources[good], MAX_MARCH_PX, nearest)
+                           fx, fy, cx, cy, points[good], sources[good], max(z.shape) + 1, nearest)
     return out
 
 

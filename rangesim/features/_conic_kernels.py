@@ -365,28 +365,33 @@ def grow_few(conics, xy, ct_all, st_all, bands, cos_tol, margin):  # pragma: no 
     N = xy.shape[0]
     conics = conics.copy()
     ok = np.zeros(K, np.bool_)
-    count = 0
-    hyp = np.empty(K * N, np.int64)
-    pt = np.empty(K * N, np.int64)
-    for k in range(K):
-        real, cx, cy, a = _is_real_ellipse(conics[k])
-        ok[k] = real
-        if not real:
-            continue
-        reach = a + bands[0] + margin + 1
-        q = conics[k]
-        for n in range(N):
-            x, y = xy[n, 0], xy[n, 1]
-            if abs(x - cx) > reach or abs(y - cy) > reach:
+    # two passes over the points, counting then filling: memory follows the candidates
+    hyp = np.empty(0, np.int64)
+    pt = np.empty(0, np.int64)
+    for fill in range(2):
+        count = 0
+        for k in range(K):
+            real, cx, cy, a = _is_real_ellipse(conics[k])
+            ok[k] = real
+            if not real:
                 continue
-            v = q[0] * x * x + q[1] * x * y + q[2] * y * y + q[3] * x + q[4] * y + q[5]
-            gx = 2 * q[0] * x + q[1] * y + q[3]
-            gy = q[1] * x + 2 * q[2] * y + q[4]
-            if abs(v) / max(np.hypot(gx, gy), 1e-12) <= bands[0] + margin:
-                hyp[count] = k
-                pt[count] = n
-                count += 1
-    hyp, pt = hyp[:count], pt[:count]
+            reach = a + bands[0] + margin + 1
+            q = conics[k]
+            for n in range(N):
+                x, y = xy[n, 0], xy[n, 1]
+                if abs(x - cx) > reach or abs(y - cy) > reach:
+                    continue
+                v = q[0] * x * x + q[1] * x * y + q[2] * y * y + q[3] * x + q[4] * y + q[5]
+                gx = 2 * q[0] * x + q[1] * y + q[3]
+                gy = q[1] * x + 2 * q[2] * y + q[4]
+                if abs(v) / max(np.hypot(gx, gy), 1e-12) <= bands[0] + margin:
+                    if fill == 1:
+                        hyp[count] = k
+                        pt[count] = n
+                    count += 1
+        if fill == 0:
+            hyp = np.empty(count, np.int64)
+            pt = np.empty(count, np.int64)
     px, py = xy[pt, 0].copy(), xy[pt, 1].copy()
     ct, st = ct_all[pt].copy(), st_all[pt].copy()
     new = np.empty(6)
