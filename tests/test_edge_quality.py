@@ -13,10 +13,10 @@ Documented F1 (measured; the floors asserted below are these minus a small margi
 =============  ==========  ======================  ============  ======================
 detector       noise-free  noise-free, stripe 0    preset noise  flagged at preset noise
 =============  ==========  ======================  ============  ======================
-gradient       0.908       0.922                   0.856         1.3 % of valid pixels
-normal         0.912       0.932                   0.813         1.2 %
-line_fit       0.853       0.889                   0.670         0.9 %
-curvature      0.887       0.910                   0.822         1.2 %
+gradient       0.900       0.917                   0.847         1.3 % of valid pixels
+normal         0.903       0.927                   0.801         1.2 %
+line_fit       0.846       0.885                   0.651         0.8 %
+curvature      0.879       0.907                   0.809         1.1 %
 pcl_organized  0.747       0.733                   0.654         1.7 %
 =============  ==========  ======================  ============  ======================
 

@@ -157,3 +157,23 @@ def test_a_boss_shadow_through_its_unlit_wall_is_no_rim(offset):
     on_table = scan.valid & (np.abs(world_z) < 0.5)
     for detector in (gradient, normal, line_fit):
         assert not (detector(scan).label_mask(RIM) & on_table).any(), detector.__name__
+
+
+def test_specks_of_shadow_in_a_face_are_no_rims(thick_plate_scene):
+    # single shadowed pixels in the plate's top (as between thread crests): their caster lies
+    # within a pixel, below what the depth image resolves; they must mark nothing
+    scan = _scan(thick_plate_scene, NOISE_OFF)
+    plain = gradient(scan)
+    depth, xyz, valid, status = scan.depth.copy(), scan.xyz.copy(), scan.valid.copy(), scan.status.copy()
+    rows, cols = np.meshgrid(np.arange(60, 80, 4), np.arange(40, 220, 6), indexing="ij")
+    rows, cols = rows.ravel(), cols.ravel()
+    keep = valid[rows, cols]
+    rows, cols = rows[keep], cols[keep]
+    depth[rows, cols], xyz[rows, cols], valid[rows, cols], status[rows, cols] = np.nan, np.nan, False, int(Status.SHADOW)
+    specked = gradient(dataclasses.replace(scan, depth=depth, xyz=xyz, valid=valid, status=status))
+    near = np.zeros(scan.shape, bool)
+    for dr in range(-1, 2):
+        for dc in range(-1, 2):
+            near[rows + dr, cols + dc] = True
+    assert len(rows) > 20
+    assert not (specked.label_mask(RIM) & near & ~plain.label_mask(RIM)).any()

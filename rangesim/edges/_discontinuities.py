@@ -55,6 +55,15 @@ SIGMA_STEPS = 1.0
 #: and the border no rim (:func:`find_discontinuities`, ``caster_test``)
 CASTER_STEPS = 3.0
 
+#: the caster test of a shadow gap is asked at its first shadow pixel and at up to this many
+#: further ones along the search, where they are shadow too (all must see no caster): see
+#: :func:`find_discontinuities`
+SHADOW_DEPTH_PX = 1
+
+#: a shadow gap with fewer shadow pixels than this in the 5 x 5 window around its first
+#: pixel is a speck, whose caster the depth image cannot resolve (no rim)
+SPECK_PX = 6
+
 #: RangeScan.status code of a pixel whose camera ray hit no surface
 #: (:class:`rangesim.core.constants.Status` ``MISS``; the value, so that this analysis
 #: module needs nothing from the sensor layer)
@@ -468,17 +477,25 @@ def find_discontinuities(
             gi = si[a] + np.rint(sy[a] * unlit_s[a]).astype(np.intp)
             gj = sj[a] + np.rint(sx[a] * unlit_s[a]).astype(np.intp)
             lit = caster_test(z, gi, gj, at_gap[a])
-            # and the next gap pixel when it is shadow too: a path from a shadow's first
-            # pixel can graze its caster's corner by less than the tolerance
-            s2 = unlit_s[a] + 1
-            hi = si[a] + np.rint(sy[a] * s2).astype(np.intp)
-            hj = sj[a] + np.rint(sx[a] * s2).astype(np.intp)
-            deeper = ((s2 < found_s[a]) | ~ok[a]) & (hi >= 0) & (hi < h) & (hj >= 0) & (hj < w)
-            deeper[deeper] = shade[hi[deeper], hj[deeper]]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                z2 = 1.0 / np.fmax(1.0 / z0[a] + s2 * slope[a], 0.5 / z0[a]) if perspective else z0[a] + s2 * slope[a]
-            d = np.flatnonzero(lit & deeper)
-            lit[d] = caster_test(z, hi[d], hj[d], z2[d])
+            # a speck of shadow (fewer than SPECK_PX shadow pixels in the 5 x 5 window around
+            # its first pixel: a valley between thread crests) has its caster within a pixel
+            # or two, below what the depth image resolves: no rim
+            lit &= _count_in_window(shade, gi, gj, 2) >= SPECK_PX
+            # and the next gap pixels up to SHADOW_DEPTH_PX deeper, where they are shadow too:
+            # the path from a cast shadow's first pixel grazes its caster's edge (that is
+            # where the shadow begins), by less than the tolerance; deeper ones pass it clearly
+            for extra in range(1, SHADOW_DEPTH_PX + 1):
+                d = np.flatnonzero(lit)
+                s2 = unlit_s[a[d]] + extra
+                hi = si[a[d]] + np.rint(sy[a[d]] * s2).astype(np.intp)
+                hj = sj[a[d]] + np.rint(sx[a[d]] * s2).astype(np.intp)
+                deeper = ((s2 < found_s[a[d]]) | ~ok[a[d]]) & (hi >= 0) & (hi < h) & (hj >= 0) & (hj < w)
+                deeper[deeper] = shade[hi[deeper], hj[deeper]]
+                d, s2, hi, hj = d[deeper], s2[deeper], hi[deeper], hj[deeper]
+                zb, sb = z0[a[d]], slope[a[d]]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    z2 = 1.0 / np.fmax(1.0 / zb + s2 * sb, 0.5 / zb) if perspective else zb + s2 * sb
+                lit[d] = caster_test(z, hi, hj, z2)
             a = a[lit]
             rim[si[a], sj[a]] = True
             direction[si[a], sj[a]] = np.mod(np.arctan2(sy[a], sx[a]), np.pi)
@@ -525,6 +542,17 @@ def find_discontinuities(
         ci, cj, cx, cy = (np.concatenate(v) for v in zip(*across))
         contour[ci, cj] = contour_offsets(np.column_stack([cx, cy]), connectivity)
     return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim, contour=contour)
+
+
+def _count_in_window(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray, half: int) -> np.ndarray:
+    """(N,) how many pixels of ``mask`` lie in the (2 half + 1)^2 window around each
+    (rows, cols) (outside the image: none)."""
+    pad = np.pad(np.asarray(mask, bool), half)
+    count = np.zeros(len(rows), np.int64)
+    for dr in range(-half, half + 1):
+        for dc in range(-half, half + 1):
+            count += pad[rows + half + dr, cols + half + dc]
+    return count
 
 
 def contour_offsets(across: np.ndarray, connectivity: int = 4) -> np.ndarray:
