@@ -1,6 +1,7 @@
 """Casting camera rays into the Mitsuba scene: one ``ray_intersect`` for all pixels."""
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,6 +12,39 @@ from rangesim.core.backend import mitsuba, opaque_point, opaque_scalar, opaque_t
 
 #: shift (pixels) of the second ray cast by the shared-edge guard
 RECAST_OFFSET_PX = 1e-3
+
+#: rays are cast in square tiles of this many pixels a side, then put back in row-major
+#: order: Embree's coherent traversal takes neighbouring rays in packets, and a 4 x 4 tile
+#: is a tighter bundle than 16 pixels of a row (1024^2 on 2 CPU cores: 60 -> 39 ms at 1.3M
+#: triangles, 96 -> 68 ms at 5.2M; 8 x 8 tiles 44 ms, 16 x 16 no gain). The results are the
+#: same ray for ray, only their order changes.
+RAY_TILE_PX = 4
+
+
+@functools.lru_cache(maxsize=8)
+def _tile_permutation(height: int, width: int, tile: int) -> tuple[np.ndarray, np.ndarray]:
+    """(order, position), (H * W,) uint32 each: ``order[k]`` is the row-major index of the
+    k-th pixel in tile order (tiles of ``tile`` x ``tile`` pixels, row-major over the tiles and
+    within each; partial tiles at the right and bottom edges), ``position`` its inverse."""
+    n = height * width
+    i, j = np.divmod(np.arange(n, dtype=np.int64), width)
+    tiles_x = -(-width // tile)
+    key = ((i // tile) * tiles_x + j // tile) * (tile * tile) + (i % tile) * tile + j % tile
+    # ranks of the keys (unique; gaps where partial tiles lack pixels): a cumulative count
+    present = np.zeros(int(key.max()) + 1, np.int64)
+    present[key] = 1
+    position = (np.cumsum(present) - 1)[key]
+    order = np.empty(n, np.int64)
+    order[position] = np.arange(n)
+    return order.astype(np.uint32), position.astype(np.uint32)
+
+
+def tile_order(height: int, width: int):
+    """(order, position) as ``mi.UInt32``: :func:`_tile_permutation` of the image size
+    (data, not kernel constants: a new image size compiles nothing)."""
+    mi = mitsuba()
+    order, position = _tile_permutation(int(height), int(width), RAY_TILE_PX)
+    return mi.UInt32(order), mi.UInt32(position)
 
 
 @dataclass
@@ -32,6 +66,9 @@ class PrimaryHits:
         Object index and triangle index within it; -1 on a miss.
     recast : int
         Number of rays cast a second time by the shared-edge guard.
+    tiles : (mi.UInt32, mi.UInt32) or None
+        The :func:`tile_order` the rays were cast in (secondary rays from the hits, such as
+        the laser-shadow rays, are cast in it too).
     """
 
     rays: Any
@@ -41,6 +78,7 @@ class PrimaryHits:
     part: Any
     face: Any
     recast: int = 0
+    tiles: Any = None
 
     @property
     def hit(self):
@@ -101,8 +139,12 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     n_pix = height * width
     index = dr.arange(mi.UInt32, n_pix)
     w, h = opaque_scalar(width, "UInt32"), opaque_scalar(height, "UInt32")  # sizes as kernel inputs
+    # cast in tiles (RAY_TILE_PX), then back to row-major order
+    order, position = tiles = tile_order(height, width)
+    hits = _intersect(mscene, pose, pixel_rays(K, w, order), maxt)
+    dr.eval(*hits)
+    t, p, n, part, face, d_world = (dr.gather(type(v), v, position) for v in hits)
     rays = pixel_rays(K, w, index)
-    t, p, n, part, face, d_world = _intersect(mscene, pose, rays, maxt)
     closed = mi.Bool(np.asarray(watertight, dtype=bool))
     dr.eval(t, p, n, part, face, d_world)
 
@@ -128,7 +170,7 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
         dr.scatter(part, part2, sel, ok)
         dr.scatter(face, face2, sel, ok)
         dr.eval(t, p, n, part, face)
-    return PrimaryHits(rays, t, p, n, part, face, recast)
+    return PrimaryHits(rays, t, p, n, part, face, recast, tiles)
 
 
 #: camera rays end at this multiple of the far limit: surfaces beyond are "no surface" (Mitsuba #61)

@@ -6,7 +6,7 @@ import drjit as dr
 from rangesim.core.backend import mitsuba, opaque_transform
 
 
-def occluded(mscene, points_world, normals_world, sources_world, active):
+def occluded(mscene, points_world, normals_world, sources_world, active, tiles=None):
     """True where scene geometry blocks the segment from a surface point to its laser source.
 
     Parameters
@@ -17,6 +17,9 @@ def occluded(mscene, points_world, normals_world, sources_world, active):
         frame, mm.
     active : mi.Bool
         Which points to test; the others return False.
+    tiles : (order, position) mi.UInt32, optional
+        Cast the rays in this order (:func:`rangesim.sensor.rays.tile_order`: neighbouring
+        points' shadow rays in one packet), the answer in the points' own order.
 
     Notes
     -----
@@ -26,6 +29,13 @@ def occluded(mscene, points_world, normals_world, sources_world, active):
     plane shadow itself (seen on CUDA, whose rsqrt is approximate).
     """
     mi = mitsuba()
+    if tiles is not None:
+        order, position = tiles
+        inputs = (points_world, normals_world, sources_world, active)
+        dr.eval(*inputs)
+        tiled = occluded(mscene, *(v if dr.width(v) == 1 else dr.gather(type(v), v, order) for v in inputs))
+        dr.eval(tiled)
+        return dr.gather(mi.Bool, tiled, position)
     to_source = sources_world - points_world
     side = dr.sign(dr.dot(normals_world, to_source))
     magnitude = dr.select(dr.abs(points_world.x) > dr.abs(points_world.y), dr.abs(points_world.x), dr.abs(points_world.y))
@@ -68,5 +78,5 @@ def laser_reach(mscene, view, sources, pose, near: float, far: float):
     in_range = hits.hit & (points.z >= near) & (points.z <= far)
     facing = dr.dot(view.normals, sources - points) > 0
     blocked = occluded(mscene, hits.point_world, hits.normal_world,
-                       opaque_transform(pose) @ mi.Point3f(sources), active=in_range & facing)
+                       opaque_transform(pose) @ mi.Point3f(sources), active=in_range & facing, tiles=hits.tiles)
     return in_range, hits.hit & facing & ~blocked
