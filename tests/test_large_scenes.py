@@ -6,6 +6,7 @@ import pytest
 import trimesh
 
 import rangesim as rs
+from rangesim.core.geometry import look_at
 from tests.conftest import make_sensor, plane, top_down_pose
 
 
@@ -94,3 +95,33 @@ def test_mesh_cache_skips_validation_and_follows_the_content(tmp_path, monkeypat
     assert len(third.faces) == 12 and len(list((tmp_path / "cache").glob("*.npz"))) == 2
     monkeypatch.setenv(meshes.CACHE_ENV, "off")
     assert meshes.mesh_cache_dir() is None
+
+
+@pytest.mark.parametrize("shape", [(6, 9), (8, 8), (5, 4), (1, 7), (13, 1)])
+def test_tile_order_is_a_permutation_of_square_tiles(shape):
+    from rangesim.sensor.rays import _tile_permutation
+
+    h, w = shape
+    order, position = _tile_permutation(h, w, 4)
+    assert sorted(order.tolist()) == list(range(h * w))
+    assert (order[position] == np.arange(h * w)).all()
+    # each run of 16 (a full tile) covers a 4 x 4 square of pixels
+    if h >= 4 and w >= 4:
+        i, j = np.divmod(order[:16].astype(int), w)
+        assert set(i.tolist()) == {0, 1, 2, 3} and set(j.tolist()) == {0, 1, 2, 3}
+
+
+def test_rays_cast_in_tiles_give_the_row_major_scan(monkeypatch):
+    # the tile order changes only the order in which rays are traced: the scan is the same
+    import rangesim.sensor.rays as rays
+
+    sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 70, "camera.height": 45})
+    scene = rs.load_scene([trimesh.creation.box((40, 30, 10)).apply_translation((0, 0, 5)),
+                           trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))])
+    pose = look_at((40.0, -60.0, 280.0), (0.0, 0.0, 0.0))
+    tiled = rs.scan(scene, sensor, pose=pose, seed=5)
+    monkeypatch.setattr(rays, "RAY_TILE_PX", 1)
+    plain = rs.scan(scene, sensor, pose=pose, seed=5)
+    for name in ("depth", "xyz", "status", "normal", "face", "sigma"):
+        assert np.array_equal(getattr(tiled, name), getattr(plain, name), equal_nan=True), name
+    assert (tiled.status == 2).sum() > 50  # the box shadows the floor: shadow rays were cast
