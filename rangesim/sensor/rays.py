@@ -36,7 +36,18 @@ def _tile_permutation(height: int, width: int, tile: int) -> tuple[np.ndarray, n
     position = (np.cumsum(present) - 1)[key]
     order = np.empty(n, np.int64)
     order[position] = np.arange(n)
-    return order.astype(np.uint32), position.astype(np.uint32)
+    return _aligned(order.astype(np.uint32)), _aligned(position.astype(np.uint32))
+
+
+def _aligned(a: np.ndarray, align: int = 64) -> np.ndarray:
+    """A copy of ``a`` starting on an ``align``-byte boundary. Dr.Jit's LLVM backend reads a
+    NumPy array in place and compiles its kernels for the array's alignment: arrays at other
+    offsets (NumPy aligns to 16 bytes) would compile new variants of the same kernels."""
+    buf = np.empty(a.nbytes + align, np.uint8)
+    start = (-buf.ctypes.data) % align
+    out = buf[start:start + a.nbytes].view(a.dtype)
+    out[...] = a
+    return out
 
 
 def tile_order(height: int, width: int):
