@@ -131,13 +131,8 @@ def discontinuities(
     sigma = predicted_noise(scan)
     if sigma is not None:
         thr = thr + np.float32(SIGMA_STEPS * np.sqrt(2.0)) * sigma
-    valid = np.isfinite(z)
-    empty, certain = empty_pixels(scan, valid)
-    # a caster must stand clear of a path by the noise of a pixel pair and a footprint
-    tol = geo.footprint if sigma is None else geo.footprint + np.float32(2.0 * np.sqrt(2.0)) * sigma
-    if quantum is not None:
-        tol = tol + quantum
-    shadows = shadow_gaps(scan, valid, tol) if geo.perspective else None
+    empty, certain = empty_pixels(scan, np.isfinite(z))
+    shadows = shadow_gaps(scan, z, geo.footprint, sigma, quantum) if geo.perspective else None
     unlit, caster_test = shadows if shadows is not None else (None, None)
     disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
                                 empty=empty, empty_certain=certain, unlit=unlit, caster_test=caster_test)
@@ -438,12 +433,7 @@ def find_discontinuities(
             if active.size == 0:
                 break
         ok = np.isfinite(found_z)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            if perspective:
-                inv_pred = 1.0 / z0 + found_s * slope
-                pred = 1.0 / np.fmax(inv_pred, 0.5 / z0)  # a receding surface: at most 2 z0
-            else:
-                pred = z0 + found_s * slope
+        pred = _continued(z0, slope, found_s, perspective)
         occl = ok & (found_z - pred > t0)
         occd = ok & (pred - found_z > found_t)
         occluding[si[occl], sj[occl]] = True
@@ -465,18 +455,13 @@ def find_discontinuities(
             # that step less than half the jump threshold a pixel: a steep face (a lit hole
             # wall at grazing incidence) continued across a gap is a guess, and its caster
             # (the hole's far wall, which faces away from the laser) is itself in shadow.
-            su = unlit_s.astype(np.float64)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                if perspective:
-                    step1 = 1.0 / np.fmax(1.0 / z0 + slope, 0.5 / z0)
-                    at_gap = 1.0 / np.fmax(1.0 / z0 + su * slope, 0.5 / z0)
-                else:
-                    step1, at_gap = z0 + slope, z0 + su * slope
+            step1 = _continued(z0, slope, 1.0, perspective)
+            with np.errstate(invalid="ignore"):
                 caster = ok & (pred - found_z > CASTER_STEPS * found_t) & (z0 - found_z > CASTER_STEPS * t0)
             a = np.flatnonzero(~occl & ~caster & ~todo & (unlit_s > 0) & (np.abs(step1 - z0) <= 0.5 * t0))
             gi = si[a] + np.rint(sy[a] * unlit_s[a]).astype(np.intp)
             gj = sj[a] + np.rint(sx[a] * unlit_s[a]).astype(np.intp)
-            lit = caster_test(z, gi, gj, at_gap[a])
+            lit = caster_test(gi, gj, _continued(z0[a], slope[a], unlit_s[a], perspective))
             # a speck of shadow (fewer than SPECK_PX shadow pixels in the 5 x 5 window around
             # its first pixel: a valley between thread crests) has its caster within a pixel
             # or two, below what the depth image resolves: no rim
@@ -492,10 +477,7 @@ def find_discontinuities(
                 deeper = ((s2 < found_s[a[d]]) | ~ok[a[d]]) & (hi >= 0) & (hi < h) & (hj >= 0) & (hj < w)
                 deeper[deeper] = shade[hi[deeper], hj[deeper]]
                 d, s2, hi, hj = d[deeper], s2[deeper], hi[deeper], hj[deeper]
-                zb, sb = z0[a[d]], slope[a[d]]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    z2 = 1.0 / np.fmax(1.0 / zb + s2 * sb, 0.5 / zb) if perspective else zb + s2 * sb
-                lit[d] = caster_test(z, hi, hj, z2)
+                lit[d] = caster_test(hi, hj, _continued(z0[a[d]], slope[a[d]], s2, perspective))
             a = a[lit]
             rim[si[a], sj[a]] = True
             direction[si[a], sj[a]] = np.mod(np.arctan2(sy[a], sx[a]), np.pi)
@@ -542,6 +524,15 @@ def find_discontinuities(
         ci, cj, cx, cy = (np.concatenate(v) for v in zip(*across))
         contour[ci, cj] = contour_offsets(np.column_stack([cx, cy]), connectivity)
     return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim, contour=contour)
+
+
+def _continued(z0: np.ndarray, slope: np.ndarray, steps, perspective: bool) -> np.ndarray:
+    """Depth of a pixel's surface continued ``steps`` pixels along its search: linear in
+    inverse depth (``perspective``; a receding surface at most 2 z0) or in depth."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if perspective:
+            return 1.0 / np.fmax(1.0 / z0 + steps * slope, 0.5 / z0)
+        return z0 + steps * slope
 
 
 def _count_in_window(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray, half: int) -> np.ndarray:

@@ -42,12 +42,13 @@ from rangesim.core.light import light_sources
 #: structured_light_bench), while on the laser presets it found the rims over shadow
 LASER_MODES = ("geometric", "rendered")
 
-#: test(z, rows, cols, depth) -> (N,) bool: True where the gap pixel (rows, cols) at
-#: ``depth`` (mm, camera z) would have no caster between it and its light source
-CasterTest = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+#: test(rows, cols, depth) -> (N,) bool: True where the gap pixel (rows, cols) at ``depth``
+#: (mm, camera z) would have no caster between it and its light source
+CasterTest = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
-def shadow_gaps(scan: Any, valid: np.ndarray, tolerance: np.ndarray) -> tuple[np.ndarray, CasterTest] | None:
+def shadow_gaps(scan: Any, z: np.ndarray, footprint: np.ndarray, sigma: np.ndarray | None = None,
+                quantum: np.ndarray | float | None = None) -> tuple[np.ndarray, CasterTest] | None:
     """The scan's laser-shadow pixels and a caster test for them; None where it cannot tell.
 
     Needs what a synthetic laser-stripe scan carries (:data:`LASER_MODES`): ``status`` (which
@@ -58,20 +59,29 @@ def shadow_gaps(scan: Any, valid: np.ndarray, tolerance: np.ndarray) -> tuple[np
     Parameters
     ----------
     scan : RangeScan
-    valid : (H, W) bool
-    tolerance : (H, W) float
-        How much nearer than a path a measured pixel must be to block it, mm: the depth
-        noise of a pixel pair and a footprint, not the jump threshold (a path that grazes
-        its caster's edge, at the end of a shadow, passes it by less than a jump).
+    z : (H, W) float
+        The scan's depth image (camera z, mm), NaN where not measured.
+    footprint : (H, W) float
+        Pixel footprint, mm.
+    sigma : (H, W) float, optional
+        Predicted depth noise, mm.
+    quantum : float or (H, W), optional
+        Depth quantum, mm.
+
+    A measured pixel blocks a path where it stands nearer than the path by more than the
+    noise of a pixel pair (2 sqrt(2) sigma), a footprint and a quantum: not the jump
+    threshold, since a path that grazes its caster's edge, at the end of a shadow, passes
+    it by less than a jump.
 
     Returns
     -------
     unlit : (H, W) bool
         Invalid pixels in laser shadow.
     test : callable
-        ``test(z, rows, cols, depth)``: :func:`uncast`, for this scan's camera, light and
-        ``tolerance``.
+        ``test(rows, cols, depth)``: :func:`uncast`, for this depth image, camera, light and
+        tolerance.
     """
+    valid = np.isfinite(z)
     status = getattr(scan, "status", None)
     meta = getattr(scan, "meta", None) or {}
     if status is None or np.shape(status) != valid.shape or "source" in meta:
@@ -85,15 +95,19 @@ def shadow_gaps(scan: Any, valid: np.ndarray, tolerance: np.ndarray) -> tuple[np
     if not unlit.any():
         return None
     K = np.asarray(K, np.float64)
+    tolerance = footprint if sigma is None else footprint + np.float32(2.0 * np.sqrt(2.0)) * sigma
+    if quantum is not None:
+        tolerance = tolerance + quantum
+    nearest = _nearest(z)
 
-    def test(z: np.ndarray, rows: np.ndarray, cols: np.ndarray, depth: np.ndarray) -> np.ndarray:
-        return uncast(z, tolerance, K, sensor, rows, cols, depth)
+    def test(rows: np.ndarray, cols: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        return uncast(z, tolerance, K, sensor, rows, cols, depth, nearest=nearest)
 
     return unlit, test
 
 
 def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np.ndarray, cols: np.ndarray,
-           depth: np.ndarray) -> np.ndarray:
+           depth: np.ndarray, nearest: float | None = None) -> np.ndarray:
     """Whether points at pixels (rows, cols) and ``depth`` would see their light source.
 
     Parameters
@@ -110,6 +124,9 @@ def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np
     rows, cols : (N,) int
     depth : (N,) float
         Camera z of each point, mm.
+    nearest : float, optional
+        The least measured depth of ``z`` (computed when not given): a path nearer than it
+        has nothing left in front of it.
 
     Returns
     -------
@@ -123,11 +140,15 @@ def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np
     good = np.isfinite(depth) & (depth > 0)
     out = np.zeros(len(depth), bool)
     if good.any():
-        # a path nearer than every measured pixel has nothing left in front of it
-        nearest = float(np.nanmin(z)) if np.isfinite(z).any() else np.inf
+        nearest = _nearest(z) if nearest is None else nearest
         out[good] = _march(np.ascontiguousarray(z, np.float32), np.ascontiguousarray(thr, np.float32),
                            fx, fy, cx, cy, points[good], sources[good], max(z.shape) + 1, nearest)
     return out
+
+
+def _nearest(z: np.ndarray) -> float:
+    """The least finite depth of ``z`` (inf when none)."""
+    return float(np.nanmin(z)) if np.isfinite(z).any() else np.inf
 
 
 @numba.njit(cache=True, nogil=True)

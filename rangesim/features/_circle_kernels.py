@@ -376,6 +376,12 @@ def _thin_fit(px, py, ct, st, index, H, W, cx, cy, r, cos_tol, ring, sel,
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def _dropped(lab, drop_concave, drop_other, concave, none):  # pragma: no cover - compiled
+    """Whether :func:`claim`'s one_edge rule leaves out a point labelled ``lab``."""
+    return (drop_concave and lab == concave) or (drop_other and lab != concave and lab != none)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, none):  # pragma: no cover - compiled
     """The circles' claim loop of :func:`rangesim.features.circles`: each edge point supports
     one circle, strongest first.
@@ -414,11 +420,9 @@ def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, 
         all_free = True
         for k in range(a, b):
             p = points[k]
-            if len(labels) > 0:
-                lab = labels[p]
-                if (drop_concave and lab == concave) or (drop_other and lab != concave and lab != none):
-                    all_free = False  # one_edge dropped it: the candidate lost points
-                    continue
+            if len(labels) > 0 and _dropped(labels[p], drop_concave, drop_other, concave, none):
+                all_free = False  # one_edge dropped it: the candidate lost points
+                continue
             if used[p]:
                 all_free = False
                 continue
@@ -429,11 +433,8 @@ def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, 
                 continue
         for k in range(a, b):
             p = points[k]
-            if len(labels) > 0:
-                lab = labels[p]
-                if (drop_concave and lab == concave) or (drop_other and lab != concave and lab != none):
-                    continue
-            used[p] = True
+            if not (len(labels) > 0 and _dropped(labels[p], drop_concave, drop_other, concave, none)):
+                used[p] = True
         kept[n_kept] = j
         n_kept += 1
     return kept[:n_kept]
