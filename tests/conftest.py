@@ -70,6 +70,46 @@ def top_down_pose(height):
     return look_at((0, 0, height), (0, 0, 0), up=(0, 1, 0))
 
 
+def holed_plate(length, width, thick, holes):
+    """A plate ``length`` x ``width`` x ``thick`` (mm) standing on z = 0, centred on the z axis,
+    with vertical through-holes ``holes`` ((x, y, radius), mm)."""
+    plate = trimesh.creation.box((length, width, thick))
+    for x, y, r in holes:
+        plate = plate.difference(trimesh.creation.cylinder(r, 4 * thick).apply_translation((x, y, 0)))
+    return plate.apply_translation((0, 0, thick / 2))
+
+
+def circle_px(scan, cx: float, cy: float, r: float, z: float, n: int = 720) -> np.ndarray:
+    """(n, 2) pixel coordinates (u, v; pixel (i, j) centred at (j + .5, i + .5)) of the
+    horizontal world circle of centre (cx, cy, z) and radius r (mm), through the scan's
+    pose and ``meta["K"]``."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    pts = np.stack([cx + r * np.cos(t), cy + r * np.sin(t), np.full(n, z), np.ones(n)], 1)
+    pc = (np.linalg.inv(scan.pose) @ pts.T).T[:, :3]
+    uv = (np.asarray(scan.meta["K"]) @ pc.T).T
+    return uv[:, :2] / uv[:, 2:]
+
+
+def pixels_inside(uv: np.ndarray, px: float = 1.5) -> np.ndarray:
+    """(n, 2) (row, col) of the pixels ``px`` pixels inside the closed image curve ``uv``,
+    towards its centroid."""
+    inward = uv.mean(0) - uv
+    inside = uv + px * inward / np.linalg.norm(inward, axis=1, keepdims=True)
+    return np.floor(inside[:, ::-1]).astype(int)
+
+
+def pixel_centres(mask: np.ndarray) -> np.ndarray:
+    """(n, 2) (u, v) image coordinates of the centres of the mask's pixels."""
+    ii, jj = np.nonzero(mask)
+    return np.stack([jj + 0.5, ii + 0.5], 1)
+
+
+def world_heights(scan) -> np.ndarray:
+    """(H, W) world z of each pixel's measured point, mm (0 where none)."""
+    h, w = scan.shape
+    return (scan.pose[:3, :3] @ np.nan_to_num(scan.xyz).reshape(-1, 3).T).T[:, 2].reshape(h, w) + scan.pose[2, 3]
+
+
 @pytest.fixture
 def data_dir() -> Path:
     """The shared recorded data (RANGESIM_DATA or ../shared/data); skips when absent."""

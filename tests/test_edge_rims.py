@@ -28,6 +28,7 @@ import rangesim as rs
 from rangesim.core.constants import EdgeLabel, Status
 from rangesim.core.geometry import look_at
 from rangesim.edges import RIM, gradient, line_fit, normal
+from tests.conftest import circle_px, holed_plate, pixel_centres, pixels_inside
 
 NOISE_OFF = {"noise.sigma_px": 0.0, "noise.speckle_contrast": 0.0, "noise.quantization_px": 0.0}
 #: (x, y, radius) of the floating plate's holes, mm; plate 80 x 60 x 6 mm centred at 0
@@ -35,27 +36,9 @@ HOLES = ((-22.0, -12.0, 4.0), (22.0, -12.0, 5.0), (-22.0, 14.0, 6.0), (20.0, 14.
 THICK = 6.0
 
 
-def _circle_px(scan, cx: float, cy: float, r: float, z: float, n: int = 720) -> np.ndarray:
-    """(n, 2) pixel coordinates (u, v; pixel (i, j) centred at (j + .5, i + .5)) of a
-    horizontal world circle."""
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    pts = np.stack([cx + r * np.cos(t), cy + r * np.sin(t), np.full(n, z), np.ones(n)], 1)
-    pc = (np.linalg.inv(scan.pose) @ pts.T).T[:, :3]
-    uv = (np.asarray(scan.meta["K"]) @ pc.T).T
-    return uv[:, :2] / uv[:, 2:]
-
-
-def _pixel_centres(mask: np.ndarray) -> np.ndarray:
-    ii, jj = np.nonzero(mask)
-    return np.stack([jj + 0.5, ii + 0.5], 1)
-
-
 @pytest.fixture(scope="module")
 def floating_plate():
-    plate = trimesh.creation.box((80, 60, THICK))
-    for x, y, r in HOLES:
-        plate = plate.difference(trimesh.creation.cylinder(r, 30).apply_translation((x, y, 0)))
-    plate.apply_translation((0, 0, THICK / 2))
+    plate = holed_plate(80, 60, THICK, HOLES)
     sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 384, "camera.height": 288})
     pose = look_at(np.array((25.0, -70.0, 330.0)), np.array((0.0, 0.0, 0.0)))
     return rs.scan(rs.load_scene([plate]), sensor, pose=pose, seed=3)
@@ -84,17 +67,15 @@ def test_through_hole_rims_over_nothing_are_found(detector, floating_plate):
                              + [np.stack([np.full_like(s, x), 30 * s], 1) for x in (-40, 40)])
     outline = np.column_stack([outline, np.full(len(outline), THICK), np.ones(len(outline))])
     uvw = (np.asarray(scan.meta["K"]) @ (np.linalg.inv(scan.pose) @ outline.T)[:3]).T
-    tops = cKDTree(np.concatenate([_circle_px(scan, x, y, r, THICK) for x, y, r in HOLES] + [uvw[:, :2] / uvw[:, 2:]]))
-    assert (tops.query(_pixel_centres(rim & ~beside))[0] <= 2.0).all()
-    tree = cKDTree(_pixel_centres(em.mask))
+    tops = cKDTree(np.concatenate([circle_px(scan, x, y, r, THICK) for x, y, r in HOLES] + [uvw[:, :2] / uvw[:, 2:]]))
+    assert (tops.query(pixel_centres(rim & ~beside))[0] <= 2.0).all()
+    tree = cKDTree(pixel_centres(em.mask))
     for x, y, r in HOLES:
         # the top rim's samples with nothing behind them: the pixel 1.5 px inside the
         # projected rim (towards the hole's centre) saw no surface (where the wall is seen
         # instead, the rim is its crease or, in laser shadow, unknown to the scan)
-        uv = _circle_px(scan, x, y, r, THICK)
-        inward = uv.mean(0) - uv
-        inside = uv + 1.5 * inward / np.linalg.norm(inward, axis=1, keepdims=True)
-        ij = np.floor(inside[:, ::-1]).astype(int)
+        uv = circle_px(scan, x, y, r, THICK)
+        ij = pixels_inside(uv)
         open_ = scan.status[ij[:, 0], ij[:, 1]] == Status.MISS
         assert open_.sum() >= 100
         d, _ = tree.query(uv[open_])
@@ -111,7 +92,7 @@ def _with_gap(scan, box: tuple[slice, slice], status: Status):
 def test_a_dropout_in_a_face_is_no_rim_but_a_view_into_nothing_is(detector, floating_plate):
     scan = floating_plate
     # a 7 x 7 block on the plate's top at its centre, 14 mm and more from holes and outline
-    u, v = _circle_px(scan, 0.0, 0.0, 0.0, THICK, 1)[0]
+    u, v = circle_px(scan, 0.0, 0.0, 0.0, THICK, 1)[0]
     i, j = int(v), int(u)
     box = (slice(i - 3, i + 4), slice(j - 3, j + 4))
     around = np.zeros(scan.shape, bool)
@@ -158,8 +139,8 @@ def test_a_lit_hole_wall_is_a_crease_at_the_rim_not_a_band_of_jumps(holed_plate_
         {"camera.width": 512, "camera.height": 384, **NOISE_OFF})
     pose = look_at(np.array((ex, ey, distance)), np.array((0.0, 0.0, T_PLATE)))
     scan = rs.scan(holed_plate_scene, sensor, pose=pose, seed=0)
-    top = cKDTree(_circle_px(scan, 0, 0, R_HOLE, T_PLATE, 2000))
-    foot = cKDTree(_circle_px(scan, 0, 0, R_HOLE, 0.0, 2000))
+    top = cKDTree(circle_px(scan, 0, 0, R_HOLE, T_PLATE, 2000))
+    foot = cKDTree(circle_px(scan, 0, 0, R_HOLE, 0.0, 2000))
     h, w = scan.shape
     centres = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), -1).reshape(-1, 2)
     d_top = top.query(centres)[0].reshape(h, w)

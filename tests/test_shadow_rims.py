@@ -27,6 +27,7 @@ from rangesim.core.constants import Status
 from rangesim.core.geometry import look_at
 from rangesim.edges import RIM, gradient, line_fit, normal
 from rangesim.edges._self_shadow import uncast
+from tests.conftest import circle_px, holed_plate, pixel_centres, pixels_inside, world_heights
 
 NOISE_OFF = {"noise.sigma_px": 0.0, "noise.speckle_contrast": 0.0, "noise.quantization_px": 0.0}
 SENSOR = {"mode": "geometric", "laser": {"baseline": 150.0, "sweep": "rotating"}, "range": {"near": 200, "far": 400}}
@@ -60,10 +61,7 @@ def test_a_plane_point_sees_the_laser_and_a_wall_in_front_blocks_it():
 
 @pytest.fixture(scope="module")
 def thick_plate_scene():
-    plate = trimesh.creation.box((90, 50, THICK))
-    for x, y, r in HOLES:
-        plate = plate.difference(trimesh.creation.cylinder(r, 60).apply_translation((x, y, 0)))
-    plate.apply_translation((0, 0, THICK / 2))
+    plate = holed_plate(90, 50, THICK, HOLES)
     table = trimesh.creation.box((400, 400, 2)).apply_translation((0, 0, -1))
     return rs.load_scene([plate, table])
 
@@ -73,26 +71,15 @@ def _scan(scene, changes, seed=1):
     return rs.scan(scene, sensor, pose=look_at((0.0, 0.0, 300.0 + THICK), (0.0, 0.0, 0.0), up=(0, 1, 0)), seed=seed)
 
 
-def _rim_px(scan, x: float, y: float, r: float, z: float, n: int = 720) -> np.ndarray:
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    pts = np.stack([x + r * np.cos(t), y + r * np.sin(t), np.full(n, z), np.ones(n)], 1)
-    pc = (np.linalg.inv(scan.pose) @ pts.T).T[:, :3]
-    uv = (np.asarray(scan.meta["K"]) @ pc.T).T
-    return uv[:, :2] / uv[:, 2:]
-
-
 @pytest.mark.parametrize("noisy", [False, True], ids=["noise-free", "preset-noise"])
 @pytest.mark.parametrize("detector", [gradient, normal, line_fit])
 def test_rims_over_their_own_shadow_are_found(detector, noisy, thick_plate_scene):
     scan = _scan(thick_plate_scene, {} if noisy else NOISE_OFF)
     em = detector(scan)
-    ii, jj = np.nonzero(em.mask)
-    tree = cKDTree(np.stack([jj + 0.5, ii + 0.5], 1))
+    tree = cKDTree(pixel_centres(em.mask))
     for x, y, r in HOLES:
-        uv = _rim_px(scan, x, y, r, THICK)
-        inward = uv.mean(0) - uv
-        inside = uv + 1.5 * inward / np.linalg.norm(inward, axis=1, keepdims=True)
-        ij = np.floor(inside[:, ::-1]).astype(int)
+        uv = circle_px(scan, x, y, r, THICK)
+        ij = pixels_inside(uv)
         shadowed = scan.status[ij[:, 0], ij[:, 1]] == Status.SHADOW
         assert shadowed.mean() >= 0.5  # the scene is what it claims: most of the rim over shadow
         d, _ = tree.query(uv[shadowed])
@@ -130,7 +117,7 @@ def test_a_shadow_cast_on_the_table_is_no_edge(detector, post_scan):
     beside = np.zeros((h, w), bool)
     for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
         beside |= pad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-    world_z = (scan.pose[:3, :3] @ np.nan_to_num(scan.xyz).reshape(-1, 3).T).T[:, 2].reshape(h, w) + scan.pose[2, 3]
+    world_z = world_heights(scan)
     on_table = scan.valid & (np.abs(world_z) < 0.5)
     post = scan.valid & (world_z > 1.0)
     ii, jj = np.nonzero(post)
@@ -152,8 +139,7 @@ def test_a_boss_shadow_through_its_unlit_wall_is_no_rim(offset):
     scan = rs.scan(rs.load_scene([boss, table]), sensor, pose=look_at((0.0, 0.0, 330.0), (0.0, 0.0, 0.0), up=(0, 1, 0)),
                    seed=4)
     assert (scan.status == Status.SHADOW).sum() > 30
-    h, w = scan.shape
-    world_z = (scan.pose[:3, :3] @ np.nan_to_num(scan.xyz).reshape(-1, 3).T).T[:, 2].reshape(h, w) + scan.pose[2, 3]
+    world_z = world_heights(scan)
     on_table = scan.valid & (np.abs(world_z) < 0.5)
     for detector in (gradient, normal, line_fit):
         assert not (detector(scan).label_mask(RIM) & on_table).any(), detector.__name__
