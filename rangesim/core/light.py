@@ -65,11 +65,10 @@ def light_sources(points: np.ndarray, sensor: Mapping[str, Any]) -> np.ndarray |
     if baseline is None or mode not in ("geometric", "rendered", "structured_light"):
         return None
     out = np.zeros_like(points)
-    if mode == "structured_light":
-        out[:, 0] = baseline
-        return out
+    # a structured-light projector sits at L: as a rotating mirror (its presets' sweep key)
+    sweep = "rotating" if mode == "structured_light" else laser.get("sweep", "rotating")
     rng = sensor.get("range") or {}
     reference = 0.5 * (float(rng.get("near", 0.0)) + float(rng.get("far", 0.0)))
     tilt = sheet_tilt_rad(laser.get("tilt_deg"), float(baseline), reference)
-    out[:, 0] = source_x(points[:, 0], points[:, 2], laser.get("sweep", "rotating"), float(baseline), tilt)
+    out[:, 0] = source_x(points[:, 0], points[:, 2], sweep, float(baseline), tilt)
     return out
