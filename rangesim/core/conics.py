@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rangesim.core._conic_kernels import direct_fit, direct_fits, ellipse_rows
+
 
 def fit_circle(xy: np.ndarray) -> tuple[np.ndarray, float, float]:
     """Algebraic (Kasa) least-squares circle, then Gauss-Newton on the geometric distance.
@@ -55,68 +57,19 @@ def fit_conic(xy: np.ndarray) -> np.ndarray | None:
 
     Notes
     -----
-    Called many times per image on small point sets, so the 6 x 6 scatter matrix is one
-    matrix product and the 3 x 3 inverse of its linear block is written out (the points
-    are centred, scaled to [-1, 1]); only the 3 x 3 eigenproblem goes through LAPACK.
+    The points are centred and scaled to [-1, 1]; the fit is that of their moments
+    (:func:`fit_conics_moments`, compiled in :mod:`rangesim.core._conic_kernels`).
     """
-    n = len(xy)
-    if n < 5:
+    xy = np.asarray(xy, np.float64).reshape(-1, 2)
+    if len(xy) < 5:
         return None
     m = xy.mean(axis=0)
     q = xy - m
     s = max(float(np.abs(q).max()), 1e-9)
-    q = q / s
-    x, y = q[:, 0], q[:, 1]
-    D = np.empty((n, 6))
-    D[:, 0] = x * x
-    D[:, 1] = x * y
-    D[:, 2] = y * y
-    D[:, 3] = x
-    D[:, 4] = y
-    D[:, 5] = 1.0
-    S = D.T @ D
-    S1, S2, S3 = S[:3, :3], S[:3, 3:], S[3:, 3:]
-    inv3 = _inv3(S3)
-    if inv3 is None:
+    conic, v = np.empty(6), np.empty(6)
+    if direct_fit(conic_monomials(q / s).sum(0), float(m[0]), float(m[1]), s, conic, v) < 0:
         return None
-    T = -inv3 @ S2.T
-    M = S1 + S2 @ T
-    M = np.array([M[2] / 2, -M[1], M[0] / 2])
-    if not np.isfinite(M).all():
-        return None
-    w, v = np.linalg.eig(M)
-    v = np.real(v)
-    cond = 4 * v[0] * v[2] - v[1] ** 2
-    ok = np.nonzero(cond > 0)[0]
-    if len(ok) == 0:
-        return None
-    a1 = v[:, ok[0]]
-    a2 = T @ a1
-    A, B, C, D_, E, F = (*a1.tolist(), *a2.tolist())
-    # undo the normalisation x' = (x - mx) / s
-    mx, my = float(m[0]), float(m[1])
-    A2, B2, C2 = A / s ** 2, B / s ** 2, C / s ** 2
-    D2_, E2 = D_ / s, E / s
-    conic = np.array([
-        A2, B2, C2,
-        D2_ - 2 * A2 * mx - B2 * my,
-        E2 - 2 * C2 * my - B2 * mx,
-        F + A2 * mx ** 2 + B2 * mx * my + C2 * my ** 2 - D2_ * mx - E2 * my,
-    ])
-    return conic / np.sqrt(conic @ conic)
-
-
-def _inv3(S: np.ndarray) -> np.ndarray | None:
-    """Inverse of a 3 x 3 matrix by cofactors, or None when (near) singular."""
-    (a, b, c), (d, e, f), (g, h, i) = S.tolist()
-    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
-    det = a * A + b * B + c * C
-    scale = max(abs(a), abs(b), abs(c), abs(d), abs(e), abs(f), abs(g), abs(h), abs(i), 1e-300)
-    if not np.isfinite(det) or abs(det) <= 1e-13 * scale ** 3:
-        return None
-    return np.array([[A, c * h - b * i, b * f - c * e],
-                     [B, a * i - c * g, c * d - a * f],
-                     [C, b * g - a * h, a * e - b * d]]) / det
+    return conic
 
 
 def conic_matrix(conic: np.ndarray) -> np.ndarray:
@@ -227,44 +180,6 @@ def _group_sums(w: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
     return np.column_stack([np.bincount(group, weights=w[:, j], minlength=n_groups) for j in range(w.shape[1])])
 
 
-def _direct_fits(S1: np.ndarray, S2: np.ndarray, S3: np.ndarray, m: np.ndarray,
-                 s: np.ndarray, normalised: bool = False):
-    """Halir-Flusser direct ellipse fits from the (K, 3, 3) blocks of the scatter matrices of
-    points centred on ``m`` (K, 2) and scaled by ``1 / s`` (K,): unit-norm pixel conics, ok
-    (and, with ``normalised``, the (K, 6) solutions in the normalised frame)."""
-    ok = np.abs(np.linalg.det(S3)) > 1e-12
-    S3[~ok] = np.eye(3)
-    T = -np.linalg.solve(S3, np.swapaxes(S2, 1, 2))
-    M = S1 + S2 @ T
-    M = np.stack([M[:, 2] / 2, -M[:, 1], M[:, 0] / 2], 1)
-    M[~np.isfinite(M).all(axis=(1, 2))] = 0.0
-    K = len(S1)
-    _, v = np.linalg.eig(M)
-    v = np.real(v)
-    cond = 4 * v[:, 0, :] * v[:, 2, :] - v[:, 1, :] ** 2  # (K, 3): per eigenvector
-    has = cond > 0
-    ok &= has.any(1)
-    first = np.argmax(has, axis=1)
-    a1 = v[np.arange(K), :, first]  # (K, 3)
-    a2 = np.einsum("kij,kj->ki", T, a1)
-    A, B, C = (a1 / s[:, None] ** 2).T
-    D, E = (a2[:, :2] / s[:, None]).T
-    F = a2[:, 2]
-    mx, my = m[:, 0], m[:, 1]
-    conics = np.stack([
-        A, B, C,
-        D - 2 * A * mx - B * my,
-        E - 2 * C * my - B * mx,
-        F + A * mx ** 2 + B * mx * my + C * my ** 2 - D * mx - E * my,
-    ], 1)
-    nrm = np.linalg.norm(conics, axis=1)
-    ok &= np.isfinite(nrm) & (nrm > 0)
-    conics = np.where(ok[:, None], conics / np.where(ok, nrm, 1.0)[:, None], 0.0)
-    if normalised:
-        return conics, ok, np.concatenate([a1, a2], 1)
-    return conics, ok
-
-
 def fit_conics_grouped(xy: np.ndarray, group: np.ndarray, n_groups: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`fit_conic` on many point groups at once (one scatter matrix per group).
 
@@ -334,27 +249,10 @@ def fit_conics_moments(mom: np.ndarray, m: np.ndarray, s: np.ndarray) -> tuple[n
         algebraic residual, a first-order estimate of the RMS geometric distance (from the
         moments alone).
     """
-    K = len(mom)
-    col = {p: k for k, p in enumerate(MOMENT_POWERS)}
-    mono = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # x^2, xy, y^2, x, y, 1
-    S = np.empty((K, 6, 6))
-    for a, (i1, j1) in enumerate(mono):
-        for b, (i2, j2) in enumerate(mono):
-            S[:, a, b] = mom[:, col[(i1 + i2, j1 + j2)]]
-    conics, ok, v = _direct_fits(S[:, :3, :3], S[:, :3, 3:], S[:, 3:, 3:].copy(), m, s, normalised=True)
-    ok &= mom[:, col[(0, 0)]] >= 5
-    conics[~ok] = 0.0
-    # residual of the normalised form v = (A, B, C, D, E, F): sum f^2 = v S v; the gradient
-    # (2A x + B y + D, B x + 2C y + E) is linear in (x, y, 1), so sum |grad|^2 = g P g + h P h
-    f2 = np.einsum("ki,kij,kj->k", v, S, v)
-    P = S[:, 3:, 3:]  # sums of (x, y, 1)(x, y, 1)^T
-    g = np.stack([2 * v[:, 0], v[:, 1], v[:, 3]], 1)
-    h = np.stack([v[:, 1], 2 * v[:, 2], v[:, 4]], 1)
-    grad2 = np.einsum("ki,kij,kj->k", g, P, g) + np.einsum("ki,kij,kj->k", h, P, h)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rms = s * np.sqrt(np.maximum(f2, 0) / grad2)
-    rms = np.where(ok & np.isfinite(rms), rms, np.inf)
-    return conics, ok, rms
+    mom = np.ascontiguousarray(mom, np.float64).reshape(-1, 15)
+    m = np.ascontiguousarray(m, np.float64).reshape(-1, 2)
+    s = np.ascontiguousarray(s, np.float64).reshape(-1)
+    return direct_fits(mom, m, s)
 
 
 def real_ellipses(conics: np.ndarray) -> np.ndarray:
@@ -389,23 +287,4 @@ def ellipse_params(conics: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     ok : (K,) bool
         Real ellipses; the other rows hold NaN or meaningless values.
     """
-    conics = np.asarray(conics, float).reshape(-1, 6)
-    sgn = np.where(conics[:, 0] < 0, -1.0, 1.0)
-    a, b, c, d, e, f = (conics * sgn[:, None]).T
-    h, gx, gy = b / 2, d / 2, e / 2
-    det = a * c - h * h
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        cx = (h * gy - c * gx) / det
-        cy = (h * gx - a * gy) / det
-        f0 = cx * gx + cy * gy + f  # value of the form at the centre
-        mean, half = (a + c) / 2, np.hypot((a - c) / 2, h)
-        lo, hi = mean - half, mean + half  # eigenvalues, lo <= hi; the major axis goes with lo
-        ok = (det > 0) & (lo > 0) & (f0 < 0)  # not a parabola, hyperbola, imaginary ellipse or point
-        axes = np.column_stack([np.sqrt(-f0 / lo), np.sqrt(-f0 / hi)])
-    # eigenvector of lo: (h, lo - a) or (lo - c, h), whichever is better conditioned
-    v1x, v1y, v2x, v2y = h, lo - a, lo - c, h
-    first = v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y
-    vx, vy = np.where(first, v1x, v2x), np.where(first, v1y, v2y)
-    vx = np.where((vx == 0) & (vy == 0), 1.0, vx)  # a circle: any direction
-    angle = (np.arctan2(vy, vx) + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector
-    return np.column_stack([cx, cy]), axes, angle, ok
+    return ellipse_rows(np.ascontiguousarray(conics, np.float64).reshape(-1, 6))

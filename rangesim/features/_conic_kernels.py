@@ -6,6 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from rangesim.core._conic_kernels import direct_fit, ellipse_row
 from rangesim.features._circle_kernels import _norm
 
 
@@ -273,81 +274,12 @@ def grouped_frames(xy, pt, keep, group, G):  # pragma: no cover - compiled
 
 # -- growing few conics, all compiled (the circle finder's ellipse-end check) ---------------
 
-#: the 6 x 6 scatter matrix of a conic fit from its 15 moments: S[a, b] = mom[_SCATTER[a, b]]
-#: (rows and columns x^2, xy, y^2, x, y, 1; moments in the order of MOMENT_POWERS)
-_SCATTER = np.array([[(i1 + i2) * 5 - ((i1 + i2) * (i1 + i2 - 1)) // 2 + (j1 + j2)
-                      for (i2, j2) in ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))]
-                     for (i1, j1) in ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))], np.int64)
-
-
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _is_real_ellipse(q):  # pragma: no cover - compiled
     """:func:`rangesim.core.conics.ellipse_params`' test of one conic, with its centre and
     semi-major axis (px)."""
-    sgn = -1.0 if q[0] < 0 else 1.0
-    a, b, c, d, e, f = sgn * q[0], sgn * q[1], sgn * q[2], sgn * q[3], sgn * q[4], sgn * q[5]
-    h, gx, gy = b / 2, d / 2, e / 2
-    det = a * c - h * h
-    if not det > 0:
-        return False, 0.0, 0.0, 0.0
-    cx = (h * gy - c * gx) / det
-    cy = (h * gx - a * gy) / det
-    f0 = cx * gx + cy * gy + f
-    lo = (a + c) / 2 - np.hypot((a - c) / 2, h)
-    if not (lo > 0 and f0 < 0):
-        return False, cx, cy, 0.0
-    return True, cx, cy, np.sqrt(-f0 / lo)
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _direct_fit(mom, m, s, out):  # pragma: no cover - compiled
-    """:func:`rangesim.core.conics.fit_conics_moments` of one set (its unit-norm pixel conic
-    into ``out``; True where fitted). The 3 x 3 reduced eigenproblem is solved in complex
-    arithmetic (its eigenvalues are real in theory, not always in floating point), and the
-    conic's sign may differ from NumPy's: every use of it is sign-free."""
-    S = np.empty((6, 6))
-    for a in range(6):
-        for b in range(6):
-            S[a, b] = mom[_SCATTER[a, b]]
-    if mom[0] < 5:
-        return False
-    S3 = S[3:, 3:].copy()
-    if not abs(np.linalg.det(S3)) > 1e-12:
-        return False
-    S2 = S[:3, 3:].copy()
-    T = -np.linalg.solve(S3, S2.T.copy())
-    M = S[:3, :3] + S2 @ np.ascontiguousarray(T)
-    R = np.empty((3, 3), np.complex128)
-    for j in range(3):
-        R[0, j] = M[2, j] / 2
-        R[1, j] = -M[1, j]
-        R[2, j] = M[0, j] / 2
-    for i in range(3):
-        for j in range(3):
-            if not np.isfinite(R[i, j].real):
-                return False
-    _, v = np.linalg.eig(R)
-    pick = -1
-    for j in range(3):
-        if 4 * v[0, j].real * v[2, j].real - v[1, j].real ** 2 > 0:
-            pick = j
-            break
-    if pick < 0:
-        return False
-    a1 = np.array([v[0, pick].real, v[1, pick].real, v[2, pick].real])
-    a2 = np.ascontiguousarray(T) @ a1
-    A, B, C = a1[0] / s ** 2, a1[1] / s ** 2, a1[2] / s ** 2
-    D, E, F = a2[0] / s, a2[1] / s, a2[2]
-    mx, my = m[0], m[1]
-    out[0], out[1], out[2] = A, B, C
-    out[3] = D - 2 * A * mx - B * my
-    out[4] = E - 2 * C * my - B * mx
-    out[5] = F + A * mx ** 2 + B * mx * my + C * my ** 2 - D * mx - E * my
-    nrm = np.sqrt(np.sum(out ** 2))
-    if not (np.isfinite(nrm) and nrm > 0):
-        return False
-    out /= nrm
-    return True
+    ok, cx, cy, a, _, _ = ellipse_row(q)
+    return ok, cx, cy, a
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -394,14 +326,14 @@ def grow_few(conics, xy, ct_all, st_all, bands, cos_tol, margin):  # pragma: no 
             pt = np.empty(count, np.int64)
     px, py = xy[pt, 0].copy(), xy[pt, 1].copy()
     ct, st = ct_all[pt].copy(), st_all[pt].copy()
-    new = np.empty(6)
+    new, v = np.empty(6), np.empty(6)
     sel = np.zeros(count, np.bool_)
     for b in range(len(bands)):
         sel, m, s, mom = band_moments(conics, hyp, px, py, ct, st, bands[b], cos_tol)
         if b == len(bands) - 1:
             break
         for k in range(K):
-            if ok[k] and mom[k, 0] >= 6 and _direct_fit(mom[k], m[k], s[k], new):
+            if ok[k] and mom[k, 0] >= 6 and direct_fit(mom[k], m[k, 0], m[k, 1], s[k], new, v) >= 0:
                 if _is_real_ellipse(new)[0]:
                     conics[k] = new
     for k in range(K):

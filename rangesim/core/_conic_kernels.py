@@ -1,0 +1,255 @@
+"""Compiled conic arithmetic: Halir-Flusser direct ellipse fits from moments (one set at a
+time, with no LAPACK) and the centre, axes and angle of conics.
+
+The fit reduces to the 3 x 3 eigenproblem of ``M = C1^-1 (S1 - S2 S3^-1 S2^T)``: the ellipse is
+the eigenvector ``a`` with ``4 a0 a2 - a1^2 > 0``. Its eigenvalues are the roots of the
+characteristic cubic (closed form, then polished by Newton steps) and each eigenvector is
+the cross product of two rows of ``M - lambda I``: a few hundred flops per fit, against
+about 3 us of call overhead for one batched ``np.linalg.eig`` row. The eigenvalues are real
+in theory (``M`` is similar to a symmetric pencil), not always in floating point: a complex
+pair is handled as LAPACK's ``geev`` returns it (unit eigenvectors whose largest component
+is real), of which the fit uses the real part, as ``np.real(np.linalg.eig(M)[1])`` did.
+
+Everything here is scalar arithmetic on small fixed arrays, so a batch of thousands of fits
+costs about as much as NumPy's fixed cost of one call.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: the 6 x 6 scatter matrix of a conic fit from its 15 moments: S[a, b] = mom[SCATTER[a, b]]
+#: (rows and columns x^2, xy, y^2, x, y, 1; the moments x^i y^j in the order of
+#: :data:`rangesim.core.conics.MOMENT_POWERS`, i + j <= 4, i major)
+SCATTER = np.array([[(i1 + i2) * 5 - ((i1 + i2) * (i1 + i2 - 1)) // 2 + (j1 + j2)
+                     for (i2, j2) in ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))]
+                    for (i1, j1) in ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))], np.int64)
+
+_JIT = dict(cache=True, nogil=True, error_model="numpy")
+
+
+@numba.njit(**_JIT)
+def _cross_rows(R, out):  # pragma: no cover - compiled
+    """The largest cross product of two rows of the (3, 3) ``R`` (real or complex) into
+    ``out``: a null vector of ``R`` when its rank is 2. Returns its squared norm."""
+    best = -1.0
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        c0 = R[i, 1] * R[j, 2] - R[i, 2] * R[j, 1]
+        c1 = R[i, 2] * R[j, 0] - R[i, 0] * R[j, 2]
+        c2 = R[i, 0] * R[j, 1] - R[i, 1] * R[j, 0]
+        n2 = abs(c0) ** 2 + abs(c1) ** 2 + abs(c2) ** 2
+        if n2 > best:
+            best = n2
+            out[0], out[1], out[2] = c0, c1, c2
+    return best
+
+
+@numba.njit(**_JIT)
+def _ellipse_vector(M, a1):  # pragma: no cover - compiled
+    """The eigenvector of the (3, 3) ``M`` with ``4 a0 a2 - a1^2 > 0`` into ``a1`` (unit norm;
+    of several, the one with the largest such value, normalised). False when none has."""
+    scale = 0.0
+    for i in range(3):
+        for j in range(3):
+            scale = max(scale, abs(M[i, j]))
+    if not (scale > 0 and np.isfinite(scale)):
+        return False
+    A = M / scale  # eigenvectors do not change; the cubic's coefficients stay near 1
+    tr = A[0, 0] + A[1, 1] + A[2, 2]
+    c1 = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0] + A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+          + A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+    det = (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+           + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+    # lambda^3 - tr lambda^2 + c1 lambda - det = 0; lambda = t + tr / 3: t^3 + p t + q = 0
+    p = c1 - tr * tr / 3
+    q = -2 * tr ** 3 / 27 + tr * c1 / 3 - det
+    roots = np.empty(3, np.complex128)
+    disc = q * q / 4 + p ** 3 / 27
+    if disc <= 0:  # three real roots (trigonometric form; p <= 0 here)
+        r = np.sqrt(max(-p / 3, 0.0))
+        if r == 0:
+            for k in range(3):
+                roots[k] = tr / 3
+        else:
+            arg = min(max(-q / (2 * r ** 3), -1.0), 1.0)
+            phi = np.arccos(arg) / 3
+            for k in range(3):
+                roots[k] = tr / 3 + 2 * r * np.cos(phi - 2 * np.pi * k / 3)
+    else:  # one real root and a complex pair (Cardano)
+        sq = np.sqrt(disc)
+        u, v = np.cbrt(-q / 2 + sq), np.cbrt(-q / 2 - sq)
+        roots[0] = tr / 3 + u + v
+        roots[1] = tr / 3 - (u + v) / 2 + 1j * (np.sqrt(3.0) / 2) * (u - v)
+        roots[2] = np.conj(roots[1])
+    best, found = -np.inf, False
+    R = np.empty((3, 3), np.complex128)
+    w = np.empty(3, np.complex128)
+    for k in range(3):
+        lam = roots[k]
+        for _ in range(2):  # Newton on the cubic: the closed form loses digits near double roots
+            f = ((lam - tr) * lam + c1) * lam - det
+            df = (3 * lam - 2 * tr) * lam + c1
+            if df == 0:
+                break
+            lam = lam - f / df
+        for i in range(3):
+            for j in range(3):
+                R[i, j] = A[i, j]
+            R[i, i] = A[i, i] - lam
+        if not _cross_rows(R, w) > 1e-28:
+            continue  # a double root (rank 1): no unique eigenvector; a degenerate set
+        # geev's normalisation: unit norm, largest component real (then the real part is used)
+        big = 0
+        for i in range(1, 3):
+            if abs(w[i]) > abs(w[big]):
+                big = i
+        ph = np.conj(w[big]) / abs(w[big])
+        x0, x1, x2 = (w[0] * ph).real, (w[1] * ph).real, (w[2] * ph).real
+        n2 = x0 * x0 + x1 * x1 + x2 * x2
+        if not n2 > 0:
+            continue
+        cond = (4 * x0 * x2 - x1 * x1) / n2
+        if cond > 0 and cond > best:
+            best, found = cond, True
+            nrm = np.sqrt(n2)
+            a1[0], a1[1], a1[2] = x0 / nrm, x1 / nrm, x2 / nrm
+    return found
+
+
+@numba.njit(**_JIT)
+def direct_fit(mom, m0, m1, s, conic, v):  # pragma: no cover - compiled
+    """Direct ellipse fit of one set from its 15 moments in the frame ``(xy - m) / s``.
+
+    Writes the unit-norm pixel conic into ``conic`` (6,) and the normalised-frame solution
+    into ``v`` (6,). Returns the fit's approximate RMS geometric residual, pixels (see
+    :func:`rangesim.core.conics.fit_conics_moments`), or -1 when there is no fit (fewer than
+    5 points, a singular linear block, no ellipse-specific eigenvector).
+    """
+    if not mom[0] >= 5:
+        return -1.0
+    S = np.empty((6, 6))
+    for a in range(6):
+        for b in range(6):
+            S[a, b] = mom[SCATTER[a, b]]
+    # T = -S3^-1 S2^T by cofactors (the points are centred and scaled: S3 is well scaled)
+    a, b, c = S[3, 3], S[3, 4], S[3, 5]
+    d, e, f = S[4, 3], S[4, 4], S[4, 5]
+    g, h, i = S[5, 3], S[5, 4], S[5, 5]
+    C0, C1, C2 = e * i - f * h, f * g - d * i, d * h - e * g
+    det3 = a * C0 + b * C1 + c * C2
+    big = max(abs(a), abs(b), abs(c), abs(d), abs(e), abs(f), abs(g), abs(h), abs(i))
+    if not (abs(det3) > 1e-12 and abs(det3) > 1e-13 * big ** 3):  # (near) singular: collinear points
+        return -1.0
+    inv = np.empty((3, 3))
+    inv[0, 0], inv[0, 1], inv[0, 2] = C0, c * h - b * i, b * f - c * e
+    inv[1, 0], inv[1, 1], inv[1, 2] = C1, a * i - c * g, c * d - a * f
+    inv[2, 0], inv[2, 1], inv[2, 2] = C2, b * g - a * h, a * e - b * d
+    T = np.empty((3, 3))  # T[r, k] = -sum_j inv[r, j] S2[k, j], S2 = S[:3, 3:]
+    for r in range(3):
+        for k in range(3):
+            acc = 0.0
+            for j in range(3):
+                acc += inv[r, j] * S[k, 3 + j]
+            T[r, k] = -acc / det3
+    Mr = np.empty((3, 3))  # S1 + S2 T
+    for r in range(3):
+        for k in range(3):
+            acc = S[r, k]
+            for j in range(3):
+                acc += S[r, 3 + j] * T[j, k]
+            Mr[r, k] = acc
+    M = np.empty((3, 3))  # C1^-1 (S1 + S2 T): rows (r2 / 2, -r1, r0 / 2)
+    for k in range(3):
+        M[0, k] = Mr[2, k] / 2
+        M[1, k] = -Mr[1, k]
+        M[2, k] = Mr[0, k] / 2
+    for r in range(3):
+        for k in range(3):
+            if not np.isfinite(M[r, k]):
+                return -1.0
+    a1 = np.empty(3)
+    if not _ellipse_vector(M, a1):
+        return -1.0
+    for r in range(3):
+        v[r] = a1[r]
+        v[3 + r] = T[r, 0] * a1[0] + T[r, 1] * a1[1] + T[r, 2] * a1[2]
+    A, B, C = v[0] / s ** 2, v[1] / s ** 2, v[2] / s ** 2
+    D, E, F = v[3] / s, v[4] / s, v[5]
+    conic[0], conic[1], conic[2] = A, B, C
+    conic[3] = D - 2 * A * m0 - B * m1
+    conic[4] = E - 2 * C * m1 - B * m0
+    conic[5] = F + A * m0 ** 2 + B * m0 * m1 + C * m1 ** 2 - D * m0 - E * m1
+    nrm = np.sqrt(np.sum(conic ** 2))
+    if not (np.isfinite(nrm) and nrm > 0):
+        return -1.0
+    conic /= nrm
+    # residual: sum f^2 = v S v; the gradient (2A x + B y + D, B x + 2C y + E) is linear in
+    # (x, y, 1), so sum |grad|^2 = g P g + h P h with P = S[3:, 3:]
+    f2 = 0.0
+    for r in range(6):
+        for k in range(6):
+            f2 += v[r] * S[r, k] * v[k]
+    g0, g1, g2 = 2 * v[0], v[1], v[3]
+    h0, h1, h2 = v[1], 2 * v[2], v[4]
+    grad2 = 0.0
+    for r, (gr, hr) in enumerate(((g0, h0), (g1, h1), (g2, h2))):
+        for k, (gk, hk) in enumerate(((g0, h0), (g1, h1), (g2, h2))):
+            grad2 += (gr * gk + hr * hk) * S[3 + r, 3 + k]
+    rms = s * np.sqrt(max(f2, 0.0) / grad2) if grad2 > 0 else np.inf
+    return rms if np.isfinite(rms) else np.inf
+
+
+@numba.njit(**_JIT)
+def direct_fits(mom, m, s):  # pragma: no cover - compiled
+    """:func:`direct_fit` of K sets: conics (K, 6), ok (K,), rms (K,) (inf where no fit)."""
+    K = mom.shape[0]
+    conics = np.zeros((K, 6))
+    ok = np.zeros(K, np.bool_)
+    rms = np.full(K, np.inf)
+    v = np.empty(6)
+    for k in range(K):
+        r = direct_fit(mom[k], m[k, 0], m[k, 1], s[k], conics[k], v)
+        if r >= 0:
+            ok[k] = True
+            rms[k] = r
+        else:
+            conics[k] = 0.0
+    return conics, ok, rms
+
+
+@numba.njit(**_JIT)
+def ellipse_row(q):  # pragma: no cover - compiled
+    """Centre, semi-axes and angle of one conic ``q`` (6,): (ok, cx, cy, a, b, angle), the
+    row of :func:`rangesim.core.conics.ellipse_params` (the same arithmetic)."""
+    sgn = -1.0 if q[0] < 0 else 1.0
+    a, b, c, d, e, f = sgn * q[0], sgn * q[1], sgn * q[2], sgn * q[3], sgn * q[4], sgn * q[5]
+    h, gx, gy = b / 2, d / 2, e / 2
+    det = a * c - h * h
+    cx = (h * gy - c * gx) / det
+    cy = (h * gx - a * gy) / det
+    f0 = cx * gx + cy * gy + f  # the form's value at the centre
+    mean, half = (a + c) / 2, np.hypot((a - c) / 2, h)
+    lo, hi = mean - half, mean + half  # eigenvalues, lo <= hi; the major axis goes with lo
+    ok = det > 0 and lo > 0 and f0 < 0  # not a parabola, hyperbola, imaginary ellipse or point
+    ax, bx = np.sqrt(-f0 / lo), np.sqrt(-f0 / hi)
+    # eigenvector of lo: (h, lo - a) or (lo - c, h), whichever is better conditioned
+    v1x, v1y, v2x, v2y = h, lo - a, lo - c, h
+    if v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y:
+        vx, vy = v1x, v1y
+    else:
+        vx, vy = v2x, v2y
+    if vx == 0 and vy == 0:
+        vx = 1.0  # a circle: any direction
+    angle = (np.arctan2(vy, vx) + np.pi / 2) % np.pi - np.pi / 2  # an axis, not a vector
+    return ok, cx, cy, ax, bx, angle
+
+
+@numba.njit(**_JIT)
+def ellipse_rows(conics):  # pragma: no cover - compiled
+    """:func:`ellipse_row` of (K, 6) conics: centre (K, 2), axes (K, 2), angle (K,), ok (K,)."""
+    K = conics.shape[0]
+    center, axes = np.empty((K, 2)), np.empty((K, 2))
+    angle, ok = np.empty(K), np.empty(K, np.bool_)
+    for k in range(K):
+        ok[k], center[k, 0], center[k, 1], axes[k, 0], axes[k, 1], angle[k] = ellipse_row(conics[k])
+    return center, axes, angle, ok
