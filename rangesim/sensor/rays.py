@@ -8,7 +8,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba, opaque_point, opaque_scalar, opaque_transform
+from rangesim.core.backend import coherent_rays, mitsuba, opaque_point, opaque_scalar, opaque_transform
 
 #: shift (pixels) of the second ray cast by the shared-edge guard
 RECAST_OFFSET_PX = 1e-3
@@ -114,10 +114,10 @@ def _intersect(mscene, pose: np.ndarray, rays, maxt: float):
     d_world = dr.normalize(to_world @ rays)
     ray = mi.Ray3f(opaque_point(pose[:3, 3]), d_world)
     ray.maxt = opaque_scalar(maxt)  # depends on the image size (the corner ray)
-    # coherent: neighbouring pixels' rays share an origin and nearly a direction, and
-    # Embree's coherent traversal of them is ~1.7x faster on CPU (55 -> 33 ms at 1024^2,
-    # 327k triangles; 95 -> 87 ms at 5.2M); the flag is Embree's (CPU) only
-    si = mscene.scene.ray_intersect(ray, mi.RayFlags.All, True)
+    # coherent where it pays: neighbouring pixels' rays share an origin and nearly a
+    # direction, and on AVX-512 CPUs Embree's coherent traversal of them is ~1.7x faster
+    # (55 -> 33 ms at 1024^2, 327k triangles; 95 -> 87 ms at 5.2M); see coherent_rays
+    si = mscene.scene.ray_intersect(ray, mi.RayFlags.All, coherent_rays())
     hit = si.is_valid()
     t = dr.select(hit, si.t, dr.inf)
     part = mscene.part_index(si)
