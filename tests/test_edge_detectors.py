@@ -593,3 +593,83 @@ def test_jump_threshold_row_broadcasts_like_the_full_image():
     b = find_discontinuities(z, np.repeat(row, 6, axis=0), folds=True)
     assert np.array_equal(a.pairs, b.pairs) and np.array_equal(a.occluding, b.occluding)
     assert a.pairs.any()
+
+
+def _noisy(scan: RangeScan, sigma_mm: float, seed: int = 0, smooth_px: float = 0.0) -> RangeScan:
+    """``scan`` with Gaussian depth noise of ``sigma_mm`` along the rays (white, or smoothed
+    by a Gaussian of ``smooth_px`` and rescaled to the same std), and that sigma attached."""
+    from scipy import ndimage
+    e = np.random.default_rng(seed).standard_normal(scan.shape)
+    if smooth_px:
+        e = ndimage.gaussian_filter(e, smooth_px, mode="wrap")
+        e /= e.std()
+    depth = scan.xyz[..., 2].astype(np.float64)
+    xyz = scan.xyz * ((depth + sigma_mm * e) / depth)[..., None]
+    return grid_scan(xyz, np.asarray(scan.meta["K"]), np.full(scan.shape, sigma_mm, np.float32))
+
+
+@pytest.mark.parametrize("smooth_px", [0.0, 2.0])
+def test_stride_gain_is_the_second_difference_law(smooth_px):
+    """The bend noise at lag s over lag 1, measured on a noisy frontal plane: for errors with
+    correlation rho(l) the second difference at lag s has variance (6 - 8 rho(s) + 2 rho(2s))
+    sigma^2, so the gain is sqrt of that over its lag-1 value, over s (1 / s for white noise,
+    rho = 0; rho(l) = exp(-l^2 / (4 w^2)) for white noise smoothed by a Gaussian of w px)."""
+    from rangesim.edges._noise import stride_gain
+    K, rays = pinhole_rays(256, 400.0)
+    plane = grid_scan(rays * 500.0, K)
+    scan = _noisy(plane, 0.3, smooth_px=smooth_px)
+    gain = stride_gain(scan.depth, np.full(scan.shape, 1.25, np.float32), 6)
+
+    def var(lag):
+        rho = (lambda l: np.exp(-l * l / (4 * smooth_px ** 2))) if smooth_px else (lambda l: 0.0)
+        return 6 - 8 * rho(lag) + 2 * rho(2 * lag)
+    expect = np.array([np.sqrt(var(s) / var(1)) / s for s in range(1, 7)])
+    assert gain[1] == 1.0
+    assert np.allclose(gain[1:], expect, rtol=0.08), (gain, expect)
+    if smooth_px:
+        assert gain[2] > 0.8                     # correlated errors: a longer line barely helps
+
+
+def test_ring_strides_follow_the_noise_and_stop_at_blocked_pixels():
+    """Noise 0.25 footprints with k = 2.25 bends lines by atan(2.25 sqrt(2) 0.25) = 38.5 deg
+    at stride 1; with independent errors (gain 1 / s) stride ceil(2.97) = 3 brings that to
+    15 deg. A window may hold no blocked pixel nor reach past the border; a stride that
+    gains nothing over a shorter one is never used."""
+    from rangesim.edges._line_rings import ring_strides
+    n = 41
+    noise = np.full((n, n), 0.25)
+    blocked = np.zeros((n, n), bool)
+    blocked[20, 20] = True
+    gain = 1.0 / np.maximum(np.arange(9), 1)
+    s = ring_strides(noise, 2.25, blocked, 15.0, gain)
+    assert s[20, 20] == 0
+    # beside it and one further: nearest neighbours (the jump rule decides beside it)
+    assert s[20, 21] == 1 and s[20, 22] == 1 and s[20, 23] == 2 and s[20, 24] == 3 and s[20, 30] == 3
+    assert s[0, 10] == 1 and s[1, 10] == 1 and s[2, 10] == 2 and s[10, 10] == 3
+    # quieter pixels need less: noise 0.1 -> ceil(1.19) = 2
+    assert ring_strides(np.full((n, n), 0.1), 2.25, np.zeros((n, n), bool), 15.0, gain)[20, 20] == 2
+    # a stride that does not beat a shorter one is skipped
+    flat = gain.copy()
+    flat[3] = flat[2]
+    assert ring_strides(noise, 2.25, np.zeros((n, n), bool), 15.0, flat)[20, 20] == 4
+    # no stride good enough: the one with the least gain that fits
+    assert ring_strides(np.full((n, n), 5.0), 2.25, np.zeros((n, n), bool), 15.0, gain)[20, 20] == 8
+
+
+def test_line_fit_finds_a_noisy_crease_with_longer_lines():
+    """A 40 degree roof under white depth noise of 0.3 footprints: the nearest-neighbour test
+    needs a 43.6 degree tolerance to stay silent on the noise, so it misses the crease; lines
+    drawn 4 px out (angle noise / 4) find it in nearly every row and leave the faces clean."""
+    roof = synthetic_roof(40.0, 90.0, convex=True, size=81)
+    scan = _noisy(roof, 0.3 * 500.0 / 400.0)
+    near = roof_distance(scan, 90.0) <= 2.0
+    far = roof_distance(scan, 90.0) >= 8.0
+    cols = slice(6, -6)
+    long_lines = line_fit(scan)
+    short_lines = line_fit(scan, max_stride=1)
+    assert long_lines.params["median_stride"] >= 3
+    assert (long_lines.mask & near)[:, cols].any(axis=0).mean() >= 0.9
+    assert (short_lines.mask & near)[:, cols].any(axis=0).mean() <= 0.3
+    assert long_lines.mask[far].mean() <= 0.01
+    crease = long_lines.mask & near
+    assert (long_lines.labels[crease] == EdgeLabel.CONVEX).mean() >= 0.9

@@ -30,7 +30,7 @@ from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
     "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
-    "predicted_noise", "raised_threshold",
+    "predicted_noise", "raised_threshold", "stride_gain",
     "NOISE_FLOOR",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_NORMAL_LOCAL", "NOISE_K_PCL",
 ]
@@ -219,6 +219,48 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     if quantum is not None:
         return float(np.sqrt(np.mean(d.astype(np.float64) ** 2) / 6.0))
     return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
+
+
+def stride_gain(z: np.ndarray, fp: np.ndarray, max_stride: int) -> np.ndarray:
+    """How the bend noise of a line through a pixel falls as its halves grow, measured.
+
+    The second difference of depth at lag ``s``, ``z[i + s] - 2 z[i] + z[i - s]`` over the
+    footprint, is the bend of the line from pixel ``i - s`` through ``i`` to ``i + s`` times
+    ``s`` (in radians, for a face seen head-on). On a plane its spread is the noise's: for
+    independent errors the same at every lag, so the bend noise falls as ``1 / s``; for
+    errors correlated over the lag (block matching's windows, a smoothed surface) it falls
+    more slowly, and for heavy-tailed ones (patches of wrong matches) its RMS does.
+
+    Returns
+    -------
+    (max_stride + 1,) float
+        ``gain[s]``: the RMS second difference at lag ``s`` over ``s`` times that at lag 1
+        (``gain[1] = 1``, ``1 / s`` for independent errors; ``gain[0]`` unused, 1). The RMS
+        is over the differences within 4 robust sigmas (1.4826 MAD about 0) of each lag's
+        own (beyond are edges), along rows and columns, every 4th line. A lag with fewer
+        than 100 differences, or a depth without spread at lag 1, gets gain 1 (no gain).
+    """
+    z = np.asarray(z, np.float32)
+    gain = np.ones(int(max_stride) + 1)
+    rms = np.full(int(max_stride) + 1, np.nan)
+    zc, fc = z[:, ::4], fp[:, ::4]
+    zr, fr = z[::4], fp[::4]
+    for lag in range(1, int(max_stride) + 1):
+        if 2 * lag >= min(z.shape):
+            break
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d0 = (zc[:-2 * lag] - 2 * zc[lag:-lag] + zc[2 * lag:]) / fc[lag:-lag]
+            d1 = (zr[:, :-2 * lag] - 2 * zr[:, lag:-lag] + zr[:, 2 * lag:]) / fr[:, lag:-lag]
+        d = np.abs(np.concatenate([d0[np.isfinite(d0)], d1[np.isfinite(d1)]]).astype(np.float64))
+        if d.size < 100:
+            break
+        d = d[d <= 4 * 1.4826 * np.median(d)]
+        rms[lag] = np.sqrt(np.mean(d * d)) if d.size else np.nan
+    if not rms[1] > 0:
+        return gain
+    ok = np.isfinite(rms) & (np.arange(len(rms)) >= 1)
+    gain[ok] = rms[ok] / (np.arange(len(rms))[ok] * rms[1])
+    return gain
 
 
 def stencil_window(window: int | None, name: str, noise: float | None) -> int:
