@@ -20,6 +20,7 @@ from rangesim.edges._noise import (
 )
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
+from rangesim.edges._trig import bend_degrees, half_atan2
 from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["gradient", "OPERATORS"]
@@ -555,8 +556,9 @@ def gradient(
         np.fmax(mag, np.abs(r), out=mag)     # fmax: an undefined operator does not veto
     # Hessian from the operators: 0 -> Dxx, 90 -> Dyy, 45/135 -> +-(6 / 2 sqrt 2) Dxy
     mean, rad, minor_wins, two_dxy, dxx_dyy = _hessian(*resp)
-    # the dominant eigenvector's angle; arctan2 in NumPy (vectorised, and its bits)
-    theta = 0.5 * np.arctan2(two_dxy, dxx_dyy)
+    # the dominant eigenvector's angle (compiled arc tangents, rangesim.edges._trig: NumPy's
+    # are scalar C-library calls on CPUs without AVX-512; the same but for last bits)
+    theta = half_atan2(two_dxy, dxx_dyy)
     _to_direction(theta, minor_wins, mag)
     direction = theta
 
@@ -587,9 +589,7 @@ def gradient(
     half = mag * np.float32(0.5)
     ti = np.flatnonzero(thin)
     half.ravel()[ti] = (mag.ravel()[ti] + np.fmax(beside.ravel()[ti], 0)) / 2
-    bend = np.arctan(t + half)
-    bend -= np.arctan(t - half)
-    np.degrees(bend, out=bend)
+    bend = bend_degrees(t, half)
     with np.errstate(invalid="ignore"):
         crease = bend > pixel_threshold
     if nms:

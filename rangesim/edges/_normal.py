@@ -21,6 +21,7 @@ from rangesim.edges._noise import (
 )
 from rangesim.edges._scan_access import scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
+from rangesim.edges._trig import half_atan2
 from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["normal"]
@@ -168,7 +169,7 @@ def normal(
         threshold_deg = noise_threshold(strength, valid, threshold_deg, k)
         pixel_threshold = raised_threshold(threshold_deg, scale, 179.0)
     # direction across the crease: dominant second harmonic of the four axis strengths
-    theta = 0.5 * np.arctan2(angles[1] - angles[3], angles[0] - angles[2])
+    theta = half_atan2(angles[1] - angles[3], angles[0] - angles[2])
 
     with np.errstate(invalid="ignore"):
         crease = strength > pixel_threshold

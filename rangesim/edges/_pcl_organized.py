@@ -16,6 +16,7 @@ from rangesim.edges._grid import AXES, pad_last2, padded_view
 from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold, stencil_window
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry, scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nearest_axis, nonmax_suppress, thin_staircases
+from rangesim.edges._trig import half_atan2
 from rangesim.edges.edgemap import EdgeMap
 
 __all__ = ["pcl_organized", "OrganizedEdgeMap", "EDGE_TYPES"]
@@ -258,7 +259,7 @@ def pcl_organized(
     if auto_threshold and noisy:
         low = noise_threshold(magnitude, valid, low, NOISE_K_PCL)
         high = low * 1.1 / 0.4
-    theta = 0.5 * np.arctan2(2 * jxy, jxx - jyy)
+    theta = half_atan2(2 * jxy, jxx - jyy)
     axis = nearest_axis(theta)
     thin = nonmax_suppress(magnitude, theta, magnitude > low)
     high_curvature = _hysteresis(np.where(thin, magnitude, 0), low, high) & valid
