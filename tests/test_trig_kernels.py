@@ -47,3 +47,21 @@ def test_bend_degrees_is_the_angle_between_two_slopes():
     assert np.all(np.abs(got - ref) <= tol)
     assert bend_degrees(np.zeros((1, 1), np.float32), np.ones((1, 1), np.float32))[0, 0] == np.float32(90.0)
     assert np.isnan(bend_degrees(np.full((1, 1), np.nan, np.float32), np.ones((1, 1), np.float32))[0, 0])
+
+
+def test_above_tan_half_orders_as_the_tangent():
+    """mag > tan(threshold / 2) decided through the arc tangent: the same answer as NumPy's
+    but within a float32 ulp of the tangent, where rounding decides; NaN is never above."""
+    from rangesim.edges._trig import above_tan_half
+    rng = np.random.default_rng(4)
+    thr = rng.uniform(15.0, 89.0, (128, 128)).astype(np.float32)
+    tan_half = np.tan(np.radians(thr) / 2)
+    mag = (tan_half * rng.uniform(0.5, 1.5, thr.shape)).astype(np.float32)
+    mag[:4] = tan_half[:4]                                    # exact ties
+    mag[4, :10] = np.nan
+    got = above_tan_half(mag, thr)
+    ref = mag > tan_half
+    close = np.abs(mag - tan_half) <= 2 * np.spacing(tan_half)
+    assert np.array_equal(got[~close], ref[~close])
+    assert not got[4, :10].any()
+    assert ref.mean() > 0.3 and (~ref).mean() > 0.3

@@ -20,7 +20,7 @@ from rangesim.edges._noise import (
 )
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
-from rangesim.edges._trig import bend_degrees, half_atan2
+from rangesim.edges._trig import above_tan_half, bend_degrees, half_atan2
 from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["gradient", "OPERATORS"]
@@ -575,8 +575,11 @@ def gradient(
     # the edge (central first difference, which straddles a crease at the centre); d is
     # the response summed over the edge's ridge: a crease between two pixel centres splits
     # its response between them (the larger neighbour across the edge holds the rest)
-    with np.errstate(invalid="ignore"):
-        candidates = mag > np.tan(np.radians(pixel_threshold) / 2)
+    if np.ndim(pixel_threshold):
+        candidates = above_tan_half(mag, np.ascontiguousarray(pixel_threshold, np.float32))
+    else:
+        with np.errstate(invalid="ignore"):
+            candidates = mag > np.tan(np.radians(pixel_threshold) / 2)
     thin, beside = nonmax_suppress(mag, direction, candidates, return_sides=True)
     gx = central_difference(zs, 0, disc.pairs)
     gy = central_difference(zs, 2, disc.pairs)

@@ -15,7 +15,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["atan", "atan2", "half_atan2", "bend_degrees"]
+__all__ = ["atan", "atan2", "half_atan2", "bend_degrees", "above_tan_half"]
 
 _P0, _P1, _P2, _P3, _P4 = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
                            -1.228866684490136173410e2, -6.485021904942025371773e1)
@@ -78,4 +78,16 @@ def bend_degrees(t, half):  # pragma: no cover - compiled
         a = np.float32(atan(np.float64(tf[k] + hf[k])))
         b = np.float32(atan(np.float64(tf[k] - hf[k])))
         of[k] = (a - b) * deg
+    return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def above_tan_half(mag, threshold_deg):  # pragma: no cover - compiled
+    """``mag > np.tan(np.radians(threshold_deg) / 2)`` of float32 images (H, W), as
+    ``atan(mag) > threshold / 2`` (the same order: tan rises on (-pi / 2, pi / 2)), (H, W) bool."""
+    out = np.empty(mag.shape, np.bool_)
+    mf, tf, of = mag.ravel(), threshold_deg.ravel(), out.ravel()
+    half_rad = np.pi / 360.0
+    for k in range(mf.size):
+        of[k] = atan(np.float64(mf[k])) > np.float64(tf[k]) * half_rad
     return out
