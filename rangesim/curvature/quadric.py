@@ -342,6 +342,51 @@ def _normal_equations(rel, w, fr):  # pragma: no cover - compiled
     return A, rhs, s_out
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _cholesky_solve(A, rhs):  # pragma: no cover - compiled
+    """Solutions of the symmetric systems ``A[n] x = rhs[n]`` (n, m, m), (n, m) by Cholesky,
+    and each Hadamard ratio ``det(A) / prod(diag A)`` (the product of the squared pivots over
+    the diagonal's). A system that is not positive definite, or holds a non-finite entry,
+    gets ratio 0 and solution 0."""
+    n, m = rhs.shape
+    sol = np.zeros((n, m))
+    ratio = np.zeros(n)
+    L = np.empty((m, m))
+    y = np.empty(m)
+    for t in range(n):
+        good = True
+        r = 1.0
+        for i in range(m):
+            for j in range(i + 1):
+                acc = A[t, i, j]
+                for k in range(j):
+                    acc -= L[i, k] * L[j, k]
+                if i == j:
+                    if not (acc > 0.0) or not np.isfinite(acc) or not (A[t, i, i] > 0.0):
+                        good = False
+                        break
+                    r *= acc / A[t, i, i]
+                    L[i, i] = np.sqrt(acc)
+                else:
+                    L[i, j] = acc / L[j, j]
+            if not good:
+                break
+        if not good or not np.isfinite(r):
+            continue
+        for i in range(m):
+            acc = rhs[t, i]
+            for k in range(i):
+                acc -= L[i, k] * y[k]
+            y[i] = acc / L[i, i]
+        for i in range(m - 1, -1, -1):
+            acc = y[i]
+            for k in range(i + 1, m):
+                acc -= L[k, i] * sol[t, k]
+            sol[t, i] = acc / L[i, i]
+        ratio[t] = r
+    return sol, ratio
+
+
 def _fit_chunk(centres, coords, weights, normals, orient):
     """fit_quadric on one batch, neighbour-major layout (sums over k run on contiguous rows).
 
@@ -360,14 +405,11 @@ def _fit_chunk(centres, coords, weights, normals, orient):
     # systems are O(1)): the weighted moments S[p, q] = sum w x^p y^q (p + q <= 4) and
     # T[p, q] = sum w z x^p y^q, as the normal equations A (n, 6, 6) and rhs (n, 6)
     A, rhs, s = _normal_equations(rel, w, np.nan_to_num(frame))
-    # conditioning: Hadamard ratio det(A) / prod(diag A) in (0, 1], ~0 when degenerate
-    diag = np.diagonal(A, axis1=1, axis2=2)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        ratio = np.linalg.det(np.where(np.isfinite(A), A, 0.0)) / np.prod(diag, axis=1)
+    # conditioning: Hadamard ratio det(A) / prod(diag A) in (0, 1], ~0 when degenerate; the
+    # solution and the determinant from one compiled Cholesky factorisation (A is a Gram
+    # matrix: symmetric, positive definite unless degenerate)
+    sol, ratio = _cholesky_solve(A, rhs)
     ok = (n_points >= 6) & np.isfinite(frame).all(axis=(1, 2)) & (ratio > RCOND)
-    A[~ok] = np.eye(6)
-    rhs[~ok] = 0.0
-    sol = np.linalg.solve(A, rhs[..., None])[..., 0]
     # back to length units: a, b, c scale 1/s; d, e unitless; f scales s
     one = np.ones_like(s)
     coeffs = sol * np.stack([1 / s, 1 / s, 1 / s, one, one, s], axis=-1)
