@@ -13,8 +13,9 @@ def _values(seed: int, shape=(256, 256)) -> np.ndarray:
 
 
 def test_half_atan2_is_numpys_to_the_last_bit_of_float32():
-    """Each result is the float64 arc tangent rounded to float32 (1 ulp of NumPy's float32
-    arctan2, which calls the C library's atan2f), in every quadrant and at every scale."""
+    """Each result is the float64 arc tangent rounded to float32, in every quadrant and at every
+    scale, so within NumPy's own float32 arctan2's error of it (the C library's atan2f, 1 ulp;
+    NumPy's AVX-512 SIMD path, measured 2 ulp on an Intel Xeon VM; 4 ulp allowed)."""
     y, x = _values(0), _values(1)
     got = half_atan2(y, x)
     exact = (0.5 * np.arctan2(y.astype(np.float64), x.astype(np.float64))).astype(np.float32)
@@ -22,7 +23,7 @@ def test_half_atan2_is_numpys_to_the_last_bit_of_float32():
     assert np.array_equal(got, exact)
     numpy32 = np.float32(0.5) * np.arctan2(y, x)
     ulp = np.spacing(np.abs(numpy32))
-    assert np.all(np.abs(got - numpy32) <= ulp)
+    assert np.all(np.abs(got - numpy32) <= 4 * ulp)
 
 
 def test_half_atan2_zeros_infinities_and_nan_as_c():
@@ -37,13 +38,18 @@ def test_half_atan2_zeros_infinities_and_nan_as_c():
 
 
 def test_bend_degrees_is_the_angle_between_two_slopes():
-    """atan(t + h) - atan(t - h) in degrees: a slope change from -1 to 1 is a right angle,
-    and every value is NumPy's float32 expression but for a last bit of each arc tangent."""
+    """atan(t + h) - atan(t - h) in degrees: a slope change from -1 to 1 is a right angle;
+    each arc tangent is the float64 one rounded to float32, so every value is NumPy's float32
+    expression but for the last bits of each arc tangent (NumPy's float32 arctan: 1 ulp from
+    the C library, a few on its AVX-512 SIMD path; 4 allowed)."""
     t, h = _values(2), np.abs(_values(3))
     got = bend_degrees(t, h)
+    a = np.arctan((t + h).astype(np.float64)).astype(np.float32)
+    b = np.arctan((t - h).astype(np.float64)).astype(np.float32)
+    assert np.array_equal(got, (a - b) * (np.float32(180.0) / np.float32(np.pi)))
     ref = np.degrees(np.arctan(t + h) - np.arctan(t - h))
-    # each arc tangent within 1 ulp of pi / 2 (float32), the difference rounded once more
-    tol = np.degrees(2 * np.spacing(np.float32(np.pi / 2))) + np.spacing(np.abs(ref))
+    # each arc tangent within 4 ulp of pi / 2 (float32), the difference rounded once more
+    tol = np.degrees(8 * np.spacing(np.float32(np.pi / 2))) + np.spacing(np.abs(ref))
     assert np.all(np.abs(got - ref) <= tol)
     assert bend_degrees(np.zeros((1, 1), np.float32), np.ones((1, 1), np.float32))[0, 0] == np.float32(90.0)
     assert np.isnan(bend_degrees(np.full((1, 1), np.nan, np.float32), np.ones((1, 1), np.float32))[0, 0])
