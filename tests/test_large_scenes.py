@@ -69,6 +69,34 @@ def test_closedness_agrees_with_trimesh(make):
     assert is_closed(mesh.faces) == bool(mesh.is_watertight and mesh.is_winding_consistent)
 
 
+def _closed_by_definition(faces) -> bool:
+    """Every directed edge exactly once and its reverse exactly once (a plain-Python count)."""
+    from collections import Counter
+
+    edges = Counter((int(a), int(b)) for f in faces for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])))
+    return all(n == 1 and edges.get((b, a)) == 1 and a != b for (a, b), n in edges.items())
+
+
+def test_closedness_is_the_directed_edge_definition_on_broken_meshes():
+    """The paired-key check against a plain count of directed edges: holes, a flipped face,
+    a doubled face, faces folded back on themselves, two shells, a degenerate face."""
+    from rangesim.cad.meshes import is_closed
+
+    rng = np.random.default_rng(0)
+    box = trimesh.creation.box().faces
+    cases = [box, np.vstack([box, box + 8]), np.vstack([box, box[:, ::-1]])]
+    for sub in range(3):
+        f = trimesh.creation.icosphere(subdivisions=sub).faces
+        flipped = f.copy()
+        flipped[rng.integers(len(f))] = flipped[rng.integers(len(f))][::-1]
+        degenerate = f.copy()
+        degenerate[0, 1] = degenerate[0, 0]
+        cases += [f, flipped, np.vstack([f, f[:1]]), f[1:], np.vstack([f, f[:2, ::-1]]), degenerate]
+    got = [is_closed(f) for f in cases]
+    assert got == [_closed_by_definition(f) for f in cases]
+    assert sum(got) == 5  # the box, the two boxes and the three spheres
+
+
 def test_inside_out_closed_mesh_is_flipped_and_volume_is_exact():
     from rangesim.cad.meshes import signed_volume
 
