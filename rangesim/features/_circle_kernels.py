@@ -284,29 +284,45 @@ def _select(px, py, ct, st, ring, n, cx, cy, r, width, cos_tol, out):  # pragma:
 
 
 @_jit
-def refine(px, py, ct, st, index, H, W, c, r, reach, band_px, cos_tol, max_step):  # pragma: no cover - compiled
+def refine(px, py, ct, st, index, H, W, c, r, reach, band_px, cos_tol, max_step, labels, split, concave,
+           none):  # pragma: no cover - compiled
     """Refine every hypothesis on its ring, then list its inliers.
 
     Per hypothesis: the ring of ``reach`` px is looked up once; three Gauss-Newton fits on
     its radially oriented points within ``reach``, then ``band_px + 0.5`` twice (1, 2, 2
     steps); a refit on the stretches of arc where the ring is one edge thick
-    (:func:`_thin_fit`); and the inliers: radial ring points within ``band_px``.
+    (:func:`_thin_fit`); with ``split``, a hypothesis whose ring holds two edges is replaced
+    by the two circles they lie on (:func:`_two_edges`; ``labels`` (N,) uint8 the points'
+    edge kinds, or empty; ``concave`` and ``none`` the label values of
+    :func:`rangesim.features._edge_points.one_edge`); and the inliers: radial ring points
+    within ``band_px``.
 
     Returns
     -------
-    c : (K, 2) float, r : (K,) float
+    c : (K', 2) float, r : (K',) float
+        K' >= K circles: a split hypothesis gives two, next to each other.
     hyp, point : (P,) int64
-        The inliers, grouped by hypothesis.
+        The inliers, grouped by circle.
+    parent : (K',) int64
+        The hypothesis each circle comes from.
+    sibling : (K',) int64
+        The other circle of a split hypothesis, -1 for the others.
     """
     K = len(r)
-    c = c.copy()
-    r = r.copy()
+    cap_k = 2 * K if split else K
+    c_out = np.empty((cap_k, 2))
+    r_out = np.empty(cap_k)
+    parent = np.empty(cap_k, np.int64)
+    sibling = np.full(cap_k, -1, np.int64)
     ring = np.empty(len(px), np.int64)  # a ring holds each edge point once at most
     sel = np.empty(len(px), np.int64)
+    aux = np.empty(len(px) if split else 0, np.int64)
     cap = 1024
     hyp = np.empty(cap, np.int64)
     pnt = np.empty(cap, np.int64)
     total = 0
+    k_out = 0
+    two = np.empty((2, 3))
     for k in range(K):
         cx, cy, rk = c[k, 0], c[k, 1], r[k]
         n = _gather(cx, cy, rk, reach[k], index, H, W, ring)
@@ -315,21 +331,33 @@ def refine(px, py, ct, st, index, H, W, c, r, reach, band_px, cos_tol, max_step)
             m = _select(px, py, ct, st, ring, n, cx, cy, rk, width, cos_tol, sel)
             cx, cy, rk = _gauss_newton(px, py, sel, m, cx, cy, rk, 1 if p == 0 else 2, max_step)
         cx, cy, rk = _thin_fit(px, py, ct, st, index, H, W, cx, cy, rk, cos_tol, ring, sel)
-        c[k, 0], c[k, 1], r[k] = cx, cy, rk
-        n = _gather(cx, cy, rk, band_px + 0.5, index, H, W, ring)
-        m = _select(px, py, ct, st, ring, n, cx, cy, rk, band_px, cos_tol, sel)
-        if total + m > cap:
-            while total + m > cap:
-                cap *= 2
-            hyp2 = np.empty(cap, np.int64)
-            pnt2 = np.empty(cap, np.int64)
-            hyp2[:total] = hyp[:total]
-            pnt2[:total] = pnt[:total]
-            hyp, pnt = hyp2, pnt2
-        hyp[total:total + m] = k
-        pnt[total:total + m] = sel[:m]
-        total += m
-    return c, r, hyp[:total], pnt[:total]
+        n_new = 1
+        two[0, 0], two[0, 1], two[0, 2] = cx, cy, rk
+        if split and _two_edges(px, py, ct, st, labels, index, H, W, cx, cy, rk, cos_tol, ring, sel, aux,
+                                concave, none, two):
+            n_new = 2
+            sibling[k_out] = k_out + 1
+            sibling[k_out + 1] = k_out
+        for q in range(n_new):
+            cx, cy, rk = two[q, 0], two[q, 1], two[q, 2]
+            c_out[k_out, 0], c_out[k_out, 1], r_out[k_out] = cx, cy, rk
+            parent[k_out] = k
+            n = _gather(cx, cy, rk, band_px + 0.5, index, H, W, ring)
+            m = _select(px, py, ct, st, ring, n, cx, cy, rk, band_px, cos_tol, sel)
+            if total + m > cap:
+                while total + m > cap:
+                    cap *= 2
+                hyp2 = np.empty(cap, np.int64)
+                pnt2 = np.empty(cap, np.int64)
+                hyp2[:total] = hyp[:total]
+                pnt2[:total] = pnt[:total]
+                hyp, pnt = hyp2, pnt2
+            hyp[total:total + m] = k_out
+            pnt[total:total + m] = sel[:m]
+            total += m
+            k_out += 1
+    return (c_out[:k_out].copy(), r_out[:k_out].copy(), hyp[:total], pnt[:total], parent[:k_out].copy(),
+            sibling[:k_out].copy())
 
 
 @_jit
@@ -375,6 +403,163 @@ def _thin_fit(px, py, ct, st, index, H, W, cx, cy, r, cos_tol, ring, sel,
     return _gauss_newton(px, py, ring, kept, cx, cy, r, 3, 3.0)
 
 
+#: :func:`_two_edges`: half-width of the ring searched for a second edge, px (two edges nearer
+#: than the refinement's bands, 1.5-4.5 px, are averaged by it)
+SPLIT_REACH_PX = 4.0
+#: an arc bin holds two edges when its points spread over more than this, px (as _thin_fit)
+SPLIT_THICK_PX = 1.5
+#: least fraction of the circle's arc bins holding two edges for a split
+SPLIT_MIN_THICK = 0.15
+#: each edge's seed points: within this of the bin's outermost / innermost point, px (the
+#: points' jitter and pixel rounding, about +-0.5 px)
+SPLIT_CLUSTER_PX = 0.75
+#: the two circles must differ by at least this in radius or centre, px
+SPLIT_MIN_APART_PX = 0.75
+#: least fraction of the ring's points within 1 px of one of the two circles
+SPLIT_EXPLAINED = 0.8
+
+
+@_jit
+def _kind_filter(labels, pts, n, concave, none):  # pragma: no cover - compiled
+    """Keep (in place, first ``n`` of ``pts``) the points of one edge kind, as
+    :func:`rangesim.features._edge_points.one_edge` (the majority of concave against other
+    labelled points; unlabelled kept; ``labels`` empty: all); their number returned, and the
+    rule's two flags (drop concave, drop other) for later rings of the same circle."""
+    if len(labels) == 0:
+        return n, False, False
+    n_c = 0
+    n_o = 0
+    for q in range(n):
+        lab = labels[pts[q]]
+        if lab == concave:
+            n_c += 1
+        elif lab != none:
+            n_o += 1
+    drop_c = n_c > 0 and n_o > 0 and n_c <= n_o
+    drop_o = n_c > 0 and n_o > 0 and n_c > n_o
+    return _apply_kind(labels, pts, n, drop_c, drop_o, concave, none), drop_c, drop_o
+
+
+@_jit
+def _apply_kind(labels, pts, n, drop_c, drop_o, concave, none):  # pragma: no cover - compiled
+    """Drop (in place) the points of ``pts[:n]`` that the flags of :func:`_kind_filter` leave out."""
+    if len(labels) == 0 or not (drop_c or drop_o):
+        return n
+    m = 0
+    for q in range(n):
+        lab = labels[pts[q]]
+        if not ((drop_c and lab == concave) or (drop_o and lab != concave and lab != none)):
+            pts[m] = pts[q]
+            m += 1
+    return m
+
+
+@_jit
+def _trimmed(px, py, pts, n, cx, cy, r, passes=2):  # pragma: no cover - compiled
+    """Refit ``pts[:n]`` without the points farther from the circle than 2.5 times their
+    median distance (at least ``SPLIT_CLUSTER_PX``), ``passes`` times: a seed whose bins
+    caught a third edge (a crease beside the rim) is pulled back onto the one most of it
+    lies on. Reorders ``pts[:n]``."""
+    dist = np.empty(n)
+    for _ in range(passes):
+        for q in range(n):
+            dist[q] = abs(_norm(px[pts[q]] - cx, py[pts[q]] - cy) - r)
+        tol = max(2.5 * np.median(dist[:n]), SPLIT_CLUSTER_PX)
+        m = 0
+        for q in range(n):
+            if dist[q] <= tol:
+                pts[m], pts[q] = pts[q], pts[m]
+                m += 1
+        if m < 5 or m == n:
+            break
+        cx, cy, r = _gauss_newton(px, py, pts, m, cx, cy, r, 3, 3.0)
+        n = m
+    return cx, cy, r
+
+
+@_jit
+def _two_edges(px, py, ct, st, labels, index, H, W, cx, cy, r, cos_tol, ring, sel, aux, concave, none,
+               out):  # pragma: no cover - compiled
+    """Whether a refined circle averages two near-concentric edges; if so, the two circles.
+
+    Two circles nearly concentric, or internally nearly tangent (a tapped hole's rim and its
+    crests seen down the hole, a counterbore's step), lie within the refinement's bands of
+    each other over much of their arc, so a fit to the ring lands between them. The ring of
+    ``SPLIT_REACH_PX`` around the circle (radial points of its own edge kind) is cut into
+    bins of about 2 px of arc; a bin holds two edges when its points spread over more than
+    ``SPLIT_THICK_PX``. With at least ``SPLIT_MIN_THICK`` of the bins so, the outermost and
+    innermost points of those bins (within ``SPLIT_CLUSTER_PX``) seed two circles, each then
+    refitted on the whole ring in bands narrowing to 1 and 0.75 px, so each locks onto its
+    own edge (where they coincide, both keep those points). Written to ``out`` (2, 3): (cx,
+    cy, r) of the outer and the inner circle; False (``out`` untouched) when the ring has one
+    edge, a seed is too small or the two circles come out within ``SPLIT_MIN_APART_PX``.
+    """
+    reach = SPLIT_REACH_PX
+    n = _gather(cx, cy, r, reach, index, H, W, ring)
+    m = _select(px, py, ct, st, ring, n, cx, cy, r, reach, cos_tol, sel)
+    m, drop_c, drop_o = _kind_filter(labels, sel, m, concave, none)
+    nb = max(int(np.rint(np.pi * r)), 8)  # bins of about 2 px of arc
+    lo = np.full(nb, np.inf)
+    hi = np.full(nb, -np.inf)
+    for q in range(m):
+        p = sel[q]
+        dx, dy = px[p] - cx, py[p] - cy
+        e = _norm(dx, dy) - r
+        b = min(int((np.arctan2(dy, dx) % (2 * np.pi)) / (2 * np.pi) * nb), nb - 1)
+        ring[q] = b  # the bin of each selected point (the ring is gathered again below)
+        lo[b] = min(lo[b], e)
+        hi[b] = max(hi[b], e)
+    n_thick = 0
+    for b in range(nb):
+        if hi[b] - lo[b] > SPLIT_THICK_PX:
+            n_thick += 1
+    if n_thick < SPLIT_MIN_THICK * nb:
+        return False
+    for side in range(2):  # 0: outer, 1: inner
+        k = 0
+        for q in range(m):
+            p = sel[q]
+            b = ring[q]
+            if hi[b] - lo[b] > SPLIT_THICK_PX:
+                e = _norm(px[p] - cx, py[p] - cy) - r
+                if (side == 0 and e >= hi[b] - SPLIT_CLUSTER_PX) or (side == 1 and e <= lo[b] + SPLIT_CLUSTER_PX):
+                    aux[k] = p
+                    k += 1
+        if k < 5:
+            return False
+        ox, oy, orr = _gauss_newton(px, py, aux, k, cx, cy, r, 3, 3.0)
+        ox, oy, orr = _trimmed(px, py, aux, k, ox, oy, orr)
+        out[side, 0], out[side, 1], out[side, 2] = ox, oy, orr
+    for side in range(2):  # locked refits, each on the whole ring about its own circle
+        ox, oy, orr = out[side, 0], out[side, 1], out[side, 2]
+        n2 = _gather(ox, oy, orr, 2.0, index, H, W, aux)
+        n2 = _apply_kind(labels, aux, n2, drop_c, drop_o, concave, none)
+        for width in (1.0, 0.75):
+            k = _select(px, py, ct, st, aux, n2, ox, oy, orr, width, cos_tol, ring)
+            ox, oy, orr = _gauss_newton(px, py, ring, k, ox, oy, orr, 2, 3.0)
+        out[side, 0], out[side, 1], out[side, 2] = ox, oy, orr
+    apart = max(abs(out[0, 2] - out[1, 2]), _norm(out[0, 0] - out[1, 0], out[0, 1] - out[1, 1]))
+    if not apart >= SPLIT_MIN_APART_PX:
+        out[0, 0], out[0, 1], out[0, 2] = cx, cy, r
+        return False
+    # the ring must be those two edges: where a third runs between or beside them (a crease
+    # beside a rim), the two circles are not the ring's edges and the averaged one is kept
+    n = _gather(cx, cy, r, reach, index, H, W, ring)
+    m = _select(px, py, ct, st, ring, n, cx, cy, r, reach, cos_tol, sel)
+    m = _apply_kind(labels, sel, m, drop_c, drop_o, concave, none)
+    near = 0
+    for q in range(m):
+        p = sel[q]
+        d0 = abs(_norm(px[p] - out[0, 0], py[p] - out[0, 1]) - out[0, 2])
+        d1 = abs(_norm(px[p] - out[1, 0], py[p] - out[1, 1]) - out[1, 2])
+        if min(d0, d1) <= 1.0:
+            near += 1
+    if near < SPLIT_EXPLAINED * m:
+        out[0, 0], out[0, 1], out[0, 2] = cx, cy, r
+        return False
+    return True
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _dropped(lab, drop_concave, drop_other, concave, none):  # pragma: no cover - compiled
     """Whether :func:`claim`'s one_edge rule leaves out a point labelled ``lab``."""
@@ -391,9 +576,21 @@ def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, 
     concave against other labelled points, unlabelled ones kept; ``labels`` empty: all), and
     is kept when all of them are free or the free ones still cover ``min_support`` of
     ``max(round(2 pi r), 8)`` equal angular bins; a kept candidate takes its points.
-    Returns the kept candidates, in ``order``'s order.
+    Returns the kept candidates, in ``order``'s order. (:func:`claim_pairs` with no pairs.)
     """
-    used = np.zeros(len(x), np.bool_)
+    return claim_pairs(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, none,
+                       np.full(len(r), -1, np.int64))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def claim_pairs(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, none,
+                sibling):  # pragma: no cover - compiled
+    """:func:`claim`, where the two circles of a split hypothesis (``sibling[j]``, -1 for
+    none) share their points: two edges that meet (a rim and the circle tangent inside it)
+    both run through the pixels where they meet, so a point taken by the sibling still covers
+    its bin; points taken by any other circle do not (a ghost across two rims, a duplicate).
+    """
+    owner = np.full(len(x), -1, np.int64)
     kept = np.empty(len(order), np.int64)
     n_kept = 0
     two_pi = 2 * np.pi
@@ -423,9 +620,10 @@ def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, 
             if len(labels) > 0 and _dropped(labels[p], drop_concave, drop_other, concave, none):
                 all_free = False  # one_edge dropped it: the candidate lost points
                 continue
-            if used[p]:
+            if owner[p] >= 0:
                 all_free = False
-                continue
+                if owner[p] != sibling[j] or sibling[j] < 0:
+                    continue
             ang = np.arctan2(y[p] - cy[j], x[p] - cx[j]) % two_pi
             occ[int(np.floor(ang / two_pi * n_bins)) % n_bins] = True
         if not all_free:
@@ -433,8 +631,8 @@ def claim(order, starts, points, labels, x, y, cx, cy, r, min_support, concave, 
                 continue
         for k in range(a, b):
             p = points[k]
-            if not (len(labels) > 0 and _dropped(labels[p], drop_concave, drop_other, concave, none)):
-                used[p] = True
+            if owner[p] < 0 and not (len(labels) > 0 and _dropped(labels[p], drop_concave, drop_other, concave, none)):
+                owner[p] = j
         kept[n_kept] = j
         n_kept += 1
     return kept[:n_kept]

@@ -13,7 +13,7 @@ from rangesim.core.memory import check_memory
 from rangesim.features._arc_ellipses import DIRECTION_TOL_DEG as GROW_DIRECTION_TOL_DEG
 from rangesim.features._arc_ellipses import GROW_MARGIN_PX
 from rangesim.features._arc_ellipses import coverage as ellipse_coverage
-from rangesim.features._circle_kernels import centres_and_radii, claim, refine
+from rangesim.features._circle_kernels import centres_and_radii, claim_pairs, refine
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._conic_kernels import grow_few
 from rangesim.features._edge_points import angular_coverage, edge_points, point_labels
@@ -92,7 +92,7 @@ def circle_hypotheses(
                     max_hypotheses, cell_px, radius_step, REL_CELL if rel_cell is None else rel_cell)
     if h is None:
         return []
-    c, r, votes, ph, pp = h
+    c, r, votes, ph, pp, _ = h
     n_in = np.bincount(ph, minlength=len(r))
     order = np.argsort(-n_in / (2 * np.pi * r), kind="stable")
     by_h = np.split(pp[np.argsort(ph, kind="stable")], np.cumsum(n_in)[:-1])
@@ -101,10 +101,13 @@ def circle_hypotheses(
 
 def _hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, shape: tuple[int, int], radii,
                 angle_tol_deg: float, threshold: float, band_px: float, max_hypotheses: int, cell_px: float,
-                radius_step: float, rel_cell: float):
-    """Refined circle hypotheses as arrays: centres (K, 2), radii (K,), votes (K,), and the
-    (hypothesis, point) pairs of their inliers; None when there are none. ``xy`` (N, 2): the
-    edge points, ``pixels`` (N, 2) int: their pixels (column, row)."""
+                radius_step: float, rel_cell: float, labels: np.ndarray | None = None, split: bool = False):
+    """Refined circle hypotheses as arrays: centres (K, 2), radii (K,), votes (K,), the
+    (hypothesis, point) pairs of their inliers, and each one's sibling (K,) (the other circle
+    of a hypothesis split in two, -1 for none); None when there are none. ``xy`` (N, 2): the
+    edge points, ``pixels`` (N, 2) int: their pixels (column, row); ``labels`` (N,) uint8:
+    their edge kinds (None: a bare mask); ``split``: replace a hypothesis whose ring holds two
+    near-concentric edges by the two circles (:func:`~._circle_kernels._two_edges`)."""
     if len(xy) < 5:
         return None
     bands = radius_bands(shape, radii, cell_px, rel_cell)
@@ -139,10 +142,11 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, shape: tu
     index[pixels[:, 1] * shape[1] + pixels[:, 0]] = np.arange(len(xy), dtype=np.int32)
     hcell = cell[hk]
     reach = band_px + 1.0 + 0.5 * hcell
-    c, r, ph, pp = refine(px, py, ct, st, index, shape[0],
-                          shape[1], c, r, reach, float(band_px), float(np.cos(np.deg2rad(DIRECTION_TOL_DEG))),
-                          float(hcell.max()) + 3.0)
-    return c, r, votes, ph, pp
+    labels = np.zeros(0, np.uint8) if labels is None else np.ascontiguousarray(labels, np.uint8)
+    c, r, ph, pp, parent, sibling = refine(px, py, ct, st, index, shape[0], shape[1], c, r, reach, float(band_px),
+                                           float(np.cos(np.deg2rad(DIRECTION_TOL_DEG))), float(hcell.max()) + 3.0,
+                                           labels, bool(split), int(EdgeLabel.CONCAVE), int(EdgeLabel.NONE))
+    return c, r, votes[parent], ph, pp, sibling
 
 
 def _support(xy: np.ndarray, c: np.ndarray, r: float) -> tuple[np.ndarray, float, float, float, float]:
@@ -186,6 +190,7 @@ def circles(
     angle_tol_deg: float = 4.0,
     max_residual: float = 0.8,
     keep: np.ndarray | None = None,
+    split_tangent: bool = False,
 ) -> list[Circle]:
     """Circles in an edge map, by the direction-guided Hough transform.
 
@@ -211,6 +216,16 @@ def circles(
         Largest RMS distance of the supporting edge pixels to the circle, pixels.
     keep : (H, W) bool, optional
         Only these pixels vote.
+    split_tangent : bool
+        Also separate two near-concentric circles whose edges lie within a few pixels of each
+        other (internally nearly tangent: a rim and an outline seen inside it), which the
+        refinement otherwise averages into one circle 0.5-1.5 px off both: a hypothesis whose
+        ring (4 px) holds two edges over at least 15 % of its arc, and nothing else, becomes
+        the two circles, each refitted on a narrowing band so that it locks onto its own edge
+        (:func:`~._circle_kernels._two_edges`); the two share the points where they meet in
+        the support test. Off by default: on the Green Piece's tapped holes, where a third
+        edge (a crease beside the rim) runs between them, it finds the crest outlines but no
+        more rims, and it costs about 20 % more time (``benchmarks/bench_hough.py``).
 
     Returns
     -------
@@ -237,10 +252,15 @@ def circles(
     """
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
-    h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, 1.0, 200, 1.0, 1.0, REL_CELL)
+    labels = point_labels(edge_map, pixels)
+    labels = np.zeros(0, np.uint8) if labels is None else np.ascontiguousarray(labels, np.uint8)
+    # split_tangent: a hypothesis averaging two near-concentric edges (a rim and a circle
+    # nearly tangent inside it) becomes both circles, which then share the points where they meet
+    h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, 1.0, 200, 1.0, 1.0, REL_CELL,
+                    labels, split=split_tangent)
     if h is None:
         return []
-    c, r, votes, ph, pp = h
+    c, r, votes, ph, pp, sibling = h
     cov, rms = _coverage(xy, c, r, ph, pp)
     order = np.argsort(-cov, kind="stable")
     order = order[(cov[order] >= min_support) & (rms[order] <= max_residual)]
@@ -250,11 +270,9 @@ def circles(
     # (compiled: one_edge and the angular coverage of the free points, per candidate)
     points = pp[np.argsort(ph, kind="stable")]
     starts = np.concatenate([[0], np.cumsum(np.bincount(ph, minlength=len(r)))])
-    labels = point_labels(edge_map, pixels)
-    labels = np.zeros(0, np.uint8) if labels is None else np.ascontiguousarray(labels, np.uint8)
-    kept = claim(order.astype(np.int64), starts, points.astype(np.int64), labels, xy[:, 0].copy(), xy[:, 1].copy(),
-                 c[:, 0].copy(), c[:, 1].copy(), np.asarray(r, np.float64), float(min_support),
-                 int(EdgeLabel.CONCAVE), int(EdgeLabel.NONE))
+    kept = claim_pairs(order.astype(np.int64), starts, points.astype(np.int64), labels, xy[:, 0].copy(),
+                       xy[:, 1].copy(), c[:, 0].copy(), c[:, 1].copy(), np.asarray(r, np.float64), float(min_support),
+                       int(EdgeLabel.CONCAVE), int(EdgeLabel.NONE), sibling)
     found = [Circle((float(c[j, 0]), float(c[j, 1])), float(r[j]), int(votes[j]), float(cov[j]), float(rms[j]))
              for j in kept]
     return [f for f, piece in zip(found, _ellipse_pieces(found, xy, theta)) if not piece]
