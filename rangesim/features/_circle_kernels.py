@@ -330,10 +330,13 @@ def refine(px, py, ct, st, index, H, W, c, r, reach, band_px, cos_tol, max_step,
             width = reach[k] if p == 0 else band_px + 0.5
             m = _select(px, py, ct, st, ring, n, cx, cy, rk, width, cos_tol, sel)
             cx, cy, rk = _gauss_newton(px, py, sel, m, cx, cy, rk, 1 if p == 0 else 2, max_step)
-        cx, cy, rk = _thin_fit(px, py, ct, st, index, H, W, cx, cy, rk, cos_tol, ring, sel)
+        cx, cy, rk, thick = _thin_fit(px, py, ct, st, index, H, W, cx, cy, rk, cos_tol, ring, sel)
         n_new = 1
         two[0, 0], two[0, 1], two[0, 2] = cx, cy, rk
-        if split and _two_edges(px, py, ct, st, labels, index, H, W, cx, cy, rk, cos_tol, ring, sel, aux,
+        # a ring with two edges is thick over much of its arc already within _thin_fit's 3 px
+        # (half of _two_edges' threshold there, as its ring is narrower): the others are not
+        # looked at again
+        if split and thick >= 0.5 * SPLIT_MIN_THICK and _two_edges(px, py, ct, st, labels, index, H, W, cx, cy, rk, cos_tol, ring, sel, aux,
                                 concave, none, two):
             n_new = 2
             sibling[k_out] = k_out + 1
@@ -369,7 +372,9 @@ def _thin_fit(px, py, ct, st, index, H, W, cx, cy, r, cos_tol, ring, sel,
     of edge pixels), the radially oriented pixels within ``reach`` px of it, per 2 px of arc,
     spread over more than ``thick`` px: those stretches are left out, so the fit follows the
     thin rim rather than the middle of the band. The refit (3 steps) is kept when at least a
-    quarter of the circle is thin (a short arc alone is ill-conditioned).
+    quarter of the circle is thin (a short arc alone is ill-conditioned). Returns the circle
+    and the fraction of its bins that were thick (:func:`refine` looks for two edges only
+    in rings with enough of them).
     """
     n = _gather(cx, cy, r, reach, index, H, W, ring)
     nb = max(int(np.rint(np.pi * r)), 8)  # bins of about 2 px of arc
@@ -389,6 +394,10 @@ def _thin_fit(px, py, ct, st, index, H, W, cx, cy, r, cos_tol, ring, sel,
             ring[m] = p
             sel[m] = b
             m += 1
+    n_thick = 0
+    for b in range(nb):
+        if hi[b] - lo[b] > thick:
+            n_thick += 1
     kept = 0
     for q in range(m):
         p = ring[q]
@@ -399,8 +408,9 @@ def _thin_fit(px, py, ct, st, index, H, W, cx, cy, r, cos_tol, ring, sel,
                 ring[kept] = p
                 kept += 1
     if kept < 0.25 * 2 * np.pi * r:
-        return cx, cy, r
-    return _gauss_newton(px, py, ring, kept, cx, cy, r, 3, 3.0)
+        return cx, cy, r, n_thick / nb
+    cx, cy, r = _gauss_newton(px, py, ring, kept, cx, cy, r, 3, 3.0)
+    return cx, cy, r, n_thick / nb
 
 
 #: :func:`_two_edges`: half-width of the ring searched for a second edge, px (two edges nearer
