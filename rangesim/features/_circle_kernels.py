@@ -554,9 +554,7 @@ def _two_edges(px, py, ct, st, labels, index, H, W, cx, cy, r, cos_tol, ring, se
         return False
     # the ring must be those two edges: where a third runs between or beside them (a crease
     # beside a rim), the two circles are not the ring's edges and the averaged one is kept
-    n = _gather(cx, cy, r, reach, index, H, W, ring)
-    m = _select(px, py, ct, st, ring, n, cx, cy, r, reach, cos_tol, sel)
-    m = _apply_kind(labels, sel, m, drop_c, drop_o, concave, none)
+    # (sel[:m] still holds the ring's radial points of the edge kind, as found above)
     near = 0
     for q in range(m):
         p = sel[q]
