@@ -122,3 +122,31 @@ def test_scans_without_a_matcher_keep_the_3x3_operators():
     assert np.array_equal(em.mask, em1.mask) and np.array_equal(em.labels, em1.labels)
     with pytest.raises(ValueError, match="stride"):
         gradient(scan, stride=0)
+
+
+@pytest.mark.parametrize("edge_deg", [0.0, 30.0, 135.0])
+@pytest.mark.parametrize("convex", [True, False])
+def test_curvature_fits_blocks_past_the_matchers_rounding(edge_deg, convex):
+    """The same block-matched 40 degree crease: a 5 x 5 quadric (the default before) fits the
+    rounding alone and finds nothing; the default block on such a scan (13 px for the 9 px
+    window) reaches the faces and marks the crease as one line of its type."""
+    from rangesim.edges import curvature
+    from rangesim.edges._curvature import matching_block
+
+    assert matching_block(None) == 5 and matching_block(WINDOW) == 13
+    roof = synthetic_roof(40.0, edge_deg, convex, size=91)
+    scan = block_matched(roof, noise_px=0.05, seed=int(edge_deg) + convex)
+    dist = roof_distance(scan, edge_deg)
+    inner = np.zeros(scan.shape, bool)
+    inner[15:-15, 15:-15] = True
+    rows, cols = np.nonzero(inner & (dist <= 0.5))
+    length = max(np.unique(rows).size, np.unique(cols).size)
+    em = curvature(scan)
+    assert em.params["window"] == 13
+    found = em.mask & inner
+    assert found.sum() >= 0.8 * length
+    assert np.mean(dist[found] <= 1.5) >= 0.95
+    assert (em.labels[found] == (EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE)).mean() >= 0.95
+    assert (curvature(scan, window=5).mask & inner).sum() <= 0.2 * length
+    # without a matcher the block stays 5
+    assert curvature(synthetic_roof(40.0, edge_deg, convex)).params["window"] == 5
