@@ -83,6 +83,19 @@ def test_strided_pairs_are_cut_by_gaps_and_jumps_between_their_ends():
     assert not cut[1, :16].any() and cut[1, 17:].all()       # other rows: cut only where leaving the image
 
 
+def _matched_crease(edge_deg: float, convex: bool):
+    """A block-matched 40 degree crease (91 x 91): the scan, each pixel's distance to the
+    crease line (px), the inner region away from the border, the crease pixels' rows and
+    columns there and the crease's length in pixels of an 8-connected line."""
+    roof = synthetic_roof(40.0, edge_deg, convex, size=91)
+    scan = block_matched(roof, noise_px=0.05, seed=int(edge_deg) + convex)
+    dist = roof_distance(scan, edge_deg)
+    inner = np.zeros(scan.shape, bool)
+    inner[15:-15, 15:-15] = True
+    rows, cols = np.nonzero(inner & (dist <= 0.5))
+    return scan, dist, inner, rows, cols, max(np.unique(rows).size, np.unique(cols).size)
+
+
 @pytest.mark.parametrize("edge_deg", [0.0, 30.0, 90.0, 135.0])
 @pytest.mark.parametrize("convex", [True, False])
 def test_gradient_finds_a_block_matched_crease_at_the_window_scale(edge_deg, convex):
@@ -90,13 +103,7 @@ def test_gradient_finds_a_block_matched_crease_at_the_window_scale(edge_deg, con
     3 x 3 operators (``stride=1``, the detector before) see a bend spread over nine pixels under
     the noise and find almost none of it; at the window's stride the crease is one line on
     the crease, of its type, its strength near the bend."""
-    roof = synthetic_roof(40.0, edge_deg, convex, size=91)
-    scan = block_matched(roof, noise_px=0.05, seed=int(edge_deg) + convex)
-    dist = roof_distance(scan, edge_deg)
-    inner = np.zeros(scan.shape, bool)
-    inner[15:-15, 15:-15] = True
-    rows, cols = np.nonzero(inner & (dist <= 0.5))
-    length = max(np.unique(rows).size, np.unique(cols).size)  # pixels of an 8-connected line
+    scan, dist, inner, rows, cols, length = _matched_crease(edge_deg, convex)
     em = gradient(scan)
     assert em.params["stride"] == WINDOW
     found = em.mask & inner
@@ -134,13 +141,7 @@ def test_curvature_fits_blocks_past_the_matchers_rounding(edge_deg, convex):
     from rangesim.edges._curvature import matching_block
 
     assert matching_block(None) == 5 and matching_block(WINDOW) == 13
-    roof = synthetic_roof(40.0, edge_deg, convex, size=91)
-    scan = block_matched(roof, noise_px=0.05, seed=int(edge_deg) + convex)
-    dist = roof_distance(scan, edge_deg)
-    inner = np.zeros(scan.shape, bool)
-    inner[15:-15, 15:-15] = True
-    rows, cols = np.nonzero(inner & (dist <= 0.5))
-    length = max(np.unique(rows).size, np.unique(cols).size)
+    scan, dist, inner, rows, cols, length = _matched_crease(edge_deg, convex)
     em = curvature(scan)
     assert em.params["window"] == 13
     found = em.mask & inner
