@@ -85,3 +85,16 @@ def test_crease_sigma_within_the_rule_range():
     a = crease_sigma(z, disc.pairs, disc.touching, geo.footprint, valid, 0.8)
     b = crease_sigma(z, disc.pairs, disc.touching, geo.footprint, valid, 0.8)
     assert a == b and 1.0 <= a <= 3.0
+
+
+def test_search_tiles_whole_image_up_to_512_squared_else_a_quarter():
+    """Scans up to 512 x 512 search on every pixel (the benchmark's 256 x 256 among them);
+    larger ones on 128-px tiles every 256 px, a quarter of the pixels."""
+    from rangesim.edges._gradient import _search_tiles
+
+    assert _search_tiles((256, 256)) == [(slice(0, 256), slice(0, 256))]
+    tiles = _search_tiles((1024, 1024))
+    covered = np.zeros((1024, 1024), bool)
+    for t in tiles:
+        covered[t] = True
+    assert len(tiles) == 16 and covered.mean() == 0.25

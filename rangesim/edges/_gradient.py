@@ -483,11 +483,11 @@ def _near_jump(touching: np.ndarray, sigma: float) -> np.ndarray:
     return near
 
 
-def _noise_floor_threshold(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, inv_fp: np.ndarray,
-                           valid: np.ndarray, sigma: float, floor: float) -> float:
-    """The noisy-scan threshold (degrees of bend estimate) :func:`gradient` sets at smoothing
-    ``sigma``: ``max(floor, k * median)`` of the noise's bend ``2 atan(response)``, the
-    responses as there (NaN within ``ceil(2 sigma)`` px of a jump), every 4th row and column."""
+def _noise_bends(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, inv_fp: np.ndarray,
+                 valid: np.ndarray, sigma: float) -> np.ndarray:
+    """The noise's bend ``2 atan(response)`` (degrees of bend estimate) at smoothing ``sigma``
+    on every 4th row and column of valid pixels, the responses as :func:`gradient` has them
+    (NaN within ``ceil(2 sigma)`` px of a jump, dropped here)."""
     zs = _nan_gaussian(z, sigma)
     near = _near_jump(touching, sigma)
     resp = second_differences(zs, pairs, skip=near)
@@ -496,7 +496,25 @@ def _noise_floor_threshold(z: np.ndarray, pairs: np.ndarray, touching: np.ndarra
         np.fmax(mag, np.abs(r[::4, ::4]), out=mag)
     mag *= np.where(near[::4, ::4], np.float32(np.nan), inv_fp[::4, ::4])
     bend = np.degrees(2 * np.arctan(mag))
-    return noise_threshold(bend, valid[::4, ::4], floor, NOISE_K_GRADIENT, stride=1)
+    return bend[valid[::4, ::4] & np.isfinite(bend)]
+
+
+#: images larger than this (pixels) search their smoothing on tiles (:func:`_search_tiles`)
+SEARCH_PIXELS = 512 * 512
+#: side and spacing (pixels) of those tiles: a quarter of the image, every other tile
+SEARCH_TILE, SEARCH_SPACING = 128, 256
+
+
+def _search_tiles(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
+    """Where :func:`crease_sigma` measures the noise: the whole image up to
+    :data:`SEARCH_PIXELS`, else :data:`SEARCH_TILE`-px tiles every :data:`SEARCH_SPACING` px
+    (a quarter of the pixels: the noise median is a scan-wide figure, and the candidates'
+    smoothing is what a search costs)."""
+    h, w = shape
+    if h * w <= SEARCH_PIXELS:
+        return [(slice(0, h), slice(0, w))]
+    return [(slice(i, i + SEARCH_TILE), slice(j, j + SEARCH_TILE))
+            for i in range(0, h, SEARCH_SPACING) for j in range(0, w, SEARCH_SPACING)]
 
 
 def crease_sigma(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, footprint: np.ndarray,
@@ -510,8 +528,8 @@ def crease_sigma(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, footpri
     3 px: the floor then means a 58-degree crease), and the responses within 2 sigma px of
     every jump and shadow are dropped (6 px at 3 px: the creases of narrow chamfers and
     faces beside an outline). So the scale is chosen from the measured noise: at each
-    candidate sigma the threshold :func:`gradient` would set (:func:`_noise_floor_threshold`,
-    ``max(floor, k * median)`` of the noise's bend) over that gain is the least true bend a
+    candidate sigma the threshold :func:`gradient` would set (``max(floor, k * median)``
+    of the noise's bend, :func:`_noise_bends`; on tiles of large images, :func:`_search_tiles`) over that gain is the least true bend a
     crease needs; from the rule's sigma down in steps of :data:`SIGMA_STEP` to 1 px, a smaller
     sigma is taken where that bend is lower by more than :data:`SIGMA_MARGIN`. At the White
     Scanner preset's noise the rule's ~1 px stays; the INRIA preset's 0.8 gets ~1.75 px.
@@ -538,11 +556,19 @@ def crease_sigma(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, footpri
         Smoothing standard deviation, pixels, in ``[1, clip(4 noise, 1, 3)]``.
     """
     top = float(np.clip(4 * noise, 1.0, 3.0))
+    if top <= 1.0:
+        return top                      # nothing smaller to try
     inv_fp = np.float32(1) / np.asarray(footprint, np.float32)
+    tiles = _search_tiles(z.shape)
     best, best_bend = top, None
     for sigma in [top, *np.arange(np.ceil(top / SIGMA_STEP - 1) * SIGMA_STEP, 1.0 - 1e-9, -SIGMA_STEP)]:
         sigma = float(sigma)
-        bend = _noise_floor_threshold(z, pairs, touching, inv_fp, valid, sigma, floor) / smoothing_gain(sigma)
+        noise_bend = np.concatenate([_noise_bends(z[t], pairs[(slice(None), *t)], touching[t], inv_fp[t], valid[t],
+                                                  sigma) for t in tiles])
+        # the threshold gradient would set at this sigma, over the share of a bend it sees
+        threshold = noise_threshold(noise_bend[None], np.ones((1, noise_bend.size), bool), floor, NOISE_K_GRADIENT,
+                                    stride=1)
+        bend = threshold / smoothing_gain(sigma)
         if best_bend is None:
             best_bend = bend
         elif bend < (1 - SIGMA_MARGIN) * best_bend:
