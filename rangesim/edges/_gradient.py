@@ -22,7 +22,7 @@ from rangesim.edges._noise import (
     raised_threshold,
 )
 from rangesim.edges._scan_access import scan_depth
-from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, thin_staircases
+from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, ridge_offsets, thin_staircases
 from rangesim.edges._trig import above_tan_half, bend_degrees, half_atan2
 from rangesim.edges.edgemap import RIM, EdgeMap
 
@@ -844,6 +844,17 @@ def gradient(
     labels.ravel()[ci] = np.where(dominant_positive, EdgeLabel.CONVEX, EdgeLabel.CONCAVE)
     labels[rim] = RIM
     labels[jump] = EdgeLabel.JUMP
+    # a crease between pixel centres: the kept pixel moved along the crease's normal to the
+    # vertex of the ridge it was thinned on (its own direction, before jumps overwrite it)
+    offset = disc.offsets_at(jump | rim)
+    if nms:
+        # unsmoothed, a roof's response is a 2-sample triangle (a parabola goes half the way)
+        peak = "parabola" if sigma > 0 or stride > 1 else "triangle"
+        # (none within JUMP_CLEARANCE px of a discontinuity: the neighbour across is the
+        # step's own slope there, not the roof's, whatever jump_clearance kept)
+        placed = crease & ~jump & ~rim
+        placed &= ~near_mask(placed, jump | disc.occluded | rim, JUMP_CLEARANCE)
+        offset += ridge_offsets(ridge, direction, placed, peak=peak)
     np.copyto(direction, disc.direction, where=np.isfinite(disc.direction))
     params = {
         "threshold": float(threshold), "jump_threshold": float(jump_threshold), "nms": bool(nms),
@@ -851,5 +862,5 @@ def gradient(
         "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=bend, direction=direction,
-                   offset=disc.offsets_at(jump | rim),
+                   offset=offset,
                    method="gradient", params=params)
