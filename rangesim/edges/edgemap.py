@@ -51,9 +51,9 @@ class EdgeMap:
         read at edge pixels only. The detectors set it at jump and rim pixels: an occluding
         contour lies between the last pixel of the near surface and the first beyond it, on
         average half a pixel spacing from the near pixel's centre
-        (:func:`~rangesim.edges._discontinuities.contour_offsets`). ``gradient`` also sets it
-        at its crease pixels, to the peak of the crease response across the line
-        (:func:`~rangesim.edges._thinning.ridge_offsets`, within +-0.5 px); the other
+        (:func:`~rangesim.edges._discontinuities.contour_offsets`). ``gradient`` and ``normal``
+        also set it at their crease pixels, to the peak of the crease response across the
+        line (:func:`~rangesim.edges._thinning.ridge_offsets`, within +-0.5 px); the other
         detectors leave creases at 0. The feature finders fit their circles, ellipses and
         lines to the edge pixels moved by it. None: the pixel centres.
     """
