@@ -6,7 +6,6 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.ndimage import correlate1d, gaussian_filter1d
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import central_difference
@@ -459,14 +458,13 @@ def smoothing_gain(sigma: float) -> float:
     if sigma <= 0:
         return 1.0
     x = np.arange(-40, 41, dtype=np.float64)
+    rows = 2 * int(np.ceil(3 * sigma)) + 3           # the kernel's reach either side of the middle row
     seen = []
     for c in (0.0, 0.25, 0.5, 0.75):
         z = np.maximum(x - c, 0.0)                     # a roof of slope change 1 per pixel
-        if sigma <= SMALL_SIGMA:
-            w0, w1, w2 = (float(t) for t in _taps5(sigma))
-            zs = correlate1d(z, [w2, w1, w0, w1, w2], mode="nearest")
-        else:
-            zs = gaussian_filter1d(z, sigma, mode="nearest", truncate=3.0)
+        # smoothed by the detector's own kernel (constant down the columns: the middle row
+        # is the 1-D smoothing; the roof's ends lie beyond the kernel's reach of its crease)
+        zs = _nan_gaussian(np.tile(z.astype(np.float32), (rows, 1)), sigma)[rows // 2].astype(np.float64)
         d = zs[:-2] - 2 * zs[1:-1] + zs[2:]
         i = int(np.argmax(d))
         seen.append(d[i] + max(d[i - 1], d[i + 1]))    # the ridge: peak and larger neighbour

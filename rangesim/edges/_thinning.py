@@ -19,6 +19,47 @@ def nearest_axis(direction: np.ndarray) -> np.ndarray:
     return np.rint(d * np.float32(4 / np.pi)).astype(np.int8) & 3
 
 
+def _across(strength: np.ndarray, direction: np.ndarray, ii: np.ndarray, jj: np.ndarray,
+            fill: float) -> tuple[np.ndarray, ...]:
+    """The strength at pixels (ii, jj) and one step either side along ``direction``.
+
+    Each side is interpolated linearly between the axis and the diagonal neighbour that
+    bracket the direction (a step of 1 / max(|cos|, |sin|) px); ``fill`` stands for NaN and
+    for what lies outside the image.
+
+    Returns
+    -------
+    centre, minus, plus : (K,) float32
+        Samples at the pixel, against ``direction`` and along it.
+    theta : (K,) float
+        The direction folded to [0, pi) (NaN: 0); (cos, sin) of it points to the plus side.
+    step : (K,) float
+        max(|cos theta|, |sin theta|): one step is 1 / step pixels.
+    """
+    h, w = strength.shape
+    sp = np.full((h + 2, w + 2), fill, np.float32)      # (np.pad of np.where: 3x slower)
+    sp[1:-1, 1:-1] = strength
+    if not np.isnan(fill):
+        np.copyto(sp, fill, where=np.isnan(sp))
+    sp = sp.ravel()
+    stride = w + 2
+    base = (ii + 1) * stride + (jj + 1)
+    d = direction[ii, jj]
+    theta = np.mod(np.where(np.isnan(d), 0, d), np.pi)
+    c, sn = np.abs(np.cos(theta)), np.sin(theta)          # sin >= 0 on [0, pi)
+    xmajor = c >= sn
+    step = np.maximum(c, sn)
+    wgt = np.minimum(c, sn) / step                        # tan of the angle off the axis
+    dx = np.where(theta > np.pi / 2, -1, 1)               # x component's sign
+    # plus side: the axis neighbour (x or y) and the diagonal one bracketing the direction;
+    # minus side: their mirror images
+    prim = np.where(xmajor, dx, stride)
+    diag = stride + dx
+    plus = sp[base + prim] * (1 - wgt) + sp[base + diag] * wgt
+    minus = sp[base - prim] * (1 - wgt) + sp[base - diag] * wgt
+    return sp[base], minus, plus, theta, step
+
+
 def nonmax_suppress(
     strength: np.ndarray,
     direction: np.ndarray,
@@ -61,25 +102,7 @@ def nonmax_suppress(
     if ii.size == 0:
         return (keep, sides) if return_sides else keep
     low = np.float32(-1e30)                      # not -inf: 0 * -inf would be NaN
-    sp = np.full((h + 2, w + 2), low, np.float32)      # (np.pad of np.where: 3x slower)
-    sp[1:-1, 1:-1] = strength
-    np.copyto(sp, low, where=np.isnan(sp))
-    sp = sp.ravel()
-    stride = w + 2
-    base = (ii + 1) * stride + (jj + 1)
-    d = direction[ii, jj]
-    theta = np.mod(np.where(np.isnan(d), 0, d), np.pi)
-    c, sn = np.abs(np.cos(theta)), np.sin(theta)          # sin >= 0 on [0, pi)
-    xmajor = c >= sn
-    wgt = np.minimum(c, sn) / np.maximum(c, sn)           # tan of the angle off the axis
-    dx = np.where(theta > np.pi / 2, -1, 1)               # x component's sign
-    # plus side: the axis neighbour (x or y) and the diagonal one bracketing the direction;
-    # minus side: their mirror images
-    prim = np.where(xmajor, dx, stride)
-    diag = stride + dx
-    s0 = sp[base]
-    plus = sp[base + prim] * (1 - wgt) + sp[base + diag] * wgt
-    minus = sp[base - prim] * (1 - wgt) + sp[base - diag] * wgt
+    s0, minus, plus, _, _ = _across(strength, direction, ii, jj, low)
     keep[ii, jj] = (s0 > minus) & (s0 >= plus)
     if not return_sides:
         return keep
@@ -124,31 +147,14 @@ def ridge_offsets(strength: np.ndarray, direction: np.ndarray, where: np.ndarray
         where a side sample is undefined (NaN, outside the image) or the three samples
         are not a maximum.
     """
-    h, w = strength.shape
-    out = np.zeros((h, w, 2), np.float32)
+    if peak not in ("parabola", "triangle"):
+        raise ValueError(f"peak must be 'parabola' or 'triangle', got {peak!r}")
+    out = np.zeros(strength.shape + (2,), np.float32)
     ii, jj = nonzero2(where & ~np.isnan(strength))
     if ii.size == 0:
         return out
-    sp = np.full((h + 2, w + 2), np.nan, np.float32)
-    sp[1:-1, 1:-1] = strength
-    sp = sp.ravel()
-    stride = w + 2
-    base = (ii + 1) * stride + (jj + 1)
-    d = direction[ii, jj]
-    theta = np.mod(np.where(np.isnan(d), 0, d), np.pi)
-    c, sn = np.abs(np.cos(theta)), np.sin(theta)
-    xmajor = c >= sn
-    big = np.maximum(c, sn)
-    wgt = np.minimum(c, sn) / big
-    dx = np.where(theta > np.pi / 2, -1, 1)
-    # the same neighbours as nonmax_suppress: plus side along +direction, minus side against
-    prim = np.where(xmajor, dx, stride)
-    diag = stride + dx
-    s0 = sp[base]
-    plus = sp[base + prim] * (1 - wgt) + sp[base + diag] * wgt
-    minus = sp[base - prim] * (1 - wgt) + sp[base - diag] * wgt
-    if peak not in ("parabola", "triangle"):
-        raise ValueError(f"peak must be 'parabola' or 'triangle', got {peak!r}")
+    # the same samples as nonmax_suppress; a NaN side (a missing neighbour) stays NaN
+    s0, minus, plus, theta, big = _across(strength, direction, ii, jj, np.nan)
     curv = minus - 2 * s0 + plus
     with np.errstate(invalid="ignore", divide="ignore"):
         # vertex in steps, times the step's length (1 / max(|cos|, |sin|) px)
