@@ -430,35 +430,41 @@ SPLIT_EXPLAINED = 0.8
 
 
 @_jit
-def _kind_filter(labels, pts, n, concave, none):  # pragma: no cover - compiled
-    """Keep (in place, first ``n`` of ``pts``) the points of one edge kind, as
-    :func:`rangesim.features._edge_points.one_edge` (the majority of concave against other
-    labelled points; unlabelled kept; ``labels`` empty: all); their number returned, and the
-    rule's two flags (drop concave, drop other) for later rings of the same circle."""
-    if len(labels) == 0:
-        return n, False, False
+def _kind_flags(labels, pts, concave, none):  # pragma: no cover - compiled
+    """The one_edge rule's flags for the points ``pts`` (indices into ``labels``): (drop
+    concave, drop other), the minority kind of concave against other labelled points, as
+    :func:`rangesim.features._edge_points.one_edge`; neither where one kind is absent."""
     n_c = 0
     n_o = 0
-    for q in range(n):
-        lab = labels[pts[q]]
+    for p in pts:
+        lab = labels[p]
         if lab == concave:
             n_c += 1
         elif lab != none:
             n_o += 1
-    drop_c = n_c > 0 and n_o > 0 and n_c <= n_o
-    drop_o = n_c > 0 and n_o > 0 and n_c > n_o
+    both = n_c > 0 and n_o > 0
+    return both and n_c <= n_o, both and n_c > n_o
+
+
+@_jit
+def _kind_filter(labels, pts, n, concave, none):  # pragma: no cover - compiled
+    """Keep (in place, first ``n`` of ``pts``) the points of one edge kind
+    (:func:`_kind_flags`; unlabelled kept; ``labels`` empty: all); their number returned,
+    and the rule's two flags (drop concave, drop other) for later rings of the same circle."""
+    if len(labels) == 0:
+        return n, False, False
+    drop_c, drop_o = _kind_flags(labels, pts[:n], concave, none)
     return _apply_kind(labels, pts, n, drop_c, drop_o, concave, none), drop_c, drop_o
 
 
 @_jit
 def _apply_kind(labels, pts, n, drop_c, drop_o, concave, none):  # pragma: no cover - compiled
-    """Drop (in place) the points of ``pts[:n]`` that the flags of :func:`_kind_filter` leave out."""
+    """Drop (in place) the points of ``pts[:n]`` that the flags of :func:`_kind_flags` leave out."""
     if len(labels) == 0 or not (drop_c or drop_o):
         return n
     m = 0
     for q in range(n):
-        lab = labels[pts[q]]
-        if not ((drop_c and lab == concave) or (drop_o and lab != concave and lab != none)):
+        if not _dropped(labels[pts[q]], drop_c, drop_o, concave, none):
             pts[m] = pts[q]
             m += 1
     return m
@@ -607,19 +613,7 @@ def claim_pairs(order, starts, points, labels, x, y, cx, cy, r, min_support, con
         drop_concave = False
         drop_other = False
         if len(labels) > 0:
-            n_c = 0
-            n_o = 0
-            for k in range(a, b):
-                lab = labels[points[k]]
-                if lab == concave:
-                    n_c += 1
-                elif lab != none:
-                    n_o += 1
-            if n_c > 0 and n_o > 0:
-                if n_c > n_o:
-                    drop_other = True
-                else:
-                    drop_concave = True
+            drop_concave, drop_other = _kind_flags(labels, points[a:b], concave, none)
         n_bins = max(int(np.rint(two_pi * r[j])), 8)
         occ = np.zeros(n_bins, np.bool_)
         all_free = True
