@@ -93,6 +93,31 @@ def _draw(mask: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
     mask[yi[ok], xi[ok]] = True
 
 
+def _free_spots(rng: np.random.Generator, size: int, radii, n: int, margin: float, gap: float):
+    """Up to ``n`` circles (centre (2,), radius px) drawn at random inside a size x size image,
+    ``margin`` px from its border and ``gap`` px clear of each other (20,000 tries at most);
+    each is yielded as it is placed, so the caller's own draws interleave with these."""
+    placed = []
+    for _ in range(20000):
+        if len(placed) == n:
+            return
+        r = rng.uniform(*radii)
+        c = rng.uniform(r + margin, size - r - margin, 2)
+        if any(np.hypot(*(c - c2)) < r + r2 + gap for c2, r2 in placed):
+            continue
+        placed.append((c, r))
+        yield c, r
+
+
+def _draw_partial_circle(mask: np.ndarray, rng: np.random.Generator, c, r: float, sigma: float) -> None:
+    """Draw 70-100 % of the circle (centre ``c``, radius ``r`` px) from a random start, its
+    points jittered by ``sigma`` px."""
+    a = np.linspace(0, 2 * np.pi, int(np.ceil(6 * np.pi * r)), endpoint=False)
+    a = a[np.mod(a - rng.uniform(0, 2 * np.pi), 2 * np.pi) < rng.uniform(0.7, 1.0) * 2 * np.pi]
+    _draw(mask, c[0] + r * np.cos(a) + rng.normal(0, sigma, len(a)),
+          c[1] + r * np.sin(a) + rng.normal(0, sigma, len(a)))
+
+
 def synthetic_edges(size: int, n_circles: int, seed: int, radii=(6, 60), sigma: float = 0.25):
     """A size x size edge mask: ``n_circles`` non-overlapping circles (70-100 % of each drawn,
     positions with sigma px noise, rounded to pixels), 20 segments, 8 arcs of 15-40 % of a
@@ -106,19 +131,9 @@ def synthetic_edges(size: int, n_circles: int, seed: int, radii=(6, 60), sigma: 
     """
     rng = np.random.default_rng(seed)
     mask = np.zeros((size, size), bool)
-    truth, placed = [], []
-    for _ in range(20000):
-        if len(truth) == n_circles:
-            break
-        r = rng.uniform(*radii)
-        c = rng.uniform(r + 2, size - r - 2, 2)
-        if any(np.hypot(*(c - c2)) < r + r2 + 3 for c2, r2 in placed):
-            continue
-        placed.append((c, r))
-        a = np.linspace(0, 2 * np.pi, int(np.ceil(6 * np.pi * r)), endpoint=False)
-        a = a[np.mod(a - rng.uniform(0, 2 * np.pi), 2 * np.pi) < rng.uniform(0.7, 1.0) * 2 * np.pi]
-        _draw(mask, c[0] + r * np.cos(a) + rng.normal(0, sigma, len(a)),
-              c[1] + r * np.sin(a) + rng.normal(0, sigma, len(a)))
+    truth = []
+    for c, r in _free_spots(rng, size, radii, n_circles, margin=2, gap=3):
+        _draw_partial_circle(mask, rng, c, r, sigma)
         truth.append(TrueRound(f"circle_{len(truth)}", c, np.array([r, r])))
     k = size // 512
     for _ in range(20 * k):
@@ -157,28 +172,13 @@ def tangent_pairs(size: int, seed: int, n_pairs: int = 6, n_single: int = 4, rad
     """
     rng = np.random.default_rng([seed, 15])
     mask = np.zeros((size, size), bool)
-    truth, placed = [], []
-
-    def arc(c, r):
-        a = np.linspace(0, 2 * np.pi, int(np.ceil(6 * np.pi * r)), endpoint=False)
-        a = a[np.mod(a - rng.uniform(0, 2 * np.pi), 2 * np.pi) < rng.uniform(0.7, 1.0) * 2 * np.pi]
-        _draw(mask, c[0] + r * np.cos(a) + rng.normal(0, sigma, len(a)),
-              c[1] + r * np.sin(a) + rng.normal(0, sigma, len(a)))
-
-    for _ in range(20000):
-        if len(placed) == n_pairs + n_single:
-            break
-        r = rng.uniform(*radii)
-        c = rng.uniform(r + 3, size - r - 3, 2)
-        if any(np.hypot(*(c - c2)) < r + r2 + 4 for c2, r2 in placed):
-            continue
-        placed.append((c, r))
-        arc(c, r)
-        k = len(placed)
+    truth = []
+    for k, (c, r) in enumerate(_free_spots(rng, size, radii, n_pairs + n_single, margin=3, gap=4), start=1):
+        _draw_partial_circle(mask, rng, c, r, sigma)
         if k <= n_pairs:
             e, phi = rng.uniform(*ecc), rng.uniform(0, 2 * np.pi)
             ci = c + max(e + rng.uniform(-0.3, 0.3), 0.0) * np.array([np.cos(phi), np.sin(phi)])
-            arc(ci, r - e)
+            _draw_partial_circle(mask, rng, ci, r - e, sigma)
             truth += [TrueRound(f"outer_{k}", c, np.array([r, r])), TrueRound(f"inner_{k}", ci, np.array([r - e] * 2))]
         else:
             truth.append(TrueRound(f"single_{k}", c, np.array([r, r])))
