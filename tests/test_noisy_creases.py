@@ -98,3 +98,30 @@ def test_search_tiles_whole_image_up_to_512_squared_else_a_quarter():
     for t in tiles:
         covered[t] = True
     assert len(tiles) == 16 and covered.mean() == 0.25
+
+
+@pytest.mark.parametrize("shape", [(700, 600), (1024, 1024)])
+def test_search_mosaic_measures_each_tile_as_alone(shape):
+    """The tiles packed into one image with blank gaps give each tile's noise bends to the
+    bit, at the 5-tap and at the Gaussian smoothings, with holes and jumps in the tiles."""
+    from rangesim.edges._discontinuities import find_discontinuities
+    from rangesim.edges._gradient import _noise_bends, _search_mosaic, _search_tiles
+
+    rng = np.random.default_rng(7)
+    h, w = shape
+    z = (400 + 0.05 * np.arange(w)[None, :] + rng.normal(0, 0.4, shape)).astype(np.float32)
+    z[:, w // 3:] += 30                                  # a step through several tiles
+    z[rng.random(shape) < 0.02] = np.nan                 # scattered dropouts
+    z[100:180, 200:290] = np.nan                         # a hole across a tile's edge
+    disc = find_discontinuities(z, np.float32(3.0), 0)
+    inv_fp = np.full(shape, 1 / 1.3, np.float32)
+    valid = np.isfinite(z)
+    tiles = _search_tiles(shape)
+    packed = _search_mosaic(tiles, (z, np.nan), (disc.pairs, False), (disc.touching, False), (inv_fp, np.nan),
+                            (valid, False))
+    for sigma in (1.0, 1.25, 2.0, 3.0):
+        alone = np.concatenate([_noise_bends(z[t], disc.pairs[(slice(None), *t)], disc.touching[t], inv_fp[t],
+                                             valid[t], sigma) for t in tiles])
+        together = _noise_bends(*packed, sigma)
+        assert alone.size > 1000
+        np.testing.assert_array_equal(np.sort(alone), np.sort(together))
