@@ -545,15 +545,29 @@ def test_window_minimum_matches_scipy():
         assert np.array_equal(_window_min(a, r), expected)
 
 
-def test_compiled_box_and_smoothing_match_scipy():
-    # the compiled 3x3 sums and 5-tap smoothing against scipy's filters (NaN read as 0)
+def test_compiled_hessian_and_smoothing_match_scipy():
+    # the compiled Hessian's 3x3 sums and the 5-tap smoothing against scipy's filters (NaN read as 0)
     from scipy.ndimage import correlate1d, uniform_filter
 
-    from rangesim.edges._gradient import _box3, _smooth5, _taps5
-    a = np.random.default_rng(4).normal(size=(23, 31)).astype(np.float32)
-    a[3, 4] = a[10, 0] = np.nan
+    from rangesim.edges._gradient import _hessian, _smooth5, _taps5
+    rng = np.random.default_rng(4)
+    r = rng.normal(size=(4, 23, 31)).astype(np.float32)
+    r[0, 3, 4] = r[1, 10, 0] = r[2, 22, 30] = r[3, 0, 7] = np.nan
+    a = r[0]
     a0 = np.nan_to_num(a)
-    assert np.allclose(_box3(a), uniform_filter(a0.astype(np.float64), 3, mode="constant") * 9, atol=1e-5)
+
+    def box(x):
+        return uniform_filter(np.nan_to_num(x).astype(np.float64), 3, mode="constant") * 9
+
+    dxx, dyy = box(r[0]), box(r[2])
+    dxy = box(r[1] - r[3]) * np.sqrt(2) / 6          # a NaN on either diagonal: 0
+    mean, rad, minor, two_dxy, dxx_dyy = _hessian(*r)
+    assert np.allclose(dxx_dyy, dxx - dyy, atol=1e-5) and np.allclose(two_dxy, 2 * dxy, atol=1e-5)
+    assert np.allclose(mean, (dxx + dyy) / 2, atol=1e-5)
+    assert np.allclose(rad, np.hypot((dxx - dyy) / 2, dxy), atol=1e-5)
+    lo, hi = (dxx + dyy) / 2 - rad, (dxx + dyy) / 2 + rad
+    decided = np.abs(np.abs(lo) - np.abs(hi)) > 1e-4
+    assert np.array_equal(minor[decided], (np.abs(lo) > np.abs(hi))[decided])
     taps = np.array(_taps5(1.0), np.float64)[[2, 1, 0, 1, 2]]
     ref = correlate1d(correlate1d(a0.astype(np.float64), taps, axis=1, mode="constant"), taps, axis=0, mode="constant")
     assert np.allclose(_smooth5(a0, 1.0), ref, atol=1e-5)

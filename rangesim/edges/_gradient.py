@@ -189,30 +189,18 @@ def _nan_gaussian(z: np.ndarray, sigma: float) -> np.ndarray:
     return num
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _box3(a):  # pragma: no cover - compiled
-    """3x3 sum of a float32 image with zeros outside the image and in place of NaN: column
-    sums ``(up + mid) + down``, then ``(left + centre) + right``, one compiled pass
-    (``scipy.ndimage.uniform_filter(a, 3, mode="constant") * 9`` gives the same to 1e-6 in
-    about twenty times the time at 1024 x 1024)."""
-    h, w = a.shape
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _col3(a, i, j, h):  # pragma: no cover - compiled
+    """``(up + mid) + down`` of column ``j`` around row ``i`` of a float32 image, with zeros
+    outside the image and in place of NaN."""
     zero = np.float32(0)
-    col = np.empty(w + 2, np.float32)
-    out = np.empty((h, w), np.float32)
-    for i in range(h):
-        col[0] = zero
-        col[w + 1] = zero
-        for j in range(w):
-            up = a[i - 1, j] if i >= 1 else zero
-            mid = a[i, j]
-            dn = a[i + 1, j] if i + 1 < h else zero
-            up = up if up == up else zero      # NaN counts as 0
-            mid = mid if mid == mid else zero
-            dn = dn if dn == dn else zero
-            col[j + 1] = (up + mid) + dn
-        for j in range(w):
-            out[i, j] = (col[j] + col[j + 1]) + col[j + 2]
-    return out
+    up = a[i - 1, j] if i >= 1 else zero
+    mid = a[i, j]
+    dn = a[i + 1, j] if i + 1 < h else zero
+    up = up if up == up else zero      # NaN counts as 0
+    mid = mid if mid == mid else zero
+    dn = dn if dn == dn else zero
+    return (up + mid) + dn
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -221,32 +209,47 @@ def _hessian(r0, r45, r90, r135):  # pragma: no cover - compiled
     ``Dxx`` from 0 deg, ``Dyy`` from 90, ``Dxy`` from the diagonals' difference times
     sqrt(2) / 6; its eigenvalues ``mean +- rad`` (rad by the square root of the squares:
     float32 cannot overflow here), whether the minor one dominates, and the arctan2 terms
-    ``2 Dxy`` and ``Dxx - Dyy``."""
+    ``2 Dxy`` and ``Dxx - Dyy``.
+
+    The 3x3 sums (zeros outside the image and in place of NaN: column sums ``(up + mid) +
+    down``, then ``(left + centre) + right``) are made a row at a time, so no full-size
+    sum image is stored (``scipy.ndimage.uniform_filter(a, 3, mode="constant") * 9`` gives
+    the same sums to 1e-6)."""
     h, w = r0.shape
-    dxx = _box3(r0)
-    dyy = _box3(r90)
-    diff = np.empty((h, w), np.float32)
-    for i in range(h):
-        for j in range(w):
-            diff[i, j] = r45[i, j] - r135[i, j]
-    dxy = _box3(diff)
+    zero = np.float32(0)
     k = np.float32(np.sqrt(2.0) / 6.0)
     two = np.float32(2)
     mean = np.empty((h, w), np.float32)
     rad = np.empty((h, w), np.float32)
     minor = np.empty((h, w), np.bool_)
+    two_dxy = np.empty((h, w), np.float32)
+    dxx_dyy = np.empty((h, w), np.float32)
+    cxx = np.zeros(w + 2, np.float32)       # column sums, a zero column either side
+    cyy = np.zeros(w + 2, np.float32)
+    cxy = np.zeros(w + 2, np.float32)
     for i in range(h):
         for j in range(w):
-            xy = dxy[i, j] * k
-            xx, yy = dxx[i, j], dyy[i, j]
+            cxx[j + 1] = _col3(r0, i, j, h)
+            cyy[j + 1] = _col3(r90, i, j, h)
+            up = (r45[i - 1, j] - r135[i - 1, j]) if i >= 1 else zero
+            mid = r45[i, j] - r135[i, j]
+            dn = (r45[i + 1, j] - r135[i + 1, j]) if i + 1 < h else zero
+            up = up if up == up else zero
+            mid = mid if mid == mid else zero
+            dn = dn if dn == dn else zero
+            cxy[j + 1] = (up + mid) + dn
+        for j in range(w):
+            xx = (cxx[j] + cxx[j + 1]) + cxx[j + 2]
+            yy = (cyy[j] + cyy[j + 1]) + cyy[j + 2]
+            xy = ((cxy[j] + cxy[j + 1]) + cxy[j + 2]) * k
             m = (xx + yy) / two
             hd = (xx - yy) / two
             r = np.sqrt(hd * hd + xy * xy)
             mean[i, j], rad[i, j] = m, r
             minor[i, j] = abs(m - r) > abs(m + r)
-            diff[i, j] = two * xy                 # reused: 2 Dxy
-            dxy[i, j] = xx - yy                   # reused: Dxx - Dyy
-    return mean, rad, minor, diff, dxy
+            two_dxy[i, j] = two * xy
+            dxx_dyy[i, j] = xx - yy
+    return mean, rad, minor, two_dxy, dxx_dyy
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
