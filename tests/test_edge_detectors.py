@@ -687,3 +687,22 @@ def test_line_fit_finds_a_noisy_crease_with_longer_lines():
     assert long_lines.mask[far].mean() <= 0.01
     crease = long_lines.mask & near
     assert (long_lines.labels[crease] == EdgeLabel.CONVEX).mean() >= 0.9
+
+
+def test_compiled_axis_difference_matches_the_sides_rule():
+    # the compiled x / y central difference of an image against the array rule (_sides) that
+    # stacks take, with NaN, broken pairs and 1-px images: the same bits
+    from rangesim.edges._differences import central_difference
+
+    rng = np.random.default_rng(11)
+    for h, w in ((1, 7), (6, 1), (9, 13), (31, 24)):
+        for dtype in (np.float32, np.float64):
+            a = (rng.normal(size=(h, w)) * 10).astype(dtype)
+            a[rng.random((h, w)) < 0.15] = np.nan
+            pairs = rng.random((4, h, w)) < 0.1
+            for axis in (0, 2):
+                for pr in (pairs, None):
+                    image = central_difference(a, axis, pr)
+                    stacked = central_difference(a[None], axis, pr)[0]
+                    assert image.dtype == dtype
+                    np.testing.assert_array_equal(image, stacked)

@@ -82,6 +82,10 @@ def _central_difference_2d(a: np.ndarray, axis: int, pairs: np.ndarray | None, s
     of :func:`_sides` (sparse, the same operations, so both agree to the bit).
     """
     dr, dc = AXES[axis]
+    if s == 1 and dr * dc == 0:
+        # the image axes at one pixel: one compiled pass (about 1.6x faster at 1024^2)
+        broken = np.zeros((1, 1), bool) if pairs is None else np.ascontiguousarray(pairs[axis])
+        return _axis_difference(np.ascontiguousarray(a), broken, pairs is not None, dr, dc)
     shape = a.shape
     ap = pad_last2(a, s, np.nan)
     d = padded_view(ap, s, s * dr, s * dc, shape) - padded_view(ap, s, -s * dr, -s * dc, shape)
@@ -117,6 +121,54 @@ def _central_difference_2d(a: np.ndarray, axis: int, pairs: np.ndarray | None, s
     with np.errstate(invalid="ignore", divide="ignore"):
         d.ravel()[idx] = (A - B) / (n * np.asarray(s, a.dtype))
     return d
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _axis_difference(a, broken, use_pairs, dr, dc):  # pragma: no cover - compiled
+    """:func:`_central_difference_2d` along x (``dr, dc = 0, 1``) or y (1, 0) at one pixel:
+    first the central difference at every pixel (plain loops that vectorise), then the
+    rule of :func:`_sides` where a side is missing or broken, in ``a``'s dtype (the same
+    bits as the array version)."""
+    h, w = a.shape
+    out = np.empty((h, w), a.dtype)
+    nan = a.dtype.type(np.nan)
+    two, one = a.dtype.type(2), a.dtype.type(1)
+    for i in range(h):
+        o = out[i]
+        if dr == 0:
+            row = a[i]
+            o[0] = nan
+            o[w - 1] = nan
+            for j in range(1, w - 1):
+                o[j] = (row[j + 1] - row[j - 1]) / two
+        elif i == 0 or i == h - 1:
+            o[:] = nan
+        else:
+            up, dn = a[i - 1], a[i + 1]
+            for j in range(w):
+                o[j] = (dn[j] - up[j]) / two
+    for i in range(h):
+        for j in range(w):
+            c = a[i, j]
+            redo = out[i, j] != out[i, j] or c != c
+            if use_pairs and not redo:
+                redo = broken[i, j] or (i >= dr and j >= dc and broken[i - dr, j - dc])
+            if not redo:
+                continue
+            if c != c:
+                out[i, j] = nan
+                continue
+            fi, fj, bi, bj = i + dr, j + dc, i - dr, j - dc
+            f = a[fi, fj] if fi < h and fj < w else nan
+            b = a[bi, bj] if bi >= 0 and bj >= 0 else nan
+            fok = f == f and not (use_pairs and broken[i, j])
+            bok = b == b and not (use_pairs and broken[bi, bj])
+            if fok and bok:
+                out[i, j] = (f - b) / two
+            else:
+                n = (1 if fok else 0) + (1 if bok else 0)
+                out[i, j] = ((f if fok else c) - (b if bok else c)) / (n * one)
+    return out
 
 
 #: WENO regulariser, relative to the squared step length (smaller: sharper side choice)
