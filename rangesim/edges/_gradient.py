@@ -253,6 +253,25 @@ def _hessian(r0, r45, r90, r135):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def _scale_and_magnitude(r0, r45, r90, r135, scale):  # pragma: no cover - compiled
+    """Multiply the four responses by ``scale`` in place and return ``fmax`` of their absolute
+    values (NaN only where all four are NaN), float32."""
+    h, w = r0.shape
+    mag = np.empty((h, w), np.float32)
+    for i in range(h):
+        for j in range(w):
+            f = scale[i, j]
+            a, b, c, d = r0[i, j] * f, r45[i, j] * f, r90[i, j] * f, r135[i, j] * f
+            r0[i, j], r45[i, j], r90[i, j], r135[i, j] = a, b, c, d
+            m = abs(a)
+            for v in (abs(b), abs(c), abs(d)):
+                if m != m or v > m:
+                    m = v
+            mag[i, j] = m
+    return mag
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _to_direction(theta, minor, mag):  # pragma: no cover - compiled
     """In place: the dominant eigenvector's angle in [0, pi) (a quarter turn where the minor
     eigenvalue dominates), NaN where no operator responded."""
@@ -807,11 +826,9 @@ def gradient(
     else:
         resp = second_differences(zs, disc.pairs, skip=near_jump)
         scale = inv_fp
-    for r in resp:
-        r *= scale
-    mag = np.abs(resp[0])
-    for r in resp[1:]:
-        np.fmax(mag, np.abs(r), out=mag)     # fmax: an undefined operator does not veto
+    # responses scaled in place to slope changes per footprint; the largest |response|,
+    # where an undefined operator does not veto (NumPy's fmax), in one compiled pass
+    mag = _scale_and_magnitude(*resp, np.ascontiguousarray(np.broadcast_to(scale, z.shape), np.float32))
     # Hessian from the operators: 0 -> Dxx, 90 -> Dyy, 45/135 -> +-(6 / 2 sqrt 2) Dxy
     mean, rad, minor_wins, two_dxy, dxx_dyy = _hessian(*resp)
     # the dominant eigenvector's angle (compiled arc tangents, rangesim.edges._trig: NumPy's
