@@ -239,21 +239,10 @@ def test_outer_outline_holds_every_side_of_a_rim():
     assert len(n) == 2
     # the outline points themselves: every quadrant of the rim is there (the dilation that
     # bridges gaps grows up and left; the test must look past it on those sides)
-    import rangesim.features._arc_ellipses as A
+    from rangesim.features._ellipse_kernels import outline_points
 
-    seen = {}
-    orig = A._fit_pieces
-
-    def spy(xy_, pieces, *a, **k):
-        seen["points"] = pieces.points
-        return orig(xy_, pieces, *a, **k)
-
-    A._fit_pieces = spy
-    try:
-        outline_hypotheses(xy)
-    finally:
-        A._fit_pieces = orig
-    p = xy[seen["points"]]
+    idx, _, _ = outline_points(xy.astype(np.int64), 1)
+    p = xy[idx]
     rim = np.hypot((p[:, 0] - 50) / 30, (p[:, 1] - 48) / 20) > 0.8
     all_rim = np.hypot((xy[:, 0] - 50) / 30, (xy[:, 1] - 48) / 20) > 0.8
     for sx in (-1, 1):
@@ -264,34 +253,68 @@ def test_outer_outline_holds_every_side_of_a_rim():
 
 
 def test_compiled_helpers_match_the_numpy_they_replace():
-    # the moments (float32, as np.add.reduceat sums them: first row plus NumPy's pairwise
-    # sum), the first copies of rows (np.unique over rows) and the square dilation
+    # the moments (float32 and float64, as np.add.reduceat sums them: first row plus NumPy's
+    # pairwise sum), the order of the pieces by (curve, count, sum) (np.lexsort), the curves
+    # (scipy's connected components of the links) and the outlines (ndimage's dilation and labels)
     from scipy import ndimage
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
 
     from rangesim.core.conics import conic_monomials
-    from rangesim.features._arc_ellipses import _first_copies, _square_dilation
-    from rangesim.features._conic_kernels import piece_moments
+    from rangesim.features._conic_kernels import _reduce_rows
+    from rangesim.features._ellipse_kernels import _by_curve_count_sum, _piece_moments, curve_labels, outline_points
 
     rng = np.random.default_rng(3)
     xy = rng.integers(0, 400, (3000, 2)).astype(float) + rng.uniform(-0.5, 0.5, (3000, 2))
-    pc = np.sort(rng.integers(0, 200, 40000))
-    pt = rng.integers(0, 3000, 40000)
-    frame = np.column_stack([rng.uniform(0, 400, 200), rng.uniform(0, 400, 200), rng.choice([8.0, 64.0, 128.0], 200)])
-    starts = np.searchsorted(pc, np.unique(pc))
-    q = (xy[pt] - frame[pc, :2]) / frame[pc, 2:]
-    expected = np.add.reduceat(conic_monomials(q.astype(np.float32)), starts, axis=0)
-    got = np.empty((len(starts), 15), np.float32)
-    piece_moments(xy, pt, pc, frame, starts, got)
-    assert np.array_equal(got, expected)
+    buf, got = np.empty((3000, 15), np.float32), np.empty(15, np.float32)
+    for n in (1, 5, 8, 127, 129, 300, 2999):
+        pts, frame = rng.integers(0, 3000, n), np.array([rng.uniform(0, 400), rng.uniform(0, 400), 64.0])
+        _piece_moments(xy, pts, 0, n, frame, buf, got)
+        q = ((xy[pts] - frame[:2]) / frame[2]).astype(np.float32)
+        assert np.array_equal(got, np.add.reduceat(conic_monomials(q), [0], axis=0)[0])
+        w = rng.normal(size=(n, 15)) * 1e3
+        out = np.empty(15)
+        _reduce_rows(w, 0, n, out)
+        assert np.array_equal(out, np.add.reduceat(w, [0], axis=0)[0])
 
-    cols = [rng.integers(0, 4, 500), rng.integers(0, 3, 500), rng.integers(0, 5, 500)]
-    _, first, inv = np.unique(np.column_stack(cols), axis=0, return_index=True, return_inverse=True)
-    same, first2 = _first_copies(*cols)
-    assert np.array_equal(first2, first) and np.array_equal(same, first[inv.ravel()])
+    curve, cnt, psum = rng.integers(0, 30, 2000), rng.integers(5, 9, 2000), rng.integers(0, 4, 2000)
+    curve[:300] = 7  # a curve of many pieces (merge sorts)
+    assert np.array_equal(_by_curve_count_sum(curve, cnt, psum, 2000, 30), np.lexsort((psum, cnt, curve)))
 
-    m = rng.random((61, 77)) < 0.05
+    x, y = rng.integers(0, 60, 800), rng.integers(0, 50, 800)
+    keep = np.unique(y * 60 + x, return_index=True)[1]
+    x, y, theta = x[keep], y[keep], rng.uniform(-np.pi, np.pi, len(keep))
+    lab, n_lab = curve_labels(x, y, theta, 3, np.cos(0.6), np.sin(0.6), np.cos(0.5))
+    pairs = [(i, k) for i in range(len(x)) for k in range(len(x))
+             if (y[k] - y[i], x[k] - x[i]) > (0, 0) and max(abs(x[k] - x[i]), abs(y[k] - y[i])) <= 3
+             and abs(np.cos(theta[i] - theta[k])) >= np.cos(0.6)
+             and all(abs((x[k] - x[i]) * np.cos(t) + (y[k] - y[i]) * np.sin(t))
+                     <= (np.sin(0.6) if max(abs(x[k] - x[i]), abs(y[k] - y[i])) > 1 else np.cos(0.5))
+                     * np.hypot(x[k] - x[i], y[k] - y[i]) for t in (theta[i], theta[k]))]
+    r, c = np.array(pairs).T
+    n_ref, ref = connected_components(coo_matrix((np.ones(len(r)), (r, c)), shape=(len(x),) * 2), directed=False)
+    assert n_lab == n_ref and np.array_equal(lab, ref)
+
+    pix = np.column_stack([x, y]).astype(np.int64)
     for g in (1, 2):
-        assert np.array_equal(_square_dilation(m, g), ndimage.binary_dilation(m, np.ones((2 * g + 1,) * 2, bool)))
+        m = np.zeros((y.max() + 2 * g + 3, x.max() + 2 * g + 3), bool)
+        m[y + g + 1, x + g + 1] = True
+        grown = ndimage.binary_dilation(m, np.ones((2 * g + 1,) * 2, bool))
+        groups = ndimage.label(grown, np.ones((3, 3), bool))[0]
+        spaces = ndimage.label(~grown)[0]
+        gl = groups[y + g + 1, x + g + 1]
+        on = np.zeros(len(x), bool)
+        for k in np.unique(gl):
+            gy, gx = np.nonzero(groups == k)
+            j = np.argmin(gx * grown.shape[0] + gy)
+            outer = spaces[gy[j], gx[j] - 1]
+            for dy, dx in ((-g - 1, 0), (g + 1, 0), (0, -g - 1), (0, g + 1)):
+                on |= (gl == k) & (spaces[y + g + 1 + dy, x + g + 1 + dx] == outer)
+        idx, group, n = outline_points(pix, g)
+        ref = np.nonzero(on)[0]
+        ref = ref[np.argsort(gl[ref], kind="stable")]
+        assert np.array_equal(idx, ref)
+        assert np.array_equal(n, np.unique(gl[ref], return_counts=True)[1])
 
 
 def test_grouped_frames_and_sampson_pairs_match_numpy():

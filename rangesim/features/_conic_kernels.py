@@ -74,36 +74,80 @@ def band_moments(conics, hyp, px, py, ct, st, band, cos_tol):  # pragma: no cove
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _pairwise(a, lo, n, col):  # pragma: no cover - compiled
-    """NumPy's pairwise sum of ``a[lo:lo + n, col]``, n >= 1, in ``a``'s type (``pairwise_sum``
-    of its loops: 8 running sums over blocks of at most 128, halves above), to the same bits."""
+def _pw_leaf(a, lo, n, col):  # pragma: no cover - compiled
+    """NumPy's pairwise sum of ``a[lo:lo + n, col]`` for n <= 128 (8 running sums)."""
     if n < 8:
-        res = a[lo, col]  # NumPy starts from 0: the same sum (but for the sign of a zero)
+        res = a[lo, col]
         for i in range(1, n):
             res += a[lo + i, col]
         return res
+    r0, r1, r2, r3 = a[lo, col], a[lo + 1, col], a[lo + 2, col], a[lo + 3, col]
+    r4, r5, r6, r7 = a[lo + 4, col], a[lo + 5, col], a[lo + 6, col], a[lo + 7, col]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i, col]
+        r1 += a[lo + i + 1, col]
+        r2 += a[lo + i + 2, col]
+        r3 += a[lo + i + 3, col]
+        r4 += a[lo + i + 4, col]
+        r5 += a[lo + i + 5, col]
+        r6 += a[lo + i + 6, col]
+        r7 += a[lo + i + 7, col]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i, col]
+        i += 1
+    return res
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _pairwise(a, lo, n, col):  # pragma: no cover - compiled
+    """NumPy's pairwise sum of ``a[lo:lo + n, col]``, n >= 1, in ``a``'s type (``pairwise_sum``
+    of its loops: 8 running sums over blocks of at most 128, halves above), to the same bits.
+    The halves are kept on an explicit stack: a recursive kernel cannot be called from
+    another module's cached kernels (its symbol is not resolved there)."""
     if n <= 128:
-        r0, r1, r2, r3 = a[lo, col], a[lo + 1, col], a[lo + 2, col], a[lo + 3, col]
-        r4, r5, r6, r7 = a[lo + 4, col], a[lo + 5, col], a[lo + 6, col], a[lo + 7, col]
-        i = 8
-        while i < n - (n % 8):
-            r0 += a[lo + i, col]
-            r1 += a[lo + i + 1, col]
-            r2 += a[lo + i + 2, col]
-            r3 += a[lo + i + 3, col]
-            r4 += a[lo + i + 4, col]
-            r5 += a[lo + i + 5, col]
-            r6 += a[lo + i + 6, col]
-            r7 += a[lo + i + 7, col]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[lo + i, col]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise(a, lo, n2, col) + _pairwise(a, lo + n2, n - n2, col)
+        return _pw_leaf(a, lo, n, col)
+    st_lo = np.empty(64, np.int64)
+    st_n = np.empty(64, np.int64)
+    st_k = np.zeros(64, np.int64)
+    vals = np.empty(64, a.dtype)
+    depth = 0
+    st_lo[0], st_n[0] = lo, n
+    ret = a[lo, col]
+    while True:
+        l, m = st_lo[depth], st_n[depth]
+        if m > 128:  # split: the left half first
+            st_k[depth] = 1
+            h = m // 2
+            h -= h % 8
+            depth += 1
+            st_lo[depth], st_n[depth], st_k[depth] = l, h, 0
+            continue
+        ret = _pw_leaf(a, l, m, col)
+        depth -= 1
+        while depth >= 0:
+            if st_k[depth] == 1:  # a left half done: keep it, do the right half
+                vals[depth] = ret
+                st_k[depth] = 2
+                h = st_n[depth] // 2
+                h -= h % 8
+                depth += 1
+                st_lo[depth], st_n[depth], st_k[depth] = st_lo[depth - 1] + h, st_n[depth - 1] - h, 0
+                break
+            ret = vals[depth] + ret  # both halves done
+            depth -= 1
+        if depth < 0:
+            return ret
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _reduce_rows(w, a, e, out):  # pragma: no cover - compiled
+    """``np.add.reduceat``'s sum of the rows ``a .. e - 1`` of ``w`` into ``out``: the first
+    row plus the pairwise sum of the others (``w[a]`` when ``e - a <= 1``)."""
+    for k in range(w.shape[1]):
+        out[k] = w[a, k] + _pairwise(w, a + 1, e - a - 1, k) if e - a > 1 else w[a, k]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -127,72 +171,7 @@ def _reduceat(w, starts, out):  # pragma: no cover - compiled
     range (``starts[g] == starts[g + 1]``) gives the row at ``starts[g]``."""
     G, R = len(starts), len(w)
     for g in range(G):
-        a = starts[g]
-        e = starts[g + 1] if g + 1 < G else R
-        for k in range(w.shape[1]):
-            out[g, k] = w[a, k] + _pairwise(w, a + 1, e - a - 1, k) if e - a > 1 else w[a, k]
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def piece_moments(xy, pt, pc, frame, starts, out):  # pragma: no cover - compiled
-    """Moments of pieces of points: ``np.add.reduceat`` of their float32 monomials, to the bits.
-
-    Rows ``r`` (sorted by piece ``pc[r]``): point ``pt[r]`` in the frame of its piece
-    (``q = (xy - frame[:2]) / frame[2]``, float64, then float32); each run of rows starting
-    at ``starts[g]`` sums its :func:`rangesim.core.conics.conic_monomials` into ``out[g]``.
-    """
-    mono = np.empty((len(pt), 15), np.float32)
-    for r in range(len(pt)):
-        f = frame[pc[r]]
-        _monomials(mono, r, np.float32((xy[pt[r], 0] - f[0]) / f[2]), np.float32((xy[pt[r], 1] - f[1]) / f[2]))
-    _reduceat(mono, starts, out)
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def curve_links(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: no cover - compiled
-    """Pairs (i, k) of edge points that :func:`~._arc_ellipses.smooth_curves` links.
-
-    ``x, y`` (N,) int pixels (distinct), ``theta`` (N,) normals. Each point looks at the
-    pixels of half the (2R+1)^2 window (dy > 0, or dy == 0 and dx > 0, so a pair is seen
-    once) through an index image: linked when the normals agree within ``cos_link`` and the
-    step runs along both tangents (within ``sin_link`` of the tangent across a bridged gap,
-    at least ``cos_adjacent`` off the normal between 8-neighbours).
-    """
-    n = len(x)
-    W = 0
-    H = 0
-    for i in range(n):
-        W = max(W, x[i])
-        H = max(H, y[i])
-    W += 2 * R + 1
-    H += 2 * R + 1
-    index = np.full((H, W), -1, np.int64)
-    for i in range(n):
-        index[y[i] + R, x[i] + R] = i
-    rows = np.empty(n * (2 * R + 1) * (R + 1), np.int64)
-    cols = np.empty_like(rows)
-    m = 0
-    for i in range(n):
-        ci, si = np.cos(theta[i]), np.sin(theta[i])
-        for dy in range(0, R + 1):
-            for dx in range(-R, R + 1):
-                if dy == 0 and dx <= 0:
-                    continue
-                k = index[y[i] + R + dy, x[i] + R + dx]
-                if k < 0:
-                    continue
-                if abs(np.cos(theta[i] - theta[k])) < cos_link:
-                    continue
-                step = np.sqrt(dx * dx + dy * dy)
-                lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
-                if abs(dx * ci + dy * si) > lim * step:
-                    continue
-                if abs(dx * np.cos(theta[k]) + dy * np.sin(theta[k])) > lim * step:
-                    continue
-                rows[m] = i
-                cols[m] = k
-                m += 1
-    return rows[:m], cols[:m]
+        _reduce_rows(w, starts[g], starts[g + 1] if g + 1 < G else R, out[g])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
