@@ -1,0 +1,120 @@
+"""The normal detector's block planes on noisy scans (issue 14): the predicted noise of a
+fitted normal against measured, and creases of known bend under known Gaussian noise."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.core.constants import EdgeLabel
+from rangesim.core.rangescan import RangeScan
+from rangesim.edges._normal_planes import RAYLEIGH_MEDIAN, block_planes, normal_angle_std
+
+
+def _roof(bend_deg: float, noise_fp: float, seed: int, size: int = 96, f: float = 300.0,
+          z0: float = 400.0, tilt: float = 0.0) -> RangeScan:
+    """A plane facing the camera that turns ``bend_deg`` away from it at column 48 (a
+    convex crease; ``bend_deg = 0``: a plane), optionally tilted about the x axis (``dz / dy = tilt``); Gaussian depth noise of ``noise_fp`` footprints, the noise
+    model's ``sigma`` (mm) attached as a laser-stripe scan carries it."""
+    K = np.array([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
+    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
+    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
+    fp = z0 / f
+    # exact planes: z = z0 + m y + s max(x, 0) (the crease at x = 0, between columns 47 and
+    # 48), with x = u z / f, y = v z / f on the pixel rays
+    u, v = jj - size / 2, ii - size / 2
+    s = np.where(u > 0, np.tan(np.radians(bend_deg)), 0.0)
+    depth = z0 / (1 - (s * u + tilt * v) / f)
+    sigma_mm = noise_fp * fp
+    depth = depth + sigma_mm * np.random.default_rng(seed).standard_normal((size, size))
+    xyz = (rays * depth[..., None]).astype(np.float32)
+    shape = depth.shape
+    return RangeScan(
+        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
+        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
+        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
+        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=np.full(shape, sigma_mm, np.float32),
+    )
+
+
+def _fit(scan: RangeScan, b: int):
+    h, w = scan.shape
+    xyz = np.ascontiguousarray(np.moveaxis(scan.xyz, -1, 0), np.float32)
+    s2 = (scan.sigma ** 2).astype(np.float32)
+    out = (np.empty((3, h, w), np.float32), np.empty((h, w), np.float32), np.empty((3, h, w), np.float32))
+    block_planes(xyz, scan.valid, np.zeros((h, w), bool), s2, b, 0.6, *out)
+    return out
+
+
+@pytest.mark.parametrize("b", [3, 5, 9])
+@pytest.mark.parametrize("tilt", [0.0, 1.5])
+def test_fitted_normal_noise_follows_the_law(b, tilt):
+    """On a noisy plane the fitted normals scatter as predicted: their RMS angle about the
+    mean normal is the predicted ``sqrt(v)`` within 10 % (15 % on the slanted face, where the
+    measured scatter runs up to 11 % above it at b = 9; the detector scales the prediction by
+    the scan's own measured :func:`noise_gain`, at least 1), and head-on (no tilt) both are
+    ``sqrt(2) sigma / (spacing sqrt(n) e)``, e = sqrt((b^2 - 1) / 12); a face tilted by
+    atan(1.5) = 56 degrees is quieter by cos(t) across and cos^2(t) along its slope (within
+    10 %: the prediction is taken at the fitted, noisy slope, 0.12 rad per axis at b = 3)."""
+    scan = _roof(0.0, 0.3, seed=b, tilt=tilt)
+    normal, var, _ = _fit(scan, b)
+    inner = (slice(b, -b), slice(b, -b))                 # every whole block
+    n = normal[(slice(None),) + inner].reshape(3, -1)
+    mean = n.mean(1)
+    mean /= np.linalg.norm(mean)
+    measured = np.sqrt(np.mean(np.arccos(np.clip(mean @ n, -1, 1)) ** 2))
+    predicted = np.sqrt(np.mean(var[inner]))
+    assert measured == pytest.approx(predicted, rel=0.1 if tilt == 0.0 else 0.15)
+    head_on = normal_angle_std(0.3, 1.0, b)
+    if tilt == 0.0:
+        assert predicted == pytest.approx(head_on, rel=0.1)
+    else:
+        c = np.cos(np.arctan(tilt))
+        assert predicted == pytest.approx(head_on * np.sqrt((c ** 2 + c ** 4) / 2), rel=0.1)
+
+
+def test_pair_angles_are_rayleigh_on_a_plane():
+    """The angle between blocks either side of a pixel over ``sqrt(v_A + v_B)`` has the
+    Rayleigh median sqrt(ln 2) on a noisy plane (within 5 %)."""
+    scan = _roof(0.0, 0.8, seed=3)
+    normal, var, _ = _fit(scan, 5)
+    a, b = normal[:, 10:-10, 8:-12], normal[:, 10:-10, 12:-8]          # blocks at p -+ 2 px
+    ang = np.arccos(np.clip(np.sum(a * b, 0), -1, 1)) / np.sqrt(var[10:-10, 8:-12] + var[10:-10, 12:-8])
+    assert np.median(ang) == pytest.approx(RAYLEIGH_MEDIAN, rel=0.05)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_roof_found_within_a_pixel_under_noise(seed):
+    """A 45 degree roof under 0.8 footprints of Gaussian noise (inria_laser's level): the
+    crease is found along nearly its whole length (away from the image border), convex, 75 %
+    of it within 1 px of the true line (between columns 47 and 48) and all within 2.5 px (the
+    benchmarks' 2 px tolerance from a pixel's edge), and nowhere else but next to the image
+    border (where the data ends; the benchmarks leave such pixels out)."""
+    scan = _roof(45.0, 0.8, seed)
+    em = rs.edges.normal(scan)
+    assert em.params["blocks"]                      # the block path was taken
+    crease = em.mask & (em.labels != EdgeLabel.JUMP)
+    crease[:, :8] = crease[:, -8:] = False          # the image border, where the data ends
+    rows, cols = np.nonzero(crease[12:-12])
+    assert rows.size >= 0.9 * (96 - 24)
+    off = np.abs(cols + 0.5 - 48)
+    assert np.mean(off <= 1.0) >= 0.75 and np.all(off <= 2.5)
+    assert np.all(em.labels[12:-12][crease[12:-12]] == EdgeLabel.CONVEX)
+
+
+def test_no_false_crease_on_a_noisy_plane():
+    """A tilted plane under 0.8 footprints of noise: no crease pixel 8 px or more from the
+    image border (the false-alarm rate per pair is exp(-16), ~1e-7, at k = 4; 96^2 pixels x 4
+    axes), on three draws. (The jump rule's own false alarms are not this detector's.)"""
+    for seed in range(3):
+        em = rs.edges.normal(_roof(0.0, 0.8, seed, tilt=0.7))
+        crease = em.mask & ((em.labels == EdgeLabel.CONVEX) | (em.labels == EdgeLabel.CONCAVE))
+        assert not crease[8:-8, 8:-8].any()
+
+
+def test_noise_free_and_explicit_window_keep_the_stencil_normals():
+    """Noise-free scans and an explicit ``window`` take the stencil path (no blocks)."""
+    quiet = _roof(45.0, 0.0, 0)
+    quiet.sigma = None
+    assert "blocks" not in rs.edges.normal(quiet).params
+    assert "blocks" not in rs.edges.normal(_roof(45.0, 0.8, 0), window=7).params
