@@ -13,7 +13,17 @@ from rangesim.core.errors import RangesimError
 from rangesim.edges._differences import central_difference, dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, find_discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
+from rangesim.edges._matching_scale import matching_window, ridge_sigma
 from rangesim.edges._noise import NOISE_FLOOR, NOISE_K_PCL, estimate_depth_noise, noise_threshold, stencil_window
+from rangesim.edges._pcl_scale import (
+    K_HIGH,
+    K_LOW,
+    chord_normals,
+    crease_step,
+    nan_gaussian,
+    strength_noise,
+    strided_sobel,
+)
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry, scan_depth, scan_points
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nearest_axis, nonmax_suppress, thin_staircases
 from rangesim.edges._trig import half_atan2
@@ -71,11 +81,11 @@ def _smooth3(a: np.ndarray, axis: int, weights: tuple[float, float] = (2.0, 1.0)
     return out
 
 
-def _hysteresis(strength: np.ndarray, low: float, high: float) -> np.ndarray:
+def _hysteresis(strength: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
     """Pixels above ``low`` 8-connected to a pixel above ``high`` (Canny's edge tracing).
 
     Like :func:`skimage.filters.apply_hysteresis_threshold` but 8-connected, so thinned
-    diagonal lines stay whole.
+    diagonal lines stay whole. ``low`` and ``high`` are numbers or per-pixel arrays.
     """
     s = np.nan_to_num(strength, nan=0.0)
     weak = s > low
@@ -162,6 +172,29 @@ def pcl_organized(
     PCL's defaults (0.4, 1.1) start an edge at creases of ~22 degrees and continue it down
     to ~8.
 
+    That 3 x 3 Canny is kept for clean laser scans. On block-matched scans (the scan's
+    ``meta["sensor"]`` says ``structured_light`` and its ``window``,
+    :func:`~rangesim.edges._matching_scale.matching_window`) and on noisy ones (depth noise
+    of at least :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints) it runs at the scale
+    the sensor resolves, step ``h`` (:mod:`rangesim.edges._pcl_scale`): normals from the
+    chords ``P(p +- h)`` (PCL's average-3D-gradient normals at a smoothing size of
+    ``2h + 1``), Sobel at stride ``h`` divided by the share of a matcher's box-rounded crease
+    those normals see (a crease of ``beta`` radians gives about ``8 sin(beta / 2)`` raw units),
+    non-maximum suppression on the strength smoothed over the matcher's support (a Gaussian
+    of ``w / sqrt 12``; ``2h / sqrt 12`` without a matcher) and hysteresis between
+    :data:`~rangesim.edges._pcl_scale.K_LOW` = 4 and
+    :data:`~rangesim.edges._pcl_scale.K_HIGH` = 6 sigmas of the strength's noise, PCL's
+    (0.4, 1.1) as floors. ``h`` is ``window // 2`` on block-matched scans (the normals either
+    side of a crease reach past the ``+-window / 2`` rounding: 4 for the presets' 9), else the
+    smallest step whose predicted normal noise is at most 0.22 rad
+    (:func:`~rangesim.edges._pcl_scale.crease_step`: 1 at the White Scanner preset's noise, 3
+    at the INRIA preset's). The noise sigma is predicted per pixel where the scan carries its
+    noise model's ``sigma`` (independent errors of ``s`` footprints: ``3 s / h`` raw units,
+    :func:`~rangesim.edges._pcl_scale.predicted_noise_law`), else measured on the strength
+    (its median over the chi-4 median; a matcher's errors are correlated over its window, so
+    no independent-error law holds there). At the presets' noise an edge then needs a stretch
+    of about 70 degrees to start and continues down to about 45.
+
     Labels: occluding and occluded pixels are both JUMP (which is which is kept in the
     returned map's ``occluding`` / ``occluded`` masks); NaN boundaries 0; high-curvature
     pixels CONVEX or CONCAVE from the sign of ``(P_B - P_A) . (n_A - n_B)`` across the edge
@@ -188,17 +221,19 @@ def pcl_organized(
     curvature_threshold : (float, float), optional
         Canny hysteresis (low, high) on the Sobel magnitude of the normal field, raw Sobel
         units as in PCL (``th_hc_canny_low``/``high``, 0.4 and 1.1, the noise-free
-        default). Default (None) on noisy scans (depth noise from
+        default). Default (None) on block-matched and noisy scans (depth noise from
         :func:`~rangesim.edges._noise.estimate_depth_noise` above
-        :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): low =
-        ``max(0.4, k * median)`` of the magnitude over valid pixels, ``k`` =
-        :data:`~rangesim.edges._noise.NOISE_K_PCL` = 4, and high = low * 1.1 / 0.4.
+        :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): ``max(0.4, 4 sigma)`` and
+        ``max(1.1, 6 sigma)`` per pixel, sigma the strength's noise at the sensor's scale
+        (see above; ``params["curvature_threshold"]`` reports their medians and
+        ``params["curvature_noise"]`` whether sigma was ``"sigma"``, predicted, or
+        ``"measured"``).
     edge_types : tuple of str
         Classes that enter ``mask`` (PCL's ``setEdgeType``): any of :data:`EDGE_TYPES`.
     normal_window : int, optional
-        Odd stencil size of the normal estimate, pixels (>= 3). Default (None): 3 on
-        noise-free scans, else as :func:`~rangesim.edges.normal`'s window
-        (``2 ceil(12 noise) + 1`` clipped to 3..9).
+        Odd stencil size of the normal estimate, pixels (>= 3): ``2h + 1`` at the sensor's
+        scale. Default (None): 3 on clean laser scans, else ``2h + 1`` with ``h`` as above
+        (9 on the block-matched presets).
     distance_mm : float or (H, W) float array, optional
         Distance from the sensor to each point, mm (one number: the same for every pixel,
         e.g. a scanner's stand-off). Default: ``|xyz|`` on camera-frame scans; none on
@@ -208,7 +243,9 @@ def pcl_organized(
     -------
     OrganizedEdgeMap
         ``method="pcl_organized"``; ``strength`` is the Sobel magnitude of the normal field
-        (raw units, NaN where undefined); ``direction`` None; the four class masks.
+        (raw units, at the sensor's scale where that is used; NaN where undefined);
+        ``direction`` None; the four class masks. ``params["scale"]``: ``"3x3"`` (PCL's) or
+        ``"sensor"``; ``params["matching_window"]``: the matcher's window or None.
 
     Examples
     --------
@@ -233,36 +270,67 @@ def pcl_organized(
         stencil_window(normal_window, "normal_window", None)  # a bad window is refused before any work
     z, valid = scan_depth(scan)
     geo = pixel_geometry(scan, z)
+    window = matching_window(scan)
     noise = None
-    if normal_window is None or curvature_threshold is None:
+    if normal_window is None or curvature_threshold is None or window is None:
         noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
-    normal_window = stencil_window(normal_window, "normal_window", noise)
+    # PCL's 3 x 3 Canny on clean laser scans; at the sensor's scale on block-matched or noisy ones
+    scaled = window is not None or noisy
     auto_threshold = curvature_threshold is None
     low, high = (0.4, 1.1) if auto_threshold else (float(t) for t in curvature_threshold)
     xyz = scan_points(scan, valid, component_major=True)
     threshold = _depth_threshold(xyz, z, valid, geo, float(depth_discontinuity), distance_mm)
     disc = find_discontinuities(z, threshold, max_search, rule="dominant", perspective=geo.perspective)
-    n = measured_normals(xyz, disc.pairs, normal_window // 2)
-    if _distance_source(z, valid, geo, None) != "|xyz|":
+    camera_frame = _distance_source(z, valid, geo, None) == "|xyz|"
+    noise_source = None
+    if scaled:
+        step = crease_step(window, noise) if normal_window is None else normal_window // 2
+        normal_window = 2 * step + 1
+        n = chord_normals(xyz, disc.pairs, step)
+    else:
+        normal_window = stencil_window(normal_window, "normal_window", noise)
+        step = normal_window // 2
+        n = measured_normals(xyz, disc.pairs, step)
+    if not camera_frame:
         # not a camera frame: n . p <= 0 flips wherever the range axis crosses 0, a false
         # crease; the grid looks along +z (smaller z is nearer), so turn every normal to -z
         np.multiply(n, np.where(n[2] > 0, np.float32(-1), np.float32(1)), out=n)
 
-    # PCL's Canny: 3 x 3 Gaussian (sigma 1), then Sobel of each normal component (central
-    # difference along, [1 2 1] across, times 8 for raw Sobel units)
-    n = _smooth3(_smooth3(n, 0, _GAUSS3), 1, _GAUSS3)
-    gx = _smooth3(central_difference(n, 0, disc.pairs), 0) * np.float32(8)
-    gy = _smooth3(central_difference(n, 2, disc.pairs), 1) * np.float32(8)
-    jxx, jyy, jxy = dot3(gx, gx), dot3(gy, gy), dot3(gx, gy)
-    magnitude = np.sqrt(jxx + jyy)
-    if auto_threshold and noisy:
-        low = noise_threshold(magnitude, valid, low, NOISE_K_PCL)
-        high = low * 1.1 / 0.4
+    pixel_low: float | np.ndarray = low
+    pixel_high: float | np.ndarray = high
+    if scaled:
+        # Canny at step h (rangesim.edges._pcl_scale): Sobel of the chord normals at stride h,
+        # over the share of a matcher's rounded crease it sees; NMS on the strength smoothed
+        # over the matcher's support (or the stencil's), thresholds in noise sigmas
+        gx, gy = strided_sobel(n, disc.pairs, step, window)
+        jxx, jyy, jxy = dot3(gx, gx), dot3(gy, gy), dot3(gx, gy)
+        magnitude = np.sqrt(jxx + jyy)
+        if auto_threshold:
+            sigma, noise_source = strength_noise(scan, magnitude, valid, geo.footprint, step, window)
+            pixel_low = np.maximum(np.float32(low), np.float32(K_LOW) * sigma)
+            pixel_high = np.maximum(np.float32(high), np.float32(K_HIGH) * sigma)
+            low, high = (float(np.median(t[valid])) if np.ndim(t) and valid.any() else float(np.max(t))
+                         for t in (pixel_low, pixel_high))
+        ridge = nan_gaussian(magnitude, ridge_sigma(window, 2 * step))
+    else:
+        # PCL's Canny: 3 x 3 Gaussian (sigma 1), then Sobel of each normal component (central
+        # difference along, [1 2 1] across, times 8 for raw Sobel units)
+        n = _smooth3(_smooth3(n, 0, _GAUSS3), 1, _GAUSS3)
+        gx = _smooth3(central_difference(n, 0, disc.pairs), 0) * np.float32(8)
+        gy = _smooth3(central_difference(n, 2, disc.pairs), 1) * np.float32(8)
+        jxx, jyy, jxy = dot3(gx, gx), dot3(gy, gy), dot3(gx, gy)
+        magnitude = np.sqrt(jxx + jyy)
+        if auto_threshold and noisy:
+            low = noise_threshold(magnitude, valid, low, NOISE_K_PCL)
+            high = low * 1.1 / 0.4
+        pixel_low, pixel_high = low, high
+        ridge = magnitude
     theta = half_atan2(2 * jxy, jxx - jyy)
     axis = nearest_axis(theta)
-    thin = nonmax_suppress(magnitude, theta, magnitude > low)
-    high_curvature = _hysteresis(np.where(thin, magnitude, 0), low, high) & valid
+    with np.errstate(invalid="ignore"):
+        thin = nonmax_suppress(ridge, theta, magnitude > pixel_low)
+    high_curvature = _hysteresis(np.where(thin, magnitude, 0), pixel_low, pixel_high) & valid
     # as gradient and normal: NMS staircases thinned to 1-px diagonals (the 8-connected
     # truth matches one pixel per pixel), and no crease within 2 px of a depth jump (the
     # normals bend beside an occluding edge: that crest is the jump itself)
@@ -270,14 +338,16 @@ def pcl_organized(
     high_curvature &= ~near_mask(high_curvature, disc.occluding | disc.occluded, JUMP_CLEARANCE)
 
     # convex / concave from the neighbours across the edge
+    # (the normals one step either side: 1 px on PCL's path, h at the sensor's scale)
     shape = z.shape
-    npad, xpad = pad_last2(n, 1, np.nan), pad_last2(xyz, 1, np.nan)
+    r = step if scaled else 1
+    npad, xpad = pad_last2(n, r, np.nan), pad_last2(xyz, r, np.nan)
     side = np.zeros(shape, np.float32)
     for a, (dr, dc) in enumerate(AXES):
         sel = axis == a
-        na = padded_view(npad, 1, -dr, -dc, shape)
-        nb = padded_view(npad, 1, dr, dc, shape)
-        chord = padded_view(xpad, 1, dr, dc, shape) - padded_view(xpad, 1, -dr, -dc, shape)
+        na = padded_view(npad, r, -r * dr, -r * dc, shape)
+        nb = padded_view(npad, r, r * dr, r * dc, shape)
+        chord = padded_view(xpad, r, r * dr, r * dc, shape) - padded_view(xpad, r, -r * dr, -r * dc, shape)
         dn = na - nb
         with np.errstate(invalid="ignore", divide="ignore"):
             c = dot3(chord, dn) / np.sqrt(dot3(chord, chord) * dot3(dn, dn))
@@ -307,6 +377,8 @@ def pcl_organized(
         "distance": _distance_source(z, valid, geo, distance_mm),
         "curvature_threshold": [low, high], "edge_types": list(edge_types),
         "normal_window": normal_window, "noise": None if noise is None else float(noise),
+        "scale": "sensor" if scaled else "3x3", "matching_window": window,
+        "curvature_noise": noise_source,
     }
     return OrganizedEdgeMap(
         mask=mask & valid, labels=labels, strength=magnitude, method="pcl_organized",
