@@ -45,6 +45,65 @@ def _cross_rows(R, out):  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT)
+def _real_ellipse_vector(A, tr, c1, det, p, q, a1):  # pragma: no cover - compiled
+    """:func:`_ellipse_vector` when the cubic's three roots are real (most fits), in real
+    arithmetic: the complex form's values to the bit (every imaginary part there is a signed
+    zero, which adds, multiplies and divides out exactly), without its complex products and
+    the hypot of each complex modulus."""
+    r = np.sqrt(max(-p / 3, 0.0))
+    phi = 0.0
+    if r != 0:
+        arg = min(max(-q / (2 * r ** 3), -1.0), 1.0)
+        phi = np.arccos(arg) / 3
+    best, found = -np.inf, False
+    for k in range(3):
+        lam = tr / 3 if r == 0 else tr / 3 + 2 * r * np.cos(phi - 2 * np.pi * k / 3)
+        for _ in range(2):  # Newton on the cubic: the closed form loses digits near double roots
+            f = ((lam - tr) * lam + c1) * lam - det
+            df = (3 * lam - 2 * tr) * lam + c1
+            if df == 0:
+                break
+            lam = lam - f / df
+        # the largest cross product of two rows of A - lam I (_cross_rows)
+        R00, R01, R02 = A[0, 0] - lam, A[0, 1], A[0, 2]
+        R10, R11, R12 = A[1, 0], A[1, 1] - lam, A[1, 2]
+        R20, R21, R22 = A[2, 0], A[2, 1], A[2, 2] - lam
+        n_best, w0, w1, w2 = -1.0, 0.0, 0.0, 0.0
+        for pair in range(3):
+            if pair == 0:
+                a0, a1_, a2, b0, b1, b2 = R00, R01, R02, R10, R11, R12
+            elif pair == 1:
+                a0, a1_, a2, b0, b1, b2 = R00, R01, R02, R20, R21, R22
+            else:
+                a0, a1_, a2, b0, b1, b2 = R10, R11, R12, R20, R21, R22
+            e0 = a1_ * b2 - a2 * b1
+            e1 = a2 * b0 - a0 * b2
+            e2 = a0 * b1 - a1_ * b0
+            n2 = abs(e0) ** 2 + abs(e1) ** 2 + abs(e2) ** 2
+            if n2 > n_best:
+                n_best, w0, w1, w2 = n2, e0, e1, e2
+        if not n_best > 1e-28:
+            continue  # a double root (rank 1): no unique eigenvector; a degenerate set
+        # geev's normalisation: the largest component positive
+        wb = w0
+        if abs(w1) > abs(wb):
+            wb = w1
+        if abs(w2) > abs(wb):
+            wb = w2
+        ph = wb / abs(wb)
+        x0, x1, x2 = w0 * ph, w1 * ph, w2 * ph
+        n2 = x0 * x0 + x1 * x1 + x2 * x2
+        if not n2 > 0:
+            continue
+        cond = (4 * x0 * x2 - x1 * x1) / n2
+        if cond > 0 and cond > best:
+            best, found = cond, True
+            nrm = np.sqrt(n2)
+            a1[0], a1[1], a1[2] = x0 / nrm, x1 / nrm, x2 / nrm
+    return found
+
+
+@numba.njit(**_JIT)
 def _ellipse_vector(M, a1):  # pragma: no cover - compiled
     """The eigenvector of the (3, 3) ``M`` with ``4 a0 a2 - a1^2 > 0`` into ``a1`` (unit norm;
     of several, the one with the largest such value, normalised). False when none has."""
@@ -63,24 +122,16 @@ def _ellipse_vector(M, a1):  # pragma: no cover - compiled
     # lambda^3 - tr lambda^2 + c1 lambda - det = 0; lambda = t + tr / 3: t^3 + p t + q = 0
     p = c1 - tr * tr / 3
     q = -2 * tr ** 3 / 27 + tr * c1 / 3 - det
-    roots = np.empty(3, np.complex128)
     disc = q * q / 4 + p ** 3 / 27
     if disc <= 0:  # three real roots (trigonometric form; p <= 0 here)
-        r = np.sqrt(max(-p / 3, 0.0))
-        if r == 0:
-            for k in range(3):
-                roots[k] = tr / 3
-        else:
-            arg = min(max(-q / (2 * r ** 3), -1.0), 1.0)
-            phi = np.arccos(arg) / 3
-            for k in range(3):
-                roots[k] = tr / 3 + 2 * r * np.cos(phi - 2 * np.pi * k / 3)
-    else:  # one real root and a complex pair (Cardano)
-        sq = np.sqrt(disc)
-        u, v = np.cbrt(-q / 2 + sq), np.cbrt(-q / 2 - sq)
-        roots[0] = tr / 3 + u + v
-        roots[1] = tr / 3 - (u + v) / 2 + 1j * (np.sqrt(3.0) / 2) * (u - v)
-        roots[2] = np.conj(roots[1])
+        return _real_ellipse_vector(A, tr, c1, det, p, q, a1)
+    # one real root and a complex pair (Cardano)
+    roots = np.empty(3, np.complex128)
+    sq = np.sqrt(disc)
+    u, v = np.cbrt(-q / 2 + sq), np.cbrt(-q / 2 - sq)
+    roots[0] = tr / 3 + u + v
+    roots[1] = tr / 3 - (u + v) / 2 + 1j * (np.sqrt(3.0) / 2) * (u - v)
+    roots[2] = np.conj(roots[1])
     best, found = -np.inf, False
     R = np.empty((3, 3), np.complex128)
     w = np.empty(3, np.complex128)

@@ -46,13 +46,14 @@ def _union(parent, i, k):  # pragma: no cover - compiled
 
 @numba.njit(**_JIT)
 def _sampson(q, x, y):  # pragma: no cover - compiled
-    """Sampson distance of (x, y) to the conic ``q``: :func:`~._conic_kernels.sampson_pairs`'
-    arithmetic."""
+    """Sampson distance of (x, y) to the conic ``q``: :func:`~._conic_kernels.sampson_pairs`,
+    with the gradient's norm by sqrt (libm's hypot, several times the cost, guards against an
+    overflow that pixel coordinates never reach; the two differ by an ulp at most)."""
     a, b, c, d, e, f = q[0], q[1], q[2], q[3], q[4], q[5]
     v = a * x * x + b * x * y + c * y * y + d * x + e * y + f
     gx = 2 * a * x + b * y + d
     gy = b * x + 2 * c * y + e
-    return abs(v) / max(np.hypot(gx, gy), 1e-12)
+    return abs(v) / max(np.sqrt(gx * gx + gy * gy), 1e-12)
 
 
 @numba.njit(**_JIT)
@@ -193,37 +194,41 @@ def fit_groups(xy, pts, sa, na, sb, nb, mom, frame, max_rms, min_inliers, ax_lo,
         if direct_fit(mom_in[li], m_in[li, 0], m_in[li, 1], s_in[li], new, v) >= 0 and n_in[li] >= 6:
             if ellipse_row(new)[0]:
                 conics[idx[li]] = new
-    # the checks on the points
+    # the checks on the points: the residual and inlier share first, the arc (an atan2 per
+    # inlier) only of the fits that pass them
     occ = np.zeros(36, np.bool_)
     j = 0
     for li in range(L):
         g = idx[li]
         q = conics[g]
-        real, cx, cy, A, B, ang = ellipse_row(q)
-        ca, sa_ = np.cos(ang), np.sin(ang)
+        j0 = j
         m = 0
         cnt = 0
         s2 = 0.0
-        occ[:] = False
         while j < R and gid[j] == li:
-            x, y = xy[pt[j], 0], xy[pt[j], 1]
-            d = _sampson(q, x, y)
+            d = _sampson(q, xy[pt[j], 0], xy[pt[j], 1])
             m += 1
             if d <= 1.0:
                 cnt += 1
                 s2 += d * d
-                t = _angle(x, y, cx, cy, ca, sa_, A, B)
-                occ[min(int(t / TWO_PI * 36), 35)] = True
             j += 1
         rms = np.sqrt(s2 / cnt)
         frac = cnt / m
+        real, cx, cy, A, B, ang = ellipse_row(q)
+        if not (rms <= max_rms and frac >= min_inliers and real and B >= ax_lo and A <= ax_hi and B >= min_ratio * A):
+            continue
+        ca, sa_ = np.cos(ang), np.sin(ang)
+        occ[:] = False
+        for r in range(j0, j):
+            x, y = xy[pt[r], 0], xy[pt[r], 1]
+            if _sampson(q, x, y) <= 1.0:
+                t = _angle(x, y, cx, cy, ca, sa_, A, B)
+                occ[min(int(t / TWO_PI * 36), 35)] = True
         arc = 0.0
         for k in range(36):
             if occ[k]:
                 arc += 1.0
-        arc *= 10.0
-        good[g] = (rms <= max_rms and frac >= min_inliers and arc >= min_arc_deg and real and B >= ax_lo
-                   and A <= ax_hi and B >= min_ratio * A)
+        good[g] = arc * 10.0 >= min_arc_deg
     return conics, curved, good
 
 
@@ -269,6 +274,17 @@ def _by_curve_count_sum(curve, cnt, psum, P, n_curves):  # pragma: no cover - co
             seg = seg[_stable_argsort(cnt[seg])]
             o[lo:hi] = seg
     return o
+
+
+@numba.njit(**_JIT)
+def _moments_of(xy, pts, p, start, cnt, frame, buf, out32, mom, have):  # pragma: no cover - compiled
+    """The float32 moments of piece ``p`` into ``mom[p]`` (float64), once (``have``)."""
+    if have[p]:
+        return
+    _piece_moments(xy, pts, start[p], cnt[p], frame[p], buf, out32)
+    for k in range(15):
+        mom[p, k] = out32[k]
+    have[p] = True
 
 
 # -- arc pieces -----------------------------------------------------------------------------------
@@ -349,18 +365,15 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
             prev_b = b
         at += N
     small = max(5, min_points // 3)
-    # moments (float32, as the batched form sums them) of the pieces used
+    # moments (float32, as the batched form sums them), of the pieces fitted only: the first
+    # copies, then the pieces of pairs
     mom = np.zeros((P, 15))
+    have = np.zeros(P, np.bool_)
     big = 0
     for p in range(P):
         big = max(big, p_cnt[p])
     buf = np.empty((big, 15), np.float32)
     out32 = np.empty(15, np.float32)
-    for p in range(P):
-        if p_cnt[p] >= small:
-            _piece_moments(xy, pts, p_start[p], p_cnt[p], p_frame[p], buf, out32)
-            for k in range(15):
-                mom[p, k] = out32[k]
     # first copies: pieces of the same curve, count and sum of point indices, by those keys
     o3 = _by_curve_count_sum(p_curve, p_cnt, p_sum, P, n_curves)
     same_as = np.empty(P, np.int64)
@@ -379,6 +392,8 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
             single[S] = first[u]
             S += 1
     single = single[:S]
+    for p in single:
+        _moments_of(xy, pts, p, p_start, p_cnt, p_frame, buf, out32, mom, have)
     zero = np.zeros(S, np.int64)
     conics1, curved1, good1 = fit_groups(xy, pts, p_start[single], p_cnt[single], zero, zero, mom[single],
                                          p_frame[single], max_rms, min_inliers, ax_lo, ax_hi, min_ratio,
@@ -445,6 +460,8 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
     qa, qb = qa[:M], qb[:M]
     mom2 = np.empty((M, 15))
     for q in range(M):
+        _moments_of(xy, pts, qa[q], p_start, p_cnt, p_frame, buf, out32, mom, have)
+        _moments_of(xy, pts, qb[q], p_start, p_cnt, p_frame, buf, out32, mom, have)
         for k in range(15):
             mom2[q, k] = mom[qa[q], k] + mom[qb[q], k]
     conics2, _, good2 = fit_groups(xy, pts, p_start[qa], p_cnt[qa], p_start[qb], p_cnt[qb], mom2, p_frame[qa],
