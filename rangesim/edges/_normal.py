@@ -86,7 +86,11 @@ def normal(
         = 4.5 (~37 degrees at the White Scanner preset's noise with window 7); where the
         scan carries its noise model's ``sigma``, ``k`` =
         :data:`~rangesim.edges._noise.NOISE_K_NORMAL_LOCAL` = 3.5 and per pixel times
-        :func:`~rangesim.edges._noise.local_noise_scale`.
+        :func:`~rangesim.edges._noise.local_noise_scale`. On the block-plane path
+        (``blocks``, below) the threshold is instead a floor,
+        :data:`~rangesim.edges._normal_blocks.BLOCK_FLOOR_DEG` = 35 by default (chosen on
+        tuning seeds: hole walls and cylinders bend a pair of blocks by about 2 r kappa), and
+        each pixel needs ``k`` = 4 times its fitted normals' predicted angle noise above it.
     window : int, optional
         Odd stencil size of the normal estimate, pixels (>= 3): differences over
         ``window // 2`` pixels. Default (None): 3 on noise-free scans, else
