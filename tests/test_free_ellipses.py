@@ -341,3 +341,30 @@ def test_grouped_frames_and_sampson_pairs_match_numpy():
         assert np.array_equal(m2, m) and np.array_equal(s2, s) and np.array_equal(mom2, mom)
         conics = rng.normal(size=(G, 6))
         assert np.array_equal(sampson_pairs(conics, group, xy, pt), C.sampson_distance_rows(conics[group], xy[pt]))
+
+
+def test_compiled_coverage_and_claims_match_the_batched_coverage():
+    # the free path's coverage (compiled, pairs by conic) is the circle finder's batched one
+    # (coverage): the same bins, the RMS to an ulp (sqrt for hypot)
+    from rangesim.core.conics import fit_conic
+    from rangesim.features._arc_ellipses import _COS_T, _SIN_T, MAX_PERIMETER_PX, coverage
+    from rangesim.features._ellipse_kernels import coverage_rows
+
+    rng = np.random.default_rng(5)
+    conics, hyp, pts = [], [], []
+    xy = rng.uniform(0, 200, (4000, 2))
+    for k in range(30):
+        c, a = rng.uniform(40, 160, 2), rng.uniform(3, 60)
+        b, ang = a * rng.uniform(0.1, 1.0), rng.uniform(0, np.pi)
+        t = rng.uniform(0, 2 * np.pi, 200)
+        e = np.column_stack([a * np.cos(t), b * np.sin(t)]) @ np.array([[np.cos(ang), np.sin(ang)],
+                                                                       [-np.sin(ang), np.cos(ang)]])
+        xy[k * 100:k * 100 + 100] = c + e[:100] + rng.normal(0, 0.3, (100, 2))
+        conics.append(fit_conic(c + e) if k % 7 else np.array([0.0, 0, 0, 1, 1, -5]))  # a line too
+        hyp.append(np.full(100, k))
+        pts.append(np.arange(k * 100, k * 100 + 100))
+    conics, hyp, pts = np.array(conics), np.concatenate(hyp), np.concatenate(pts)
+    cov0, rms0, per0 = coverage(conics, xy, hyp, pts)
+    cov1, rms1, per1 = coverage_rows(conics, xy, hyp, pts, _SIN_T, _COS_T, MAX_PERIMETER_PX)
+    assert np.array_equal(cov0, cov1) and np.array_equal(per0, per1)
+    assert np.allclose(rms0, rms1, rtol=1e-14) and np.array_equal(np.isinf(rms0), np.isinf(rms1))

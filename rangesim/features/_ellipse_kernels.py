@@ -79,9 +79,15 @@ def _stable_argsort(key):  # pragma: no cover - compiled
 
 @numba.njit(**_JIT)
 def curve_labels(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: no cover - compiled
-    """Labels of the smooth curves: the connected components of
-    :func:`~._conic_kernels.curve_links`' pairs (the same links), numbered by their first
-    point as ``scipy.sparse.csgraph.connected_components`` numbers them.
+    """Labels of the smooth curves: the connected components of the links of
+    :func:`~._arc_ellipses.smooth_curves`, numbered by their first point as
+    ``scipy.sparse.csgraph.connected_components`` numbers them.
+
+    Each point looks at the pixels of half the (2R+1)^2 window (dy > 0, or dy == 0 and
+    dx > 0, so a pair is seen once) through an index image: linked when the normals agree
+    within ``cos_link`` (the cosine of their difference from the normals' cosines and sines)
+    and the step runs along both tangents (within ``sin_link`` of the tangent across a
+    bridged gap, at least ``cos_adjacent`` off the normal between 8-neighbours).
 
     ``x, y`` (N,) int pixels (distinct, >= 0), ``theta`` (N,) normals. Returns (labels (N,),
     number of curves).
@@ -110,7 +116,7 @@ def curve_labels(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: n
                 k = index[y[i] + R + dy, x[i] + R + dx]
                 if k < 0:
                     continue
-                if abs(np.cos(theta[i] - theta[k])) < cos_link:
+                if abs(ci * ct[k] + si * st[k]) < cos_link:  # cos(theta_i - theta_k)
                     continue
                 step = np.sqrt(dx * dx + dy * dy)
                 lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
@@ -521,16 +527,19 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     """
     N = len(pix)
     pad = g + 1
-    W = 0
-    H = 0
+    # the points' box, with a margin of pad px: the background ring round it joins every
+    # region that reaches it, as the rest of the image would (the same regions, groups, and
+    # raster order of the groups)
+    x0, y0, x1, y1 = pix[0, 0], pix[0, 1], pix[0, 0], pix[0, 1]
     for i in range(N):
-        W = max(W, pix[i, 0] + pad)
-        H = max(H, pix[i, 1] + pad)
-    H += pad + 1
-    W += pad + 1
+        x0, x1 = min(x0, pix[i, 0]), max(x1, pix[i, 0])
+        y0, y1 = min(y0, pix[i, 1]), max(y1, pix[i, 1])
+    ox, oy = pad - x0, pad - y0
+    W = x1 + ox + pad + 1
+    H = y1 + oy + pad + 1
     grown = np.zeros((H, W), np.bool_)
     for i in range(N):
-        x, y = pix[i, 0] + pad, pix[i, 1] + pad
+        x, y = pix[i, 0] + ox, pix[i, 1] + oy
         for yy in range(y - g, y + g + 1):
             for xx in range(x - g, x + g + 1):
                 grown[yy, xx] = True
@@ -597,7 +606,7 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     on = np.zeros(N, np.bool_)
     count = np.zeros(n_groups, np.int64)
     for i in range(N):
-        x, y = pix[i, 0] + pad, pix[i, 1] + pad
+        x, y = pix[i, 0] + ox, pix[i, 1] + oy
         lab[i] = gnum[_find(parent, _run_at(rs, re, row0[y], row0[y + 1], x))]
         for dy, dx in ((-g - 1, 0), (g + 1, 0), (0, -g - 1), (0, g + 1)):
             yy, xx = y + dy, x + dx
