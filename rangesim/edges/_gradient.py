@@ -10,6 +10,7 @@ import numpy as np
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import central_difference
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._gradient_steps import step_smooth
 from rangesim.edges._grid import shift
 from rangesim.edges._matching_scale import matching_window, ridge_sigma, rounding_gain, strided_responses
 from rangesim.edges._noise import (
@@ -699,7 +700,12 @@ def gradient(
     (neighbours more than ``jump_threshold`` pixel footprints apart, PCL's rule scaled to
     the footprint, also searched across NaN gaps up to ``max_search`` pixels), labelled
     JUMP on the near (occluding) side. A step is not a roof: stencil parts that cross a
-    discontinuity are dropped (and, with smoothing, responses within 2 sigma of one).
+    discontinuity are dropped, and the smoothing never averages across one
+    (:func:`~rangesim.edges._gradient_steps.step_smooth`: each side continued by its own
+    surface, so a step is not smeared into a slope change and creases beside it keep their
+    response; on tuning seeds 20-29, inria_laser with noise, F1 0.848 -> 0.879; before, every
+    response within ceil(2 sigma) px of a jump was dropped, as it still is for an explicit
+    sigma with ``stride > 1``).
     Pixels next to NaN gaps that the search cannot resolve are not labelled.
 
     Parameters
@@ -809,14 +815,21 @@ def gradient(
             sigma = float(np.clip(4 * noise, 1.0, 3.0))
     if auto_threshold:
         threshold = 15.0
-    zs = _nan_gaussian(z, sigma) if sigma > 0 else z
     fp = geo.footprint
     inv_fp = np.float32(1) / fp
     near_jump = None
-    if sigma > 0:
-        # smoothing drags a step's slope out by ~2 sigma: no responses that close to one
+    if sigma > 0 and stride == 1:
+        # smoothed without averaging across a broken pair (rangesim.edges._gradient_steps): a
+        # step is not smeared into a slope change, so no response near it need be dropped
+        zs = step_smooth(z, disc.pairs, sigma)
+    elif sigma > 0:
+        # (an explicit sigma on strided operators) smoothing drags a step's slope out by ~2
+        # sigma: no responses that close to one
+        zs = _nan_gaussian(z, sigma)
         near_jump = _near_jump(disc.touching, sigma)
         np.copyto(inv_fp, np.nan, where=near_jump)
+    else:
+        zs = z
     # a depth step is not a roof: no stencil part may cross a discontinuity
     if stride > 1:
         # the operators dilated to the matcher's scale: chords beside the rounding, divided
