@@ -38,13 +38,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from rangesim.edges._differences import central_difference, dot3
 from rangesim.edges._matching_scale import ridge_sigma, rounding_gain
 from rangesim.edges._pcl_scale import chord_normals, crease_step, nan_gaussian
 from rangesim.edges._scan_access import scan_points
-from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress
+from rangesim.edges._thinning import JUMP_CLEARANCE, hysteresis, near_mask, nonmax_suppress
 
 __all__ = ["chord_curvatures", "chord_bend", "matched_creases", "form_sigma", "K_LOW", "K_HIGH",
            "LOW_FLOOR", "HIGH_FLOOR"]
@@ -142,18 +141,6 @@ def form_sigma(step: int) -> float:
     return float(step) / float(np.sqrt(12.0))
 
 
-def _hysteresis(strength: np.ndarray, low: float, high: float) -> np.ndarray:
-    """Pixels above ``low`` 8-connected to a pixel above ``high``."""
-    s = np.nan_to_num(strength, nan=0.0)
-    weak = s > low
-    labels, count = ndimage.label(weak, structure=np.ones((3, 3), bool))
-    if count == 0:
-        return weak
-    strong = np.zeros(count + 1, bool)
-    strong[np.unique(labels[s > high])] = True
-    strong[0] = False
-    return strong[labels]
-
 
 def matched_creases(scan: Any, valid: np.ndarray, disc: Any, window: int,
                     threshold: float | None = None) -> tuple[np.ndarray, dict[str, Any], dict[str, Any]]:
@@ -205,7 +192,7 @@ def matched_creases(scan: Any, valid: np.ndarray, disc: Any, window: int,
             noise = float(np.median(b)) if b.size else 0.0
             low, high = max(LOW_FLOOR, K_LOW * noise), max(HIGH_FLOOR, K_HIGH * noise)
             thin = nonmax_suppress(ridge, curv["direction"], bend > low)
-            points = _hysteresis(np.where(thin, bend, 0), low, high)
+            points = hysteresis(np.where(thin, bend, 0), low, high)
             info.update(bend_threshold=[low, high], bend_noise=noise)
         else:
             points = nonmax_suppress(ridge, curv["direction"], np.abs(curv["k"]) > float(threshold))

@@ -15,7 +15,24 @@ import numpy as np
 from rangesim.edges._discontinuities import segment_broken
 from rangesim.edges._grid import AXES, pad_last2, padded_view
 
-__all__ = ["central_difference", "eno_tangent", "measured_normals", "dot3"]
+__all__ = ["central_difference", "eno_tangent", "measured_normals", "normals_from_tangents", "dot3"]
+
+
+def side_samples(a: np.ndarray, ok: np.ndarray, pairs: np.ndarray | None, axis: int,
+                 s: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``a(p + s d)`` and ``a(p - s d)`` along ``AXES[axis]`` (NaN outside the image) and
+    whether each side is usable: ``ok`` at both ends and no discontinuity (``pairs``) on the
+    ``s`` steps between. ``a`` is (..., H, W), ``ok`` (H, W)."""
+    dr, dc = AXES[axis]
+    shape = ok.shape
+    okp = pad_last2(ok, s, False)
+    fok = padded_view(okp, s, s * dr, s * dc, shape) & ok
+    bok = padded_view(okp, s, -s * dr, -s * dc, shape) & ok
+    if pairs is not None:
+        fok &= ~segment_broken(pairs, axis, 0, s)
+        bok &= ~segment_broken(pairs, axis, -s, 0)
+    ap = pad_last2(a, s, np.nan)
+    return padded_view(ap, s, s * dr, s * dc, shape), padded_view(ap, s, -s * dr, -s * dc, shape), fok, bok
 
 
 def _sides(a: np.ndarray, axis: int, pairs: np.ndarray | None, step: int) -> tuple[np.ndarray, ...]:
@@ -25,19 +42,10 @@ def _sides(a: np.ndarray, axis: int, pairs: np.ndarray | None, step: int) -> tup
     between) else ``a(p)``, ``B`` likewise on the minus side, ``n`` the number of usable
     sides (0, 1, 2) as float32, so ``(A - B) / (s n)`` is the central or one-sided difference.
     """
-    dr, dc = AXES[axis]
-    s = int(step)
-    shape = a.shape[-2:]
     ok = ~np.isnan(a if a.ndim == 2 else a[0])
-    okp = pad_last2(ok, s, False)
-    fok = padded_view(okp, s, s * dr, s * dc, shape) & ok
-    bok = padded_view(okp, s, -s * dr, -s * dc, shape) & ok
-    if pairs is not None:
-        fok &= ~segment_broken(pairs, axis, 0, s)
-        bok &= ~segment_broken(pairs, axis, -s, 0)
-    ap = pad_last2(a, s, np.nan)
-    A = np.where(fok, padded_view(ap, s, s * dr, s * dc, shape), a)
-    B = np.where(bok, padded_view(ap, s, -s * dr, -s * dc, shape), a)
+    fwd, bwd, fok, bok = side_samples(a, ok, pairs, axis, int(step))
+    A = np.where(fok, fwd, a)
+    B = np.where(bok, bwd, a)
     return A, B, fok.view(np.int8) + bok.view(np.int8)
 
 
@@ -292,9 +300,16 @@ def measured_normals(xyz: np.ndarray, pairs: np.ndarray | None, step: int = 1) -
     (3, H, W) array of xyz's dtype
         Unit normals with ``n . p <= 0`` (towards the camera); NaN where a tangent is missing.
     """
-    tx = eno_tangent(xyz, 0, pairs, step)
-    ty = eno_tangent(xyz, 2, pairs, step)
-    # y-tangent x x-tangent points towards the camera (-z) for an image of a visible surface
+    return normals_from_tangents(eno_tangent(xyz, 0, pairs, step), eno_tangent(xyz, 2, pairs, step), xyz)
+
+
+def normals_from_tangents(tx: np.ndarray, ty: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """Unit normals ``ty x tx`` of (3, H, W) x- and y-tangents, turned towards the camera.
+
+    ``ty x tx`` points towards the camera (-z) for an image of a visible surface; where it
+    does not (``n . p > 0``, ``xyz`` the points) it is flipped. NaN where the cross product
+    vanishes or a tangent is missing.
+    """
     n = np.stack([ty[1] * tx[2] - ty[2] * tx[1],
                   ty[2] * tx[0] - ty[0] * tx[2],
                   ty[0] * tx[1] - ty[1] * tx[0]])

@@ -218,23 +218,10 @@ def normal(
         # by the bend summed over the four axes (largest nearest the crease) to keep one
         rank = angles[0] + angles[1] + angles[2] + angles[3]
         np.copyto(rank, np.nan, where=np.isnan(strength))
-        crease = nonmax_suppress(rank, theta, crease)
-    jump = disc.occluding
-    rim = disc.rim
-    # as in gradient: the crest beside a jump (or rim) is the jump itself, and NMS
-    # staircases are thinned
-    crease &= ~near_mask(crease, jump | disc.occluded | rim, JUMP_CLEARANCE)
-    crease = thin_staircases(crease | jump | rim, droppable=crease) & ~jump & ~rim
-    offset = disc.offsets_at(jump | rim)
-    if nms:
-        # the kept pixel towards the crease, from the ranks NMS compared: the summed bend
-        # across a sampled roof is a peak about two samples wide, so the triangle's vertex
-        # (measured on analytic roofs: mean |distance| to the line 0.65-0.75 -> 0.15-0.30 px
-        # along an axis, 0.22 -> 0.13-0.16 px oblique; the parabola's 0.17 there)
-        offset += ridge_offsets(rank, theta, crease, peak="triangle")
-    labels = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
-    labels[rim] = RIM
-    labels[jump] = EdgeLabel.JUMP
+    else:
+        rank = None
+    crease, labels, offset = _placed_creases(crease, rank, theta, concave, disc)
+    jump, rim = disc.occluding, disc.rim
     params = {
         "threshold_deg": float(threshold_deg), "window": window,
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
@@ -242,6 +229,38 @@ def normal(
     }
     return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=strength,
                    method="normal", params=params, offset=offset)
+
+
+def _placed_creases(crease: np.ndarray, rank: np.ndarray | None, theta: np.ndarray, concave: np.ndarray,
+                    disc: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Creases thinned and placed as both of :func:`normal`'s paths do: non-maximum
+    suppression on ``rank`` across ``theta`` (None: no NMS), no crease within
+    :data:`JUMP_CLEARANCE` of a jump or rim (the crest beside one is the jump itself, as in
+    gradient), NMS staircases thinned to 1-px diagonals; labels CONVEX/CONCAVE, RIM, JUMP;
+    offsets: the jumps' and rims' and, with NMS, the creases' sub-pixel vertex from the
+    ranks NMS compared (the summed bend across a sampled roof is a peak about two samples
+    wide, so the triangle's vertex; on analytic roofs mean |distance| to the line 0.65-0.75
+    -> 0.15-0.30 px along an axis, 0.22 -> 0.13-0.16 px oblique; the parabola's 0.17 there).
+
+    Returns
+    -------
+    crease : (H, W) bool
+    labels : (H, W) uint8
+    offset : (H, W, 2) float32
+    """
+    if rank is not None:
+        crease = nonmax_suppress(rank, theta, crease)
+    jump = disc.occluding
+    rim = disc.rim
+    crease &= ~near_mask(crease, jump | disc.occluded | rim, JUMP_CLEARANCE)
+    crease = thin_staircases(crease | jump | rim, droppable=crease) & ~jump & ~rim
+    offset = disc.offsets_at(jump | rim)
+    if rank is not None:
+        offset += ridge_offsets(rank, theta, crease, peak="triangle")
+    labels = np.where(concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
+    labels[rim] = RIM
+    labels[jump] = EdgeLabel.JUMP
+    return crease, labels, offset
 
 
 def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_threshold, nms, max_search) -> EdgeMap:
@@ -252,20 +271,10 @@ def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_thresho
     np.copyto(rank, np.nan, where=np.isnan(bends.strength))
     # direction across the crease: dominant second harmonic of the four axis bends
     theta = half_atan2(bends.chord[1] - bends.chord[3], bends.chord[0] - bends.chord[2])
-    if nms:
-        crease = nonmax_suppress(rank, theta, crease)
-    jump = disc.occluding
-    rim = disc.rim
-    crease &= ~near_mask(crease, jump | disc.occluded | rim, JUMP_CLEARANCE)
-    crease = thin_staircases(crease | jump | rim, droppable=crease) & ~jump & ~rim
-    offset = disc.offsets_at(jump | rim)
-    if nms:
-        # the bend of blocks sharing the pixel peaks on the crease and falls by a row of the
-        # other face per pixel off it: a triangle, as the stencil's summed bend
-        offset += ridge_offsets(rank, theta, crease, peak="triangle")
-    labels = np.where(bends.concave, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
-    labels[rim] = RIM
-    labels[jump] = EdgeLabel.JUMP
+    # (the bend of blocks sharing the pixel peaks on the crease and falls by a row of the
+    # other face per pixel off it: a triangle, as the stencil's summed bend)
+    crease, labels, offset = _placed_creases(crease, rank if nms else None, theta, bends.concave, disc)
+    jump, rim = disc.occluding, disc.rim
     params = {
         "threshold_deg": float(bends.floor_deg), "window": None, "blocks": list(bends.sizes),
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),

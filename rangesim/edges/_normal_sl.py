@@ -34,14 +34,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
-from rangesim.edges._differences import dot3
-from rangesim.edges._discontinuities import segment_broken
-from rangesim.edges._grid import AXES, pad_last2, padded_view
+from rangesim.edges._differences import dot3, side_samples
 from rangesim.edges._matching_scale import ridge_sigma, rounding_gain
 from rangesim.edges._pcl_scale import chord_normals, crease_step, nan_gaussian
-from rangesim.edges._thinning import nonmax_suppress
+from rangesim.edges._thinning import hysteresis, nonmax_suppress
 from rangesim.edges._trig import half_atan2
 
 __all__ = ["axis_bends", "bend_noise", "sl_creases", "RAYLEIGH_MEDIAN", "K_LOW", "K_HIGH",
@@ -58,20 +55,6 @@ RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
 K_LOW, K_HIGH = 4.0, 5.5
 #: least thresholds, degrees: 15 to continue a crease, 20 (the truth's least crease) to start one
 LOW_FLOOR_DEG, HIGH_FLOOR_DEG = 15.0, 20.0
-
-
-def _sides(a: np.ndarray, ok: np.ndarray, pairs: np.ndarray | None, axis: int, s: int):
-    """``a(p + s d)``, ``a(p - s d)`` and whether each side is usable (valid, no jump between)."""
-    dr, dc = AXES[axis]
-    shape = ok.shape
-    okp = pad_last2(ok, s, False)
-    fok = padded_view(okp, s, s * dr, s * dc, shape) & ok
-    bok = padded_view(okp, s, -s * dr, -s * dc, shape) & ok
-    if pairs is not None:
-        fok &= ~segment_broken(pairs, axis, 0, s)
-        bok &= ~segment_broken(pairs, axis, -s, 0)
-    ap = pad_last2(a, s, np.nan)
-    return padded_view(ap, s, s * dr, s * dc, shape), padded_view(ap, s, -s * dr, -s * dc, shape), fok, bok
 
 
 def axis_bends(xyz: np.ndarray, pairs: np.ndarray | None, window: int) -> dict[str, Any]:
@@ -101,8 +84,8 @@ def axis_bends(xyz: np.ndarray, pairs: np.ndarray | None, window: int) -> dict[s
     concave = np.zeros(shape, bool)
     angles = []
     for a in range(4):
-        nf, nb, fok, bok = _sides(n, ok, pairs, a, h)
-        pf, pb, _, _ = _sides(xyz, ok, pairs, a, h)
+        nf, nb, fok, bok = side_samples(n, ok, pairs, a, h)
+        pf, pb, _, _ = side_samples(xyz, ok, pairs, a, h)
         nf = np.where(fok, nf, n)
         nb = np.where(bok, nb, n)
         pf = np.where(fok, pf, xyz)
@@ -131,18 +114,6 @@ def bend_noise(angles: list[np.ndarray], valid: np.ndarray) -> float:
     vals = vals[np.isfinite(vals)]
     return float(np.median(vals)) / RAYLEIGH_MEDIAN if vals.size else 0.0
 
-
-def _hysteresis(strength: np.ndarray, low: float, high: float) -> np.ndarray:
-    """Pixels above ``low`` 8-connected to a pixel above ``high``."""
-    s = np.nan_to_num(strength, nan=0.0)
-    weak = s > low
-    labels, count = ndimage.label(weak, structure=np.ones((3, 3), bool))
-    if count == 0:
-        return weak
-    strong = np.zeros(count + 1, bool)
-    strong[np.unique(labels[s > high])] = True
-    strong[0] = False
-    return strong[labels]
 
 
 def sl_creases(xyz: np.ndarray, valid: np.ndarray, pairs: np.ndarray | None, window: int,
@@ -178,7 +149,7 @@ def sl_creases(xyz: np.ndarray, valid: np.ndarray, pairs: np.ndarray | None, win
     with np.errstate(invalid="ignore"):
         above = (strength > low) & valid
     crease = nonmax_suppress(ridge, theta, above) if nms else above
-    crease = _hysteresis(np.where(crease, strength, 0), low, high) & crease
+    crease = hysteresis(np.where(crease, strength, 0), low, high) & crease
     return {
         "crease": crease, "strength": np.degrees(strength).astype(np.float32), "concave": b["concave"],
         "theta": theta, "ridge": ridge, "threshold_deg": [float(np.degrees(low)), float(np.degrees(high))],

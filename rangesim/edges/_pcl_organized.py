@@ -6,7 +6,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
@@ -25,7 +24,14 @@ from rangesim.edges._pcl_scale import (
     strided_sobel,
 )
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry, scan_depth, scan_points
-from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nearest_axis, nonmax_suppress, thin_staircases
+from rangesim.edges._thinning import (
+    JUMP_CLEARANCE,
+    hysteresis,
+    near_mask,
+    nearest_axis,
+    nonmax_suppress,
+    thin_staircases,
+)
 from rangesim.edges._trig import half_atan2
 from rangesim.edges.edgemap import EdgeMap
 
@@ -80,22 +86,6 @@ def _smooth3(a: np.ndarray, axis: int, weights: tuple[float, float] = (2.0, 1.0)
     out[:, ~ok] = np.nan
     return out
 
-
-def _hysteresis(strength: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
-    """Pixels above ``low`` 8-connected to a pixel above ``high`` (Canny's edge tracing).
-
-    Like :func:`skimage.filters.apply_hysteresis_threshold` but 8-connected, so thinned
-    diagonal lines stay whole. ``low`` and ``high`` are numbers or per-pixel arrays.
-    """
-    s = np.nan_to_num(strength, nan=0.0)
-    weak = s > low
-    labels, count = ndimage.label(weak, structure=np.ones((3, 3), bool))
-    if count == 0:
-        return weak
-    strong = np.zeros(count + 1, bool)
-    strong[np.unique(labels[s > high])] = True
-    strong[0] = False
-    return strong[labels]
 
 
 def _depth_threshold(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, geo: PixelGeometry, relative: float,
@@ -330,7 +320,7 @@ def pcl_organized(
     axis = nearest_axis(theta)
     with np.errstate(invalid="ignore"):
         thin = nonmax_suppress(ridge, theta, magnitude > pixel_low)
-    high_curvature = _hysteresis(np.where(thin, magnitude, 0), pixel_low, pixel_high) & valid
+    high_curvature = hysteresis(np.where(thin, magnitude, 0), pixel_low, pixel_high) & valid
     # as gradient and normal: NMS staircases thinned to 1-px diagonals (the 8-connected
     # truth matches one pixel per pixel), and no crease within 2 px of a depth jump (the
     # normals bend beside an occluding edge: that crest is the jump itself)

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from rangesim.edges._differences import central_difference, dot3
+from rangesim.edges._differences import central_difference, normals_from_tangents
 from rangesim.edges._grid import pad_last2, padded_view
 from rangesim.edges._matching_scale import rounding_gain
 from rangesim.edges._noise import predicted_noise
@@ -115,18 +115,8 @@ def chord_normals(xyz: np.ndarray, pairs: np.ndarray | None, step: int) -> np.nd
     -------
     (3, H, W) array of xyz's dtype
     """
-    tx = central_difference(xyz, 0, pairs, step)
-    ty = central_difference(xyz, 2, pairs, step)
-    n = np.stack([ty[1] * tx[2] - ty[2] * tx[1],
-                  ty[2] * tx[0] - ty[0] * tx[2],
-                  ty[0] * tx[1] - ty[1] * tx[0]])
-    norm = np.sqrt(dot3(n, n))
-    facing = dot3(n, xyz)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(facing > 0, -1, 1).astype(n.dtype) / norm
-    np.copyto(scale, np.nan, where=~(norm > 0))
-    n *= scale
-    return n
+    return normals_from_tangents(central_difference(xyz, 0, pairs, step), central_difference(xyz, 2, pairs, step),
+                                 xyz)
 
 
 def _smooth_along(a: np.ndarray, axis: int, s: int) -> np.ndarray:

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 from rangesim.edges._grid import nonzero2
 
-__all__ = ["nearest_axis", "nonmax_suppress", "ridge_offsets", "thin_staircases", "JUMP_CLEARANCE", "near_mask"]
+__all__ = ["nearest_axis", "nonmax_suppress", "ridge_offsets", "thin_staircases", "JUMP_CLEARANCE", "near_mask",
+           "hysteresis"]
 
 
 def nearest_axis(direction: np.ndarray) -> np.ndarray:
@@ -252,3 +254,21 @@ def near_mask(where: np.ndarray, ref: np.ndarray, r: int) -> np.ndarray:
             hit |= rp[base + dr * stride + dc]
     out[ii[hit], jj[hit]] = True
     return out
+
+
+def hysteresis(strength: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
+    """Pixels above ``low`` 8-connected to a pixel above ``high`` (Canny's edge tracing).
+
+    Like :func:`skimage.filters.apply_hysteresis_threshold` but 8-connected, so thinned
+    diagonal lines stay whole. ``low`` and ``high`` are numbers or per-pixel arrays; NaN
+    strength counts as 0.
+    """
+    s = np.nan_to_num(strength, nan=0.0)
+    weak = s > low
+    labels, count = ndimage.label(weak, structure=np.ones((3, 3), bool))
+    if count == 0:
+        return weak
+    strong = np.zeros(count + 1, bool)
+    strong[np.unique(labels[s > high])] = True
+    strong[0] = False
+    return strong[labels]
