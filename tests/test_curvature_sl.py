@@ -16,16 +16,18 @@ import rangesim as rs
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._curvature_chords import HIGH_FLOOR, chord_bend, chord_curvatures, form_sigma
 from tests.test_edge_detectors import grid_scan, pinhole_rays, roof_distance, synthetic_roof
-from tests.test_structured_light_edges import WINDOW, block_matched
+from tests.test_structured_light_edges import (
+    WINDOW,
+    assert_one_line_on_the_roof,
+    block_matched,
+    inner_mask,
+    xyz_stack,
+)
 
 F, Z0 = 400.0, 500.0
 STEP = WINDOW // 2
 
 
-def _inner(shape, margin=15):
-    inner = np.zeros(shape, bool)
-    inner[margin:-margin, margin:-margin] = True
-    return inner
 
 
 def _cylinder(radius: float, concave: bool, size: int = 91):
@@ -40,8 +42,6 @@ def _cylinder(radius: float, concave: bool, size: int = 91):
     return grid_scan(rays * t[..., None], K)
 
 
-def _xyz(scan):
-    return np.ascontiguousarray(np.moveaxis(scan.xyz, -1, 0), np.float32)
 
 
 @pytest.mark.parametrize("edge_deg", [0.0, 30.0, 90.0, 135.0])
@@ -51,15 +51,8 @@ def test_a_block_matched_crease_is_one_line_on_the_crease_of_its_type(edge_deg, 
                          seed=int(edge_deg) + convex)
     em = rs.edges.curvature(scan)
     assert em.params["scale"] == "sensor" and em.params["step"] == STEP
-    dist = roof_distance(scan, edge_deg)
-    inner = _inner(scan.shape)
-    rows, cols = np.nonzero(inner & (dist <= 0.5))
-    length = max(np.unique(rows).size, np.unique(cols).size)
-    found = em.mask & inner
-    assert 0.9 * length <= found.sum() <= 1.1 * length
-    assert np.all(dist[found] <= 1.5)
-    kind = EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE
-    assert (em.labels[found] == kind).mean() >= 0.95
+    found = em.mask & inner_mask(scan.shape)
+    assert_one_line_on_the_roof(found, em.labels, scan, edge_deg, convex)
 
 
 @pytest.mark.parametrize("bend_deg", [30.0, 60.0, 90.0])
@@ -69,8 +62,8 @@ def test_the_bend_is_the_creases_angle(bend_deg, edge_deg):
     is the crease's angle within 6 %. Across a diagonal the x and y chords each span less of
     the crease than 2h, and the bend reads up to 25 % high (a known anisotropy)."""
     scan = block_matched(synthetic_roof(bend_deg, edge_deg, True, size=91))
-    bend = chord_bend(chord_curvatures(_xyz(scan), None, STEP, form_sigma(STEP)), STEP, WINDOW)
-    on = _inner(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
+    bend = chord_bend(chord_curvatures(xyz_stack(scan), None, STEP, form_sigma(STEP)), STEP, WINDOW)
+    on = inner_mask(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
     ratio = np.degrees(np.median(bend[on])) / bend_deg
     if edge_deg in (0.0, 90.0):
         assert ratio == pytest.approx(1.0, abs=0.06)
@@ -85,7 +78,7 @@ def test_a_cylinder_has_curvature_one_over_its_radius(radius, concave):
     -1/R (convex) or +1/R (concave) within 10 % (median), across the axis (image x); the
     other is 0; it is no crease."""
     scan = block_matched(_cylinder(radius, concave))
-    curv = chord_curvatures(_xyz(scan), None, STEP, form_sigma(STEP))
+    curv = chord_curvatures(xyz_stack(scan), None, STEP, form_sigma(STEP))
     inner = (slice(25, -25), slice(25, -25))
     sign = 1.0 if concave else -1.0
     assert np.median(curv["k"][inner]) * radius == pytest.approx(sign, rel=0.1)
@@ -120,7 +113,7 @@ def test_a_crease_beside_a_gap_is_found(convex):
     scan.depth[gap] = np.nan
     scan.xyz[gap] = np.nan
     em = rs.edges.curvature(scan)
-    inner = _inner(scan.shape)
+    inner = inner_mask(scan.shape)
     found = em.mask & inner & (em.labels != EdgeLabel.JUMP)
     rows = np.unique(np.nonzero(inner & (dist <= 0.5))[0])
     assert np.unique(np.nonzero(found)[0]).size >= 0.9 * rows.size

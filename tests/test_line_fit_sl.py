@@ -19,7 +19,12 @@ from rangesim.edges._line_fit_sl import K_SL, bend_noise, min_reach, sl_toleranc
 from rangesim.edges._matching_scale import rounding_gain
 from rangesim.edges._noise import stride_gain
 from tests.test_edge_detectors import grid_scan, pinhole_rays, roof_distance, synthetic_roof
-from tests.test_structured_light_edges import WINDOW, block_matched
+from tests.test_structured_light_edges import (
+    WINDOW,
+    assert_one_line_on_the_roof,
+    block_matched,
+    inner_mask,
+)
 
 F, Z0 = 400.0, 500.0
 
@@ -28,10 +33,6 @@ def _creases(em):
     return em.mask & ((em.labels == EdgeLabel.CONVEX) | (em.labels == EdgeLabel.CONCAVE))
 
 
-def _inner(shape, margin=15):
-    inner = np.zeros(shape, bool)
-    inner[margin:-margin, margin:-margin] = True
-    return inner
 
 
 @pytest.mark.parametrize(("bend_deg", "edge_deg"), [
@@ -49,17 +50,10 @@ def test_a_block_matched_crease_is_found_on_the_crease_with_its_label(bend_deg, 
                          seed=int(edge_deg) + convex)
     em = rs.edges.line_fit(scan)
     assert em.params["matching_window"] == WINDOW and em.params["median_stride"] == WINDOW
-    dist = roof_distance(scan, edge_deg)
-    inner = _inner(dist.shape)
-    rows, cols = np.nonzero(inner & (dist <= 0.5))
-    length = max(np.unique(rows).size, np.unique(cols).size)
-    found = _creases(em) & inner
-    assert 0.9 * length <= found.sum() <= 1.3 * length
-    assert np.all(dist[found] <= 1.5)
-    kind = EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE
-    assert (em.labels[found] == kind).mean() >= 0.95
+    found = _creases(em) & inner_mask(scan.shape)
+    assert_one_line_on_the_roof(found, em.labels, scan, edge_deg, convex, most=1.3)
     # nothing but the crease (and the image border's jump-free frame) is marked
-    assert not (em.mask & inner & (dist > 1.5)).any()
+    assert not (em.mask & inner_mask(scan.shape) & (roof_distance(scan, edge_deg) > 1.5)).any()
 
 
 def test_the_lines_skip_a_dropout_strand_beside_the_crease():
@@ -77,7 +71,7 @@ def test_the_lines_skip_a_dropout_strand_beside_the_crease():
         arr[strand] = np.nan
     scan.valid[strand] = False
     em = rs.edges.line_fit(scan)
-    inner = _inner(dist.shape)
+    inner = inner_mask(dist.shape)
     found = _creases(em) & inner
     length = int((inner & (dist <= 0.5)).any(axis=1).sum())
     on_crease = found & (dist <= 1.5)

@@ -14,22 +14,21 @@ import numpy as np
 import pytest
 
 import rangesim as rs
-from rangesim.core.constants import EdgeLabel
 from rangesim.edges._normal_sl import K_HIGH, K_LOW, RAYLEIGH_MEDIAN, axis_bends, bend_noise
 from tests.test_edge_detectors import roof_distance, synthetic_roof
-from tests.test_structured_light_edges import WINDOW, block_matched
+from tests.test_structured_light_edges import (
+    WINDOW,
+    assert_one_line_on_the_roof,
+    block_matched,
+    inner_mask,
+    xyz_stack,
+)
 
 STEP = WINDOW // 2
 
 
-def _inner(shape, margin=15):
-    inner = np.zeros(shape, bool)
-    inner[margin:-margin, margin:-margin] = True
-    return inner
 
 
-def _xyz(scan):
-    return np.ascontiguousarray(np.moveaxis(scan.xyz, -1, 0), np.float32)
 
 
 @pytest.mark.parametrize("edge_deg", [0.0, 30.0, 90.0, 135.0])
@@ -39,15 +38,8 @@ def test_a_block_matched_roof_is_one_line_on_the_crease_of_its_type(edge_deg, co
                          seed=int(edge_deg) + convex)
     em = rs.edges.normal(scan)
     assert em.params["matching_window"] == WINDOW and em.params["step"] == STEP
-    dist = roof_distance(scan, edge_deg)
-    inner = _inner(scan.shape)
-    rows, cols = np.nonzero(inner & (dist <= 0.5))
-    length = max(np.unique(rows).size, np.unique(cols).size)
-    found = em.mask & inner
-    assert 0.9 * length <= found.sum() <= 1.1 * length
-    assert np.all(dist[found] <= 1.5)
-    kind = EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE
-    assert (em.labels[found] == kind).mean() >= 0.95
+    found = em.mask & inner_mask(scan.shape)
+    assert_one_line_on_the_roof(found, em.labels, scan, edge_deg, convex)
 
 
 @pytest.mark.parametrize("bend_deg", [30.0, 60.0, 90.0])
@@ -58,8 +50,8 @@ def test_the_bend_is_the_creases_angle(bend_deg, edge_deg):
     of the rounding than the gain allows for, and the bend reads 25-40 % high (a known
     anisotropy, as curvature's)."""
     scan = block_matched(synthetic_roof(bend_deg, edge_deg, True, size=91))
-    strength = axis_bends(_xyz(scan), None, WINDOW)["strength"]
-    on = _inner(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
+    strength = axis_bends(xyz_stack(scan), None, WINDOW)["strength"]
+    on = inner_mask(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
     ratio = np.degrees(np.median(strength[on])) / bend_deg
     if edge_deg in (0.0, 90.0):
         assert ratio == pytest.approx(1.0, abs=0.12)
@@ -74,7 +66,7 @@ def test_the_noise_law_holds_on_a_block_matched_plane(noise_px):
     heavy-tailed), and the high threshold is never reached."""
     plane = synthetic_roof(0.0, 0.0, True, size=161)
     scan = block_matched(plane, noise_px=noise_px, seed=1)
-    b = axis_bends(_xyz(scan), None, WINDOW)
+    b = axis_bends(xyz_stack(scan), None, WINDOW)
     inner = (slice(12, -12), slice(12, -12))
     s = bend_noise([a[inner] for a in b["angles"]], scan.valid[inner])
     bends = np.concatenate([a[inner].ravel() for a in b["angles"]])

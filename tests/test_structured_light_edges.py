@@ -25,6 +25,32 @@ FB = 119_400.0
 SL_META = {"mode": "structured_light", "structured_light": {"window": WINDOW, "subpixel_steps": 8}}
 
 
+def inner_mask(shape, margin: int = 15) -> np.ndarray:
+    """The image less a ``margin`` px border (where the block-matched roofs' windows are whole)."""
+    inner = np.zeros(shape, bool)
+    inner[margin:-margin, margin:-margin] = True
+    return inner
+
+
+def xyz_stack(scan: RangeScan) -> np.ndarray:
+    """The scan's points component-major, (3, H, W) float32."""
+    return np.ascontiguousarray(np.moveaxis(scan.xyz, -1, 0), np.float32)
+
+
+def assert_one_line_on_the_roof(found: np.ndarray, labels: np.ndarray, scan: RangeScan, edge_deg: float,
+                                convex: bool, most: float = 1.1) -> None:
+    """``found`` (the crease pixels inside :func:`inner_mask`) is one line along the roof of
+    :func:`synthetic_roof`: 0.9 to ``most`` times its length, every pixel within 1.5 px of
+    the crease, and at least 95 % of them labelled with its type."""
+    dist = roof_distance(scan, edge_deg)
+    rows, cols = np.nonzero(inner_mask(dist.shape) & (dist <= 0.5))
+    length = max(np.unique(rows).size, np.unique(cols).size)
+    assert 0.9 * length <= found.sum() <= most * length
+    assert np.all(dist[found] <= 1.5)
+    kind = EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE
+    assert (labels[found] == kind).mean() >= 0.95
+
+
 def block_matched(scan: RangeScan, window: int = WINDOW, steps: int = 8, noise_px: float = 0.0,
                   seed: int = 0) -> RangeScan:
     """``scan`` as a block matcher of ``window`` px would measure it: disparity ``FB / z``
