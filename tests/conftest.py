@@ -117,3 +117,25 @@ def data_dir() -> Path:
     if not root.is_dir():
         pytest.skip(f"shared data not found at {root} (set RANGESIM_DATA)")
     return root
+
+
+def pinhole_scan(depth: np.ndarray, f: float, sigma_mm: float | None = None):
+    """A laser-stripe-like RangeScan of a (H, W) ``depth`` image (mm along the optical axis)
+    seen by a pinhole of focal length ``f`` px with its principal point at the image centre:
+    every pixel valid, its point on the pixel's ray; ``sigma_mm``: the noise model's depth
+    std attached as ``scan.sigma`` (as a simulated laser-stripe scan carries it)."""
+    from rangesim.core.rangescan import RangeScan
+
+    h, w = depth.shape
+    K = np.array([[f, 0.0, w / 2], [0.0, f, h / 2], [0.0, 0.0, 1.0]])
+    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    rays = np.stack([(jj - w / 2) / f, (ii - h / 2) / f, np.ones_like(jj)], axis=-1)
+    xyz = (rays * depth[..., None]).astype(np.float32)
+    shape = depth.shape
+    return RangeScan(
+        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
+        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
+        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
+        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()},
+        sigma=None if sigma_mm is None else np.full(shape, sigma_mm, np.float32),
+    )

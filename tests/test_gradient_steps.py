@@ -19,25 +19,16 @@ from rangesim.core.rangescan import RangeScan
 from rangesim.edges._gradient import _nan_gaussian, second_differences
 from rangesim.edges._gradient_steps import smoothing_weights, step_smooth
 from rangesim.edges._thinning import JUMP_CLEARANCE
+from tests.conftest import pinhole_scan
 
 
 def _scan(z_fp: np.ndarray, noise_fp: float, seed: int, f: float = 300.0, z0: float = 400.0) -> RangeScan:
     """A scan whose depth is ``z0 + footprint * z_fp`` (footprint ``z0 / f`` mm) plus Gaussian
     noise of ``noise_fp`` footprints, which its ``sigma`` (mm) carries as a laser scan's does."""
     h, w = z_fp.shape
-    K = np.array([[f, 0.0, w / 2], [0.0, f, h / 2], [0.0, 0.0, 1.0]])
-    jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    rays = np.stack([(jj - w / 2) / f, (ii - h / 2) / f, np.ones_like(jj)], axis=-1)
     fp = z0 / f
     depth = z0 + fp * z_fp + noise_fp * fp * np.random.default_rng(seed).standard_normal(z_fp.shape)
-    xyz = (rays * depth[..., None]).astype(np.float32)
-    shape = depth.shape
-    return RangeScan(
-        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
-        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
-        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
-        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=np.full(shape, noise_fp * fp, np.float32),
-    )
+    return pinhole_scan(depth, f, noise_fp * fp)
 
 
 def _roof_beside_step(d: int, step: float, size: int = 96, crease: int = 40) -> np.ndarray:

@@ -15,6 +15,7 @@ import rangesim as rs
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.rangescan import RangeScan
 from rangesim.edges._gradient import crease_sigma, smoothing_gain
+from tests.conftest import pinhole_scan
 
 
 def _bent_strip(noise_fp: float, seed: int, size: int = 96, f: float = 300.0, z0: float = 400.0) -> RangeScan:
@@ -22,23 +23,13 @@ def _bent_strip(noise_fp: float, seed: int, size: int = 96, f: float = 300.0, z0
     away from the camera at column 30 (convex crease), frontal again from column 50 (concave
     crease), and steps 20 footprints down at column 70; Gaussian depth noise of ``noise_fp``
     footprints, the noise model's ``sigma`` (mm) attached as a laser-stripe scan carries it."""
-    K = np.array([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
-    jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
-    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
     fp = z0 / f
     col = np.arange(size, dtype=float)
     z = z0 + fp * np.clip(col, 30, 50) - 30 * fp          # slope 1 footprint / px: 45 degrees
     z = np.where(col >= 70, z + 20 * fp, z)
     sigma_mm = noise_fp * fp
     depth = np.repeat(z[None, :], size, 0) + sigma_mm * np.random.default_rng(seed).standard_normal((size, size))
-    xyz = (rays * depth[..., None]).astype(np.float32)
-    shape = depth.shape
-    return RangeScan(
-        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
-        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
-        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
-        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=np.full(shape, sigma_mm, np.float32),
-    )
+    return pinhole_scan(depth, f, sigma_mm)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -9,6 +9,7 @@ import rangesim as rs
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.rangescan import RangeScan
 from rangesim.edges._normal_planes import RAYLEIGH_MEDIAN, block_planes, normal_angle_std
+from tests.conftest import pinhole_scan
 
 
 def _roof(bend_deg: float, noise_fp: float, seed: int, size: int = 96, f: float = 300.0,
@@ -16,9 +17,7 @@ def _roof(bend_deg: float, noise_fp: float, seed: int, size: int = 96, f: float 
     """A plane facing the camera that turns ``bend_deg`` away from it at column 48 (a
     convex crease; ``bend_deg = 0``: a plane), optionally tilted about the x axis (``dz / dy = tilt``); Gaussian depth noise of ``noise_fp`` footprints, the noise
     model's ``sigma`` (mm) attached as a laser-stripe scan carries it."""
-    K = np.array([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
     jj, ii = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5)
-    rays = np.stack([(jj - size / 2) / f, (ii - size / 2) / f, np.ones_like(jj)], axis=-1)
     fp = z0 / f
     # exact planes: z = z0 + m y + s max(x, 0) (the crease at x = 0, between columns 47 and
     # 48), with x = u z / f, y = v z / f on the pixel rays
@@ -27,14 +26,7 @@ def _roof(bend_deg: float, noise_fp: float, seed: int, size: int = 96, f: float 
     depth = z0 / (1 - (s * u + tilt * v) / f)
     sigma_mm = noise_fp * fp
     depth = depth + sigma_mm * np.random.default_rng(seed).standard_normal((size, size))
-    xyz = (rays * depth[..., None]).astype(np.float32)
-    shape = depth.shape
-    return RangeScan(
-        depth=xyz[..., 2], xyz=xyz, valid=np.ones(shape, bool),
-        normal=np.full(shape + (3,), np.nan, np.float32), intensity=np.ones(shape, np.float32),
-        part=np.zeros(shape, np.int32), face=np.zeros(shape, np.int32),
-        status=np.zeros(shape, np.uint8), meta={"K": K.tolist()}, sigma=np.full(shape, sigma_mm, np.float32),
-    )
+    return pinhole_scan(depth, f, sigma_mm)
 
 
 def _fit(scan: RangeScan, b: int):
