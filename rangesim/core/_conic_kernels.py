@@ -44,6 +44,22 @@ def _cross_rows(R, out):  # pragma: no cover - compiled
     return best
 
 
+@numba.njit(**{**_JIT, "inline": "always"})
+def _keep_ellipse(x0, x1, x2, best, a1):  # pragma: no cover - compiled
+    """Keep the eigenvector (x0, x1, x2) in ``a1`` (unit norm) if it is an ellipse's
+    (``4 a0 a2 - a1^2 > 0``) more so than ``best`` (of unit norm); returns the new best and
+    whether it was kept."""
+    n2 = x0 * x0 + x1 * x1 + x2 * x2
+    if not n2 > 0:
+        return best, False
+    cond = (4 * x0 * x2 - x1 * x1) / n2
+    if cond > 0 and cond > best:
+        nrm = np.sqrt(n2)
+        a1[0], a1[1], a1[2] = x0 / nrm, x1 / nrm, x2 / nrm
+        return cond, True
+    return best, False
+
+
 @numba.njit(**_JIT)
 def _real_ellipse_vector(A, tr, c1, det, p, q, a1):  # pragma: no cover - compiled
     """:func:`_ellipse_vector` when the cubic's three roots are real (most fits), in real
@@ -92,14 +108,8 @@ def _real_ellipse_vector(A, tr, c1, det, p, q, a1):  # pragma: no cover - compil
             wb = w2
         ph = wb / abs(wb)
         x0, x1, x2 = w0 * ph, w1 * ph, w2 * ph
-        n2 = x0 * x0 + x1 * x1 + x2 * x2
-        if not n2 > 0:
-            continue
-        cond = (4 * x0 * x2 - x1 * x1) / n2
-        if cond > 0 and cond > best:
-            best, found = cond, True
-            nrm = np.sqrt(n2)
-            a1[0], a1[1], a1[2] = x0 / nrm, x1 / nrm, x2 / nrm
+        best, kept = _keep_ellipse(x0, x1, x2, best, a1)
+        found = found or kept
     return found
 
 
@@ -156,14 +166,8 @@ def _ellipse_vector(M, a1):  # pragma: no cover - compiled
                 big = i
         ph = np.conj(w[big]) / abs(w[big])
         x0, x1, x2 = (w[0] * ph).real, (w[1] * ph).real, (w[2] * ph).real
-        n2 = x0 * x0 + x1 * x1 + x2 * x2
-        if not n2 > 0:
-            continue
-        cond = (4 * x0 * x2 - x1 * x1) / n2
-        if cond > 0 and cond > best:
-            best, found = cond, True
-            nrm = np.sqrt(n2)
-            a1[0], a1[1], a1[2] = x0 / nrm, x1 / nrm, x2 / nrm
+        best, kept = _keep_ellipse(x0, x1, x2, best, a1)
+        found = found or kept
     return found
 
 
