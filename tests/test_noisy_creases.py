@@ -116,3 +116,21 @@ def test_search_mosaic_measures_each_tile_as_alone(shape):
         together = _noise_bends(*packed, sigma)
         assert alone.size > 1000
         np.testing.assert_array_equal(np.sort(alone), np.sort(together))
+
+
+def test_sampled_operators_are_the_dense_ones_at_the_samples():
+    """The noise search's operators on every 4th row and column are the dense responses there,
+    to the bit, with holes, broken pairs and skipped pixels."""
+    from rangesim.edges._discontinuities import find_discontinuities
+    from rangesim.edges._gradient import sampled_second_differences, second_differences
+
+    rng = np.random.default_rng(3)
+    for h, w in ((3, 5), (17, 30), (64, 61)):
+        z = (400 + rng.normal(0, 1, (h, w)).cumsum(1)).astype(np.float32)
+        z[rng.random((h, w)) < 0.1] = np.nan
+        disc = find_discontinuities(z, np.float32(2.0), 0)
+        skip = rng.random((h, w)) < 0.1
+        for pairs, sk in ((disc.pairs, skip), (None, None)):
+            for dense, sampled in zip(second_differences(z, pairs, skip=sk),
+                                      sampled_second_differences(z, pairs, sk, 4)):
+                np.testing.assert_array_equal(dense[::4, ::4], sampled)
