@@ -85,7 +85,8 @@ class PcdHeader:
 
 
 # -- reading ---------------------------------------------------------------------------------
-def read_pcd(path: str | Path, *, conf: str | Path | None = None) -> tuple[RangeScan, dict[str, np.ndarray]]:
+def read_pcd(path: str | Path, *, conf: str | Path | None = None,
+             sensor: Any = None) -> tuple[RangeScan, dict[str, np.ndarray]]:
     """Read a PCD v0.7 file: the scan and its other fields.
 
     Parameters
@@ -94,6 +95,15 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None) -> tuple[Range
         ``DATA ascii``, ``binary`` or ``binary_compressed``; fields must include x, y, z.
     conf : str or Path, optional
         A Stanford ``.conf`` whose ``bmesh`` line for this file sets ``pose``.
+    sensor : str, Path, dict or Sensor, optional
+        What recorded the file: a preset name (``"kinect_v1"``), a sensor TOML, a dict or a
+        :class:`~rangesim.sensor.config.Sensor`; its parameters go to ``meta["sensor"]``, so
+        that the edge detectors measure a structured-light recording at its block matcher's
+        scale (``mode = "structured_light"``, ``structured_light.window``). ``"auto"``: only
+        if the depths sit on a disparity lattice
+        (:func:`~rangesim.edges._matching_scale.disparity_lattice`: gaps between depth
+        levels growing as z^2), the ``kinect_v1`` preset's, with the evidence in
+        ``meta["sensor_evidence"]``; nothing otherwise. Default: no ``meta["sensor"]``.
 
     Returns
     -------
@@ -107,9 +117,10 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None) -> tuple[Range
     ------
     RangesimError
         A missing file, a malformed header (NaN, inconsistent counts), truncated or
-        corrupt data, or no x/y/z fields.
+        corrupt data, no x/y/z fields, or an unknown ``sensor``.
     """
     path = check_file(path)
+    described = _sensor_meta(sensor, path)
     raw = read_bytes(path)
     header = _read_header(raw, path)
     columns = _read_body(raw, header, path)
@@ -134,13 +145,38 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None) -> tuple[Range
         pcd={"version": header.version, "data": header.data, "viewpoint": header.viewpoint},
     )
     scan = grid_scan(xyz, meta, normal=normal, intensity=intensity)
+    if described == "auto":
+        from rangesim.edges._matching_scale import default_matcher, disparity_lattice
+
+        evidence = disparity_lattice(scan.depth) if h > 1 else None
+        if evidence is not None:
+            scan.meta["sensor"] = default_matcher()
+            scan.meta["sensor_evidence"] = {"rule": "disparity lattice", **evidence}
+    elif described is not None:
+        scan.meta["sensor"] = described
     extras = {name: grid(name) for name in names if name not in _SCAN_FIELDS or columns[name].ndim != 1}
     return apply_conf(scan, conf, path), extras
 
 
-def load_pcd(path: str | Path, *, conf: str | Path | None = None) -> RangeScan:
+def load_pcd(path: str | Path, *, conf: str | Path | None = None, sensor: Any = None) -> RangeScan:
     """:func:`read_pcd` without the extra fields (their names stay in ``meta["pcd_fields"]``)."""
-    return read_pcd(path, conf=conf)[0]
+    return read_pcd(path, conf=conf, sensor=sensor)[0]
+
+
+def _sensor_meta(sensor: Any, path: Path) -> dict[str, Any] | str | None:
+    """``sensor=`` as ``meta["sensor"]`` (a preset's, a file's, a dict's parameters), "auto" or
+    None; an unknown or invalid sensor is a one-line RangesimError naming it and the file."""
+    if sensor is None or (isinstance(sensor, str) and sensor == "auto"):
+        return sensor
+    from rangesim.sensor.config import Sensor, load_sensor
+
+    if not isinstance(sensor, (str, Path, dict, Sensor)):
+        raise RangesimError(f"sensor= must be a preset name, a TOML path, a dict or a Sensor, "
+                            f"not {type(sensor).__name__}", path)
+    try:
+        return load_sensor(sensor).to_dict()
+    except RangesimError as exc:
+        raise RangesimError(f"sensor={sensor!r}: {exc}", path) from None
 
 
 def _read_header(raw: bytes, path: Path) -> PcdHeader:
