@@ -22,6 +22,7 @@ def _detectors_only(scan, labels, args, out: Path) -> tuple[dict, dict, Any]:
     metrics: dict[str, Any] = {
         "recorded": str(args.recorded), "mesh": None, "valid": int(scan.valid.sum()),
         "truth": None if truth is None else truth.kind, "edges": {},
+        **_recorded_sensor(scan, args),
     }
     results = run_detectors(scan, DETECTORS, truth, tolerance_px=args.tolerance)
     for name, result in results.items():
@@ -31,6 +32,15 @@ def _detectors_only(scan, labels, args, out: Path) -> tuple[dict, dict, Any]:
             entry.update(precision=float(s["precision"]), recall=float(s["recall"]), f1=float(s["f1"]))
         metrics["edges"][name] = entry
     return metrics, {name: r["edge_map"] for name, r in results.items()}, truth
+
+
+def _recorded_sensor(scan, args) -> dict[str, Any]:
+    """``{"recorded_sensor": ...}`` for metrics.json when --recorded-sensor was given, else nothing."""
+    if args.recorded_sensor is None:
+        return {}
+    from rangesim.cli.edge_commands import sensor_summary
+
+    return {"recorded_sensor": sensor_summary(scan, args.recorded_sensor)}
 
 
 def _structured_light(name: str) -> bool:
@@ -49,7 +59,8 @@ def _kinect_twin(scan, labels, args, out: Path) -> int:
     from rangesim.viz.compare import save_comparison
 
     metrics, twin_scan, edge_maps = compare_kinect(scan, labels, args.sensor, seed=args.seed, return_scans=True)
-    metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **metrics}
+    metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **_recorded_sensor(scan, args),
+               **metrics}
     make_out_dir(out)
     write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
@@ -83,10 +94,12 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise RangesimError(f"--seed must not be negative, got {args.seed}")
     path = Path(args.recorded)
-    scan, labels = load_scan_with_labels(path, args.conf)
-    from rangesim.cli.edge_commands import require_grid
+    scan, labels = load_scan_with_labels(path, args.conf, sensor=args.recorded_sensor)
+    from rangesim.cli.edge_commands import describe_sensor, require_grid
 
     require_grid(scan, path)
+    if args.recorded_sensor is not None:
+        print(describe_sensor(scan, args.recorded_sensor).replace("sensor ", "recorded-sensor ", 1))
     if args.mesh is None and labels is not None and _structured_light(args.sensor):
         return _kinect_twin(scan, labels, args, out)
     if args.mesh is None:
@@ -119,7 +132,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         fit = "auto"  # a calibrated sensor (a [twin] table) is used as it is
     metrics, twin_scan, edge_maps = compare(scan, args.mesh, args.sensor, params=fixed, fit=fit,
                                             seed=args.seed, return_scans=True)
-    metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **metrics}
+    metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **_recorded_sensor(scan, args),
+               **metrics}
     make_out_dir(out)
     write_json(metrics, out / "metrics.json")
     save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
@@ -154,6 +168,10 @@ def register(sub) -> None:
     p.add_argument("--mesh", help="reference mesh of the object (world frame)")
     p.add_argument("--conf", help="Stanford .conf pose file")
     p.add_argument("--sensor", default="cyberware_3030", help="sensor preset (default cyberware_3030)")
+    p.add_argument("--recorded-sensor", dest="recorded_sensor", metavar="NAME|TOML|auto",
+                   help="what recorded a .pcd frame, for its own edge maps (a preset such as kinect_v1, a sensor TOML, "
+                   "or auto: kinect_v1 only if the depths sit on a disparity lattice); a structured-light one runs "
+                   "the detectors' block-matched paths on the recording. Default: none (the twin carries --sensor)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--theta-deg", dest="theta_deg", type=float, help="fix the camera angle (else fitted)")
     p.add_argument("--alpha-deg", dest="alpha_deg", type=float, help="fix the laser angle (else fitted)")

@@ -20,6 +20,34 @@ def require_grid(scan, path: Path) -> None:
                             "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
 
 
+def describe_sensor(scan, given) -> str:
+    """One line on what ``--sensor given`` made of a recording's sensor metadata."""
+    sensor = scan.meta.get("sensor")
+    if not sensor:
+        return f"sensor {given}: no disparity lattice in the depths, no sensor metadata (the detectors' default paths)"
+    mode = sensor.get("mode", "unknown")
+    line = f"sensor {given}: {sensor.get('name', 'unnamed')} ({mode}"
+    window = (sensor.get("structured_light") or {}).get("window") if mode == "structured_light" else None
+    line += f", matching window {window} px: the block-matched paths)" if window else ")"
+    evidence = scan.meta.get("sensor_evidence")
+    if evidence and evidence.get("fb_steps"):
+        line += f", from the disparity lattice (8 f b = {evidence['fb_steps'] / 1000:.0f} k px mm)"
+    return line
+
+
+def sensor_summary(scan, given) -> dict:
+    """``--sensor``'s outcome for a report: what was given, and the sensor recorded (None: none)."""
+    sensor = scan.meta.get("sensor") or None
+    summary = {"given": str(given), "name": None, "mode": None, "matching_window": None}
+    if sensor:
+        summary.update(name=sensor.get("name"), mode=sensor.get("mode"),
+                       matching_window=(sensor.get("structured_light") or {}).get("window")
+                       if sensor.get("mode") == "structured_light" else None)
+    if scan.meta.get("sensor_evidence"):
+        summary["evidence"] = scan.meta["sensor_evidence"]
+    return summary
+
+
 def cmd_detect(args: argparse.Namespace) -> int:
     from rangesim.edges import DETECTORS, EdgeMap
     from rangesim.evaluate.runs import load_scan_with_labels, run_detectors, scan_truth
@@ -32,7 +60,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     positive("--tolerance", args.tolerance)
     positive("--crease-deg", args.crease_deg, upper=180)
     path = Path(args.scan)
-    scan, segment_labels = load_scan_with_labels(path, args.conf)
+    scan, segment_labels = load_scan_with_labels(path, args.conf, sensor=args.sensor)
     require_grid(scan, path)
     truth = scan_truth(scan, args.scene, segment_labels, crease_deg=args.crease_deg)
     results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
@@ -55,11 +83,15 @@ def cmd_detect(args: argparse.Namespace) -> int:
             "scan": str(path), "truth": truth.kind, "tolerance_px": args.tolerance, "crease_deg": args.crease_deg,
             "methods": {m: {"seconds": r["seconds"], **r["scores"]} for m, r in results.items()},
         }
+        if args.sensor is not None:
+            report["sensor"] = sensor_summary(scan, args.sensor)
         target = out / "scores.json"
         with writing(target), atomic_path(target) as tmp:
             Path(tmp).write_text(json.dumps(report, indent=1, default=float))
 
     print(f"{path}: {scan.shape[1]} x {scan.shape[0]} px, truth: {truth.kind if truth else 'none'}")
+    if args.sensor is not None:
+        print(describe_sensor(scan, args.sensor))
     print(f"{'method':<15}{'edges':>9}{'seconds':>9}" + ("" if truth is None else f"{'P':>7}{'R':>7}{'F1':>7}{'FOM':>7}"))
     for method, r in results.items():
         line = f"{method:<15}{int(r['edge_map'].mask.sum()):>9,}{r['seconds']:>9.3f}"
@@ -82,6 +114,10 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--scene", help="scene of a synthetic scan (default: the one named in the scan)")
     p.add_argument("--conf", help="Stanford .conf pose file for a recorded scan")
+    p.add_argument("--sensor", metavar="NAME|TOML|auto",
+                   help="what recorded a .pcd frame (a preset such as kinect_v1, a sensor TOML, or auto: kinect_v1 "
+                   "only if the depths sit on a block matcher's disparity lattice); a structured-light sensor runs "
+                   "the detectors' block-matched paths. Default: none (recordings carry no sensor)")
     p.add_argument("--tolerance", type=float, default=2.0, help="score matching tolerance, pixels (default 2)")
     p.add_argument("--crease-deg", type=float, default=20.0, help="ground-truth crease angle, degrees (default 20)")
     p.set_defaults(func=cmd_detect)

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 from rangesim.core.progress import Progress
 from rangesim.evaluate._edge_scores import edge_scores
 from rangesim.evaluate._visible import visible_truth
@@ -36,8 +37,25 @@ class EdgeTruth:
         return self.labels != EdgeLabel.NONE
 
 
-def load_scan_with_labels(path, conf=None):
+#: extensions whose reader takes ``sensor=`` (what recorded the file; see :func:`load_scan_with_labels`)
+SENSOR_READERS = (".pcd",)
+
+
+def load_scan_with_labels(path, conf=None, *, sensor=None):
     """A scan file and its per-pixel segment labels if the format has them (PCD ``label``).
+
+    Parameters
+    ----------
+    path : str or Path
+    conf : str or Path, optional
+        A Stanford ``.conf`` pose file.
+    sensor : str, Path, dict or Sensor, optional
+        What recorded the file (a preset name, a sensor TOML, a dict, a Sensor, or
+        ``"auto"``), passed to readers that take it (``.pcd``:
+        :func:`rangesim.recorded.read_pcd`), so that a structured-light recording gets
+        ``meta["sensor"]`` and the detectors' block-matched paths. Any other format with
+        ``sensor`` given is refused (a RangesimError naming the file): its scans either
+        carry their sensor already (``.exr``, rangesim ``.npz``) or record no such thing.
 
     Returns
     -------
@@ -48,11 +66,20 @@ def load_scan_with_labels(path, conf=None):
 
     path = Path(path)
     options = {"conf": conf} if conf else {}
-    if path.suffix.lower() == ".pcd":
+    if path.suffix.lower() in SENSOR_READERS:
         from rangesim.recorded import read_pcd
 
+        if sensor is not None:
+            options["sensor"] = sensor
         scan, extras = read_pcd(path, **options)
         return scan, extras.get("label")
+    if sensor is not None:
+        if not path.is_file():
+            return load_scan(path, **options), None  # the reader's "no such file" / "not a file"
+        kind = f"{path.suffix!r} files" if path.suffix else "files without an extension"
+        given = f"sensor {str(sensor)!r}" if isinstance(sensor, (str, Path)) else "a sensor"
+        raise RangesimError(f"{given} applies to recorded {', '.join(SENSOR_READERS)} frames only; {kind} take none "
+                            "(they carry their sensor already or record none)", path)
     return load_scan(path, **options), None
 
 
