@@ -132,3 +132,13 @@ def test_recorded_kinect_frames_are_detected(data_dir):
         # 8 steps x f b: 525 px x 75 mm nominal; the devices' about 5-10 % more
         assert 8 * 525 * 75 * 0.95 <= found["fb_steps"] <= 8 * 525 * 75 * 1.2, path.name
         assert found["rounding_mm"] == 1.0
+
+
+def test_the_default_matcher_is_the_kinect_presets():
+    """The core's stand-in for a block matcher of unknown make is the kinect_v1 preset's
+    matcher (the analysis layer reads no sensor files, so the window is a constant there)."""
+    from rangesim.core.quantisation import DEFAULT_MATCHER_PRESET, DEFAULT_MATCHER_WINDOW
+
+    sensor = rs.load_sensor(DEFAULT_MATCHER_PRESET)
+    assert sensor.mode == "structured_light"
+    assert sensor.params["structured_light"]["window"] == DEFAULT_MATCHER_WINDOW

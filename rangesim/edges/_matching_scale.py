@@ -18,121 +18,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from rangesim.core.quantisation import DEFAULT_MATCHER_WINDOW, disparity_lattice
 from rangesim.edges._discontinuities import segment_broken
 from rangesim.edges._grid import AXES
-from rangesim.edges._noise import depth_quantum
 
 __all__ = ["disparity_lattice", "matching_window", "ridge_sigma", "rounding_gain", "strided_pairs", "strided_responses"]
-
-
-#: the preset whose matcher stands for a block-matched recording of unknown make
-DEFAULT_MATCHER_PRESET = "kinect_v1"
-#: a gap between adjacent depth levels is resolved (a lattice step, not the recording's
-#: rounding) when it is at least this many rounding units (an error of one unit then
-#: moves it by at most half)
-_LATTICE_RESOLVED_UNITS = 2.0
-#: fewest resolved single-step gaps, and least depth span (deepest / nearest) they must
-#: cover to tell gaps growing as z^2 from constant ones (over a span s the two differ by s^2)
-_LATTICE_MIN_GAPS = 20
-_LATTICE_MIN_SPAN = 1.25
-#: accepted log-log slope of the gaps against depth (2 for a disparity lattice, 0 for
-#: depth rounded to a fixed unit)
-_LATTICE_SLOPE = (1.5, 2.5)
-#: least share of the gaps deeper than where q z^2 reaches two rounding units that are
-#: resolved (a lattice's all are; a fixed-unit quantiser's mostly one unit)
-_LATTICE_MIN_RESOLVED_SHARE = 0.7
-#: most median |log(gap / (q z^2))| over the single steps (rounding scatters them)
-_LATTICE_MAX_SCATTER = 0.25
-
-
-def _rounding_unit(levels: np.ndarray) -> float:
-    """The unit a recording rounded its depths to: 1 mm when (nearly) every level is a whole
-    number of millimetres (OpenNI / Kinect depth images), else 0 (depths not rounded)."""
-    off = np.abs(levels - np.round(levels))
-    return 1.0 if np.mean(off < 0.01) >= 0.95 else 0.0
-
-
-def disparity_lattice(z: np.ndarray) -> dict[str, float] | None:
-    """Evidence that a depth image came from a block matcher (structured light), or None.
-
-    The rule (physics): a block matcher measures disparity ``d`` in fixed sub-pixel steps
-    (1/8 px for PrimeSense / Kinect v1) and reports depth ``z = f b / d``, so ``1 / z`` lies on
-    a lattice of step ``q = 1 / (steps f b)`` and adjacent depth levels are ``q z^2`` apart: the
-    gaps between the levels grow as the square of depth (1 mm at 0.6 m, 3 mm at 1 m, 12 mm at
-    2 m for a Kinect). Depth quantised to a fixed unit (a laser scanner's or a ToF camera's
-    millimetres) has constant gaps; continuous depth (noisy or noise-free synthetic scans)
-    has no levels at all. A recording rounded to whole millimetres (OpenNI) shows 1 mm gaps
-    where ``q z^2 < 1 mm``; only the gaps of at least two units (resolved) are tested.
-
-    Accepted when all hold:
-
-    * the image is quantised (:func:`~rangesim.edges._noise.depth_quantum`: neighbours a level
-      or two apart, at least 20 levels);
-    * at least 20 resolved single-step gaps (``q z^2`` within a factor 0.6-1.6, ``q`` the
-      resolved gaps' median of ``gap / z^2``; larger ones are levels no pixel took) deeper
-      than where ``q z^2`` reaches two rounding units (shallower, gaps of one and two units
-      alternate whatever ``q``), covering depths at least 1.25 : 1 (over a narrower span
-      ``z^2`` and a constant are not told apart: ambiguous);
-    * their log-log slope against depth is 1.5-2.5 (Theil-Sen), their median
-      ``|log(gap / (q z^2))|`` at most 0.25;
-    * at least 70 % of the gaps deeper than where ``q z^2`` reaches two rounding units are
-      resolved (a lattice's all are there; a fixed-unit quantiser's mostly one unit).
-
-    Parameters
-    ----------
-    z : (H, W) float array
-        Depth, mm, NaN where invalid.
-
-    Returns
-    -------
-    dict or None
-        ``inverse_depth_step`` (q, 1/mm), ``fb_steps`` (1/q: steps x f x b, px mm),
-        ``slope``, ``scatter``, ``gaps`` (resolved single steps used), ``span``,
-        ``rounding_mm`` (0 when depths are not rounded); None when the rule is not met.
-    """
-    z = np.asarray(z, np.float64)
-    if z.ndim != 2 or depth_quantum(z) is None:
-        return None
-    levels = np.unique(z[np.isfinite(z) & (z > 0)])
-    if levels.size < _LATTICE_MIN_GAPS + 1:
-        return None
-    unit = _rounding_unit(levels)
-    gaps = np.diff(levels)
-    mids = 0.5 * (levels[1:] + levels[:-1])
-    resolved = gaps >= _LATTICE_RESOLVED_UNITS * unit if unit > 0 else np.ones(gaps.size, bool)
-    if resolved.sum() < _LATTICE_MIN_GAPS:
-        return None
-    q = float(np.median(gaps[resolved] / mids[resolved] ** 2))
-    # where the lattice's step q z^2 reaches two units, rounding leaves every gap resolved
-    deeper = mids >= np.sqrt(_LATTICE_RESOLVED_UNITS * unit / q)
-    share = float(resolved[deeper].mean()) if deeper.any() else 0.0
-    ratio = gaps / (q * mids ** 2)
-    # shallower, gaps of 1 and 2 units alternate whatever q: only the deeper ones measure it
-    single = deeper & resolved & (ratio > 0.6) & (ratio < 1.6)
-    if single.sum() < _LATTICE_MIN_GAPS or share < _LATTICE_MIN_RESOLVED_SHARE:
-        return None
-    span = float(mids[single].max() / mids[single].min())
-    if span < _LATTICE_MIN_SPAN:
-        return None
-    from scipy.stats import theilslopes
-
-    x, y = np.log(mids[single]), np.log(gaps[single])
-    if x.size > 2000:  # Theil-Sen is quadratic in the points
-        x, y = x[:: x.size // 1000], y[:: y.size // 1000]
-    slope = float(theilslopes(y, x)[0])
-    scatter = float(np.median(np.abs(np.log(ratio[single]))))
-    if not (_LATTICE_SLOPE[0] <= slope <= _LATTICE_SLOPE[1]) or scatter > _LATTICE_MAX_SCATTER:
-        return None
-    return {"inverse_depth_step": q, "fb_steps": 1.0 / q, "slope": slope, "scatter": scatter,
-            "gaps": int(single.sum()), "span": span, "rounding_mm": unit, "resolved_share": share}
-
-
-def default_matcher() -> dict[str, Any]:
-    """``meta["sensor"]`` for a block-matched recording of unknown make: the
-    :data:`DEFAULT_MATCHER_PRESET` preset's parameters (its matching window: 9 px)."""
-    from rangesim.sensor.config import load_sensor
-
-    return load_sensor(DEFAULT_MATCHER_PRESET).to_dict()
 
 
 def matching_window(scan: Any, *, detect: bool = False) -> int | None:
@@ -146,7 +36,7 @@ def matching_window(scan: Any, *, detect: bool = False) -> int | None:
     detect : bool
         Where the scan has no ``meta["sensor"]`` (a recording read without ``sensor=``),
         look at its depth: if :func:`disparity_lattice` finds it block-matched, the window of
-        the :data:`DEFAULT_MATCHER_PRESET` preset (9). Off by default (the detectors do not
+        the :data:`DEFAULT_MATCHER_PRESET` preset, :data:`DEFAULT_MATCHER_WINDOW` (9). Off by default (the detectors do not
         detect: on the recorded mOSD frames the block-matched paths are not better across
         the board); a reader's ``sensor="auto"`` does the same once, at reading.
 
@@ -167,7 +57,7 @@ def matching_window(scan: Any, *, detect: bool = False) -> int | None:
     sensor = meta.get("sensor") if isinstance(meta, dict) else None
     if sensor is None and detect and getattr(scan, "depth", None) is not None:
         if disparity_lattice(scan.depth) is not None:
-            sensor = default_matcher()
+            return DEFAULT_MATCHER_WINDOW
     if not isinstance(sensor, dict) or sensor.get("mode") != "structured_light":
         return None
     window = (sensor.get("structured_light") or {}).get("window")

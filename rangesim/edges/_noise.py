@@ -26,6 +26,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from rangesim.core.quantisation import depth_quantum  # noqa: F401  (re-exported: the detectors' name)
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
@@ -52,93 +53,6 @@ NOISE_K_PCL = 4.0
 #: faces that is then not needed (chosen on the machined parts' seeds 0-7: inria_laser's
 #: noisy F1 0.72 -> 0.79, white_scanner's 0.93 -> 0.92)
 NOISE_K_NORMAL_LOCAL = 3.5
-
-
-#: sampled pixels for the quantisation test of :func:`depth_quantum`
-_QUANTUM_SAMPLES = 20_000
-#: a depth image is quantised when sampled neighbours that differ lie at most this many
-#: distinct depth levels apart (median): rounded data steps by one or two levels, while
-#: continuous depths take a new value at nearly every pixel, so that hundreds of distinct
-#: values lie between two neighbours on a slanted face
-_QUANTUM_MAX_LEVELS = 3
-#: fewest distinct depth levels a quantised image must show
-_QUANTUM_MIN_LEVELS = 20
-
-
-def _strided(z: np.ndarray, target: int) -> np.ndarray:
-    """``z`` on every k-th row and column, k chosen to leave about ``target`` pixels."""
-    k = max(1, int(np.sqrt(z.size / target)))
-    return z[::k, ::k]
-
-
-def _levels_close(z: np.ndarray, levels: np.ndarray) -> bool:
-    """Whether sampled neighbours that differ lie at most :data:`_QUANTUM_MAX_LEVELS` of
-    ``levels`` apart (median; False with fewer than 100 such pairs)."""
-    k = max(1, int(np.sqrt(z.size / _QUANTUM_SAMPLES)))
-    h, w = z.shape
-    hk, wk = (h - 1) // k * k, (w - 1) // k * k      # pairs of true neighbours, sampled
-    apart = []
-    for a, b in ((z[:hk:k, :wk:k], z[:hk:k, 1:wk + 1:k]), (z[:hk:k, :wk:k], z[1:hk + 1:k, :wk:k])):
-        differ = np.isfinite(a) & np.isfinite(b) & (a != b)
-        apart.append(np.abs(np.searchsorted(levels, a[differ]) - np.searchsorted(levels, b[differ])))
-    apart = np.concatenate(apart)
-    return bool(apart.size >= 100 and np.median(apart) <= _QUANTUM_MAX_LEVELS)
-
-
-def depth_quantum(z: np.ndarray) -> np.ndarray | None:
-    """Quantisation step of a depth image at every pixel (mm), or None if it is not quantised.
-
-    Kinect-type sensors report depth on a discrete set of levels (disparity in steps of
-    1/8 px, so levels ``f b / d`` spaced ``z^2 / (8 f b)``: 3 mm at 1 m, 12 mm at 2 m;
-    then rounded to whole millimetres). The levels are the distinct values the depths
-    take; the local quantum is the larger of the two gaps beside a level (rounding to
-    uneven levels moves two neighbours apart by up to that), a running median over 9
-    levels (a level that no pixel of this image holds doubles a gap, and is outvoted),
-    interpolated at each pixel's depth. The image counts as quantised when it shows at least
-    :data:`_QUANTUM_MIN_LEVELS` levels and horizontal and vertical neighbours that differ
-    lie a level or two apart (median at most :data:`_QUANTUM_MAX_LEVELS`). Continuous
-    depths fail that (nearly every pixel is a level of its own), and so do noise-free
-    synthetic scans whose frontal planes repeat one exact depth (few levels, or slanted
-    faces between them).
-
-    Parameters
-    ----------
-    z : (H, W) float array
-        Depth, mm, NaN where invalid.
-
-    Returns
-    -------
-    (H, W) float32 or None
-        The quantum at every pixel (NaN where ``z`` is), mm; None for unquantised depth.
-    """
-    z = np.asarray(z, np.float32)
-    sub = _strided(z, _QUANTUM_SAMPLES)
-    vals = sub[np.isfinite(sub)]
-    # cheap rejection: continuous depths are (nearly) all distinct
-    head = vals[:4000]
-    if head.size < 200 or np.unique(head).size > 0.5 * head.size:
-        return None
-    # the test: neighbours that differ are a level or two apart. First on the levels of
-    # every 2nd row and column, a subset of the image's: neighbours lie at most as many
-    # of those apart as of all levels, so a failure there is a failure (sorting a quarter
-    # of the pixels, not all: 13 against 48 ms at 1024 x 1024 on a noise-free scan)
-    quarter = z[::2, ::2]
-    if not _levels_close(z, np.unique(quarter[np.isfinite(quarter)]).astype(np.float64)):
-        return None
-    levels = np.unique(z[np.isfinite(z)]).astype(np.float64)
-    if levels.size < _QUANTUM_MIN_LEVELS or not _levels_close(z, levels):
-        return None
-    # rounding to uneven levels (a Kinect's millimetres over its disparity steps: gaps
-    # 1, 2, 1, 2 mm) moves a pair by up to the larger gap beside a level: the running
-    # median of that over 9 levels (a level no pixel holds doubles a gap, and is outvoted)
-    gaps = np.diff(levels)
-    wider = np.maximum(gaps[1:], gaps[:-1]) if gaps.size > 1 else gaps
-    padded = np.pad(wider, 4, mode="edge")
-    gap = np.median(np.lib.stride_tricks.sliding_window_view(padded, 9), axis=1)
-    mids = levels[1:-1] if gaps.size > 1 else 0.5 * (levels[1:] + levels[:-1])
-    out = np.interp(z, mids, gap).astype(np.float32)
-    out[~np.isfinite(z)] = np.nan
-    return out
 
 
 def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,

@@ -146,11 +146,13 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None,
     )
     scan = grid_scan(xyz, meta, normal=normal, intensity=intensity)
     if described == "auto":
-        from rangesim.edges._matching_scale import default_matcher, disparity_lattice
+        from rangesim.core.quantisation import DEFAULT_MATCHER_PRESET, disparity_lattice
+        from rangesim.sensor.config import load_sensor
 
         evidence = disparity_lattice(scan.depth) if h > 1 else None
         if evidence is not None:
-            scan.meta["sensor"] = default_matcher()
+            # a block-matched recording of unknown make: the Kinect v1 preset's matcher
+            scan.meta["sensor"] = load_sensor(DEFAULT_MATCHER_PRESET).to_dict()
             scan.meta["sensor_evidence"] = {"rule": "disparity lattice", **evidence}
     elif described is not None:
         scan.meta["sensor"] = described
