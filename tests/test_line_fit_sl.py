@@ -126,3 +126,32 @@ def test_the_tolerance_is_k_measured_bend_noises_over_the_rounding_gain(noise_px
 
 def test_the_shortest_chord_reaches_past_the_rounding():
     assert min_reach(WINDOW) == 5 and min_reach(WINDOW) > WINDOW / 2
+
+
+@pytest.mark.parametrize("k", [1.5, 2.0])
+def test_the_two_line_tolerance_keeps_a_planes_false_crease_rate_of_three_lines(k):
+    """The least of n tested lines with independent half-normal bends (RMS 1) exceeds t with
+    P1(t) ** n, P1(t) = erfc(t / sqrt 2): lines_k equates the rates for two and three lines,
+    and is k itself for three; on a simulated plane the rates agree."""
+    from scipy.special import erfc
+
+    from rangesim.edges._line_fit_sl import lines_k
+
+    k2, k3 = float(lines_k(k, 2)), float(lines_k(k, 3))
+    assert k3 == pytest.approx(k)
+    assert k2 > k3
+    assert erfc(k2 / np.sqrt(2)) ** 2 == pytest.approx(erfc(k3 / np.sqrt(2)) ** 3, rel=1e-9)
+    b = np.abs(np.random.default_rng(0).standard_normal((3, 2_000_000)))
+    r2, r3 = (b[:2].min(axis=0) > k2).mean(), (b.min(axis=0) > k3).mean()
+    assert r2 == pytest.approx(r3, rel=0.2)
+
+
+def test_lines_the_image_frame_cuts_are_not_tested():
+    """A line the frame would cut within the stride (the matcher's window clipped there: the
+    pixels along a tilted plane's border bend its lines) is left out of the test."""
+    from rangesim.edges._line_fit_sl import _frame_cut
+
+    cut = _frame_cut((30, 40), WINDOW)
+    assert not cut[:, WINDOW:-WINDOW, WINDOW:-WINDOW].any()
+    assert cut[0, :, :WINDOW].all() and not cut[0, :, WINDOW:-WINDOW].any()
+    assert cut[2, 3, 20] and cut[1, 3, 20] and cut[3, 3, 20] and not cut[0, 3, 20]

@@ -16,18 +16,24 @@ at the matcher's scale:
   jump (a broken neighbour pair, or a step from the pixel of more than the jump rule allows
   over its length) is shortened to its last good end, down to :func:`min_reach`, else the line
   is not drawn;
-* the bend of each line (180 degrees less the angle at the pixel) is divided by the share
-  of a box-rounded crease's bend that chords of that length see
-  (:func:`~rangesim.edges._matching_scale.rounding_gain`, 3/4 at one window), an estimate of
-  the surface's own bend;
-* the pixel has no two straight lines through it (the paper's edge) where the second least
-  bend of its lines exceeds the tolerance (the four compass lines are 45 degrees apart, so any
-  two are distinct): that bend is the pixel's crease strength; a pixel with fewer than
-  :data:`MIN_LINES` lines is not tested;
-* the tolerance is :data:`K_SL` times the bend noise measured at that stride
-  (:func:`bend_noise`: the robust RMS of depth's second differences at lag ``s`` over ``s``
-  footprints, the estimator of :func:`~rangesim.edges._noise.stride_gain`), over the same
-  rounding gain, at least the noise-free 15 degrees;
+* the bend of each line (180 degrees less the angle at the pixel) is divided by the share of
+  a box-rounded crease's bend it sees where it actually crosses the crease
+  (:func:`crossing_bends`: ``cos a * rounding_gain(w, reach |u| cos a)``, ``a`` the line's
+  angle to the crease normal, estimated by the second harmonic of the four bends), an
+  estimate of the surface's own bend;
+* only the lines within 60 degrees of the normal are tested (:data:`CONE_COS`: three on an
+  axis or a diagonal, two between), and not those the image frame cuts within ``s`` (the
+  matcher's window is clipped there): the pixel has no two straight lines through it (the
+  paper's edge) where every tested line is bent, i.e. the least of them exceeds the tolerance
+  (that least, rounding-corrected, is the crease strength); a pixel with fewer than
+  :data:`MIN_LINES` drawn lines or fewer than two tested is not tested;
+* the tolerance is per line, in its own noise: its raw bend over the bend noise measured at
+  its reach (:func:`bend_noise`: the robust RMS of depth's second differences at that lag
+  over as many footprints, the estimator of :func:`~rangesim.edges._noise.stride_gain`) must
+  exceed :func:`lines_k` of :data:`K_SL` and the number ``n`` of tested lines, which keeps a
+  plane's false-crease rate the same for two lines as for three (with half-normal bends,
+  ``P1(k_2) ** 2 = P1(k_3) ** 3``); and its rounding-corrected bend must exceed the
+  noise-free :data:`FLOOR_DEG`;
 * the bands this leaves (every pixel within about ``s - w / 2`` of a crease sees it) are
   thinned by non-maximum suppression across the crease (the compass axis of the largest
   bend) on the strength smoothed over the matcher's support
@@ -37,20 +43,25 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from scipy.special import erfc, erfcinv
 
-from rangesim.edges._grid import AXES, pad_last2, padded_view
+from rangesim.edges._grid import AXES, AXIS_ANGLES, pad_last2, padded_view
 from rangesim.edges._matching_scale import ridge_sigma, rounding_gain
 from rangesim.edges._pcl_scale import nan_gaussian
+from rangesim.edges._trig import half_atan2
 
 __all__ = ["sl_stride", "min_reach", "bend_noise", "sl_strength", "sl_tolerance", "sl_creases",
+           "crossing_gain", "crossing_bends", "cone_strength", "lines_k", "CONE_COS", "GAIN_FLOOR",
            "K_SL", "MIN_LINES"]
 
-#: the tolerance in RMS bends of one line at the stride (:func:`bend_noise`, as corrected for
-#: the rounding). On flat faces of the tuning scans (seeds 0-7 of kinect_v1 and
-#: structured_light_bench, pixels over 10 px from any edge) the 99th percentile of the
-#: strength is 1.2-2.0 of it; 1.25 / 1.5 / 1.75 / 2 / 2.5 gave F1 0.70 / 0.71 / 0.71 / 0.68 /
-#: 0.64 there (mean of the four preset and noise settings)
+#: the tolerance in RMS bends of one line at its reach, for the least of three tested lines
+#: (:func:`lines_k` gives it for two: 1.97). On tuning seeds 0-7 (kinect_v1 and
+#: structured_light_bench, noise-free / noise) 1.5 / 2 gave F1 0.742 / 0.720 / 0.739 / 0.733
+#: and 0.711 / 0.665 / 0.735 / 0.726 (1.25, before the frame's lines were left out: 0.741 /
+#: 0.724 / 0.736 / 0.728)
 K_SL = 1.5
+#: the least rounding-corrected bend of a crease (degrees), the noise-free tolerance
+FLOOR_DEG = 15.0
 #: lines a pixel needs for the test: with two, one bent line says little about whether a
 #: second straight one exists (fewer: untested; jumps and rims are the jump rule's). 2 / 3 / 4
 #: gave F1 0.70 / 0.71 / 0.71 on the tuning seeds, crease precision 0.62 / 0.70 / 0.73
@@ -188,6 +199,82 @@ def sl_tolerance(noise_rad: float, window: int, stride: int, k: float = K_SL, fl
     return float(max(np.radians(floor_deg), k * noise_rad / rounding_gain(window, stride)))
 
 
+#: least |cos| of a line's angle to the crease normal for the line to be tested: the lines
+#: within 60 degrees of the normal (two between the compass axes, three on an axis or a
+#: diagonal); a line nearer the crease sees too little of its bend to tell it from noise
+CONE_COS = 0.5
+#: least crossing gain a bend is divided by (a floor on the noise's amplification)
+GAIN_FLOOR = 0.25
+_AXIS_LEN = np.array([1.0, np.sqrt(2.0), 1.0, np.sqrt(2.0)], np.float32)
+
+
+def crossing_gain(window: float, reach_px, cos_a):
+    """The share of a box-rounded crease's bend seen by a line crossing it ``alpha`` off its
+    normal with chords ``reach_px`` long (pixels, along the line): the slope change along the
+    line is ``cos(alpha)`` of that across, and the chord reaches ``reach_px cos(alpha)`` across
+    the rounded zone (``w / cos(alpha)`` of the line's length)."""
+    w = float(window)
+    sn = np.asarray(reach_px, np.float32) * cos_a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.where(sn <= w / 2, sn / w, 1.0 - w / (4.0 * sn))
+    return (cos_a * g).astype(np.float32)
+
+
+def crossing_bends(bends: np.ndarray, reach: np.ndarray, window: int,
+                   cone_cos: float = CONE_COS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each line's bend over its crossing gain, the crease normal's compass axis, and which
+    lines lie within the cone about the normal.
+
+    The crease normal ``phi`` (image angle) is the second harmonic of the four raw bends
+    (a crease bends its across line most, its along line least): ``half_atan2(b1 - b3,
+    b0 - b2)``. Line ``a`` meets it ``alpha = AXIS_ANGLES[a] - phi`` off the normal and is
+    divided by :func:`crossing_gain` of its reach (times the axis' pixel length), at least
+    :data:`GAIN_FLOOR`. Returns ``(corrected (4, H, W) float32, across (H, W) int,
+    in_cone (4, H, W) bool)``.
+    """
+    b0 = np.where(np.isfinite(bends), bends, np.float32(0))
+    phi = half_atan2(np.ascontiguousarray(b0[1] - b0[3]), np.ascontiguousarray(b0[0] - b0[2]))
+    out = np.empty_like(bends)
+    cone = np.empty(bends.shape, bool)
+    for a in range(4):
+        ca = np.abs(np.cos(np.float32(AXIS_ANGLES[a]) - phi)).astype(np.float32)
+        g = crossing_gain(window, reach[a] * _AXIS_LEN[a], ca)
+        out[a] = bends[a] / np.maximum(g, np.float32(GAIN_FLOOR))
+        cone[a] = ca >= cone_cos
+    across = np.rint(np.mod(phi, np.pi) / (np.pi / 4)).astype(np.int64) % 4
+    return out, across, cone
+
+
+def cone_strength(corrected: np.ndarray, cone: np.ndarray,
+                  min_lines: int = MIN_LINES) -> tuple[np.ndarray, np.ndarray]:
+    """``(strength, tested)``: the least corrected bend of the drawn lines within the cone
+    about the crease normal, (H, W) float32, NaN where fewer than ``min_lines`` lines are
+    drawn or fewer than two of the cone's are; and how many lines that least is taken over,
+    (H, W) int."""
+    drawn = np.isfinite(corrected)
+    inc = drawn & cone
+    st = np.min(np.where(inc, corrected, np.inf), axis=0)
+    n = inc.sum(axis=0)
+    ok = (drawn.sum(axis=0) >= max(int(min_lines), 2)) & (n >= 2)
+    return np.where(ok, st, np.nan).astype(np.float32), n
+
+
+def lines_k(k: float, n, ref: int = 3):
+    """The tolerance multiple for the least of ``n`` tested lines that keeps a plane's false
+    crease rate that of ``k`` over ``ref`` lines. Each line's bend on a plane is taken as
+    independent half-normal noise, ``P1(t) = erfc(t / sqrt 2)`` in RMS bends; the least of
+    ``n`` exceeds ``t`` with ``P1(t) ** n``, so equal rates need ``P1(k_n) ** n = P1(k) **
+    ref``: ``k_n = sqrt 2 erfcinv(erfc(k / sqrt 2) ** (ref / n))``.
+
+    Examples
+    --------
+    >>> round(float(lines_k(1.5, 3)), 3), round(float(lines_k(1.5, 2)), 3)
+    (1.5, 1.97)
+    """
+    n = np.maximum(np.asarray(n, np.float64), 1.0)
+    return np.sqrt(2.0) * erfcinv(erfc(k / np.sqrt(2.0)) ** (ref / n))
+
+
 def _nms(ridge: np.ndarray, across: np.ndarray, keep: np.ndarray) -> np.ndarray:
     """``keep`` pixels whose ``ridge`` is at least that of both neighbours along ``AXES[across]``.
 
@@ -207,6 +294,19 @@ def _nms(ridge: np.ndarray, across: np.ndarray, keep: np.ndarray) -> np.ndarray:
             nb = padded_view(rp, 1, sgn * dr, sgn * dc, (h, w))
             with np.errstate(invalid="ignore"):
                 out &= ~(sel & (nb > ridge))
+    return out
+
+
+def _frame_cut(shape: tuple[int, int], stride: int) -> np.ndarray:
+    """(4, H, W) bool: the compass line through the pixel would leave the image within
+    ``stride`` pixels (a chord cut by the frame, where the matcher's window is clipped)."""
+    h, w = shape
+    ii, jj = np.mgrid[:h, :w]
+    ri, rj = np.minimum(ii, h - 1 - ii), np.minimum(jj, w - 1 - jj)
+    big = np.full((h, w), stride, np.int64)
+    out = np.empty((4, h, w), bool)
+    for a, (dr, dc) in enumerate(AXES):
+        out[a] = np.minimum(ri if dr else big, rj if dc else big) < stride
     return out
 
 
@@ -247,13 +347,22 @@ def sl_creases(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, pairs: np.ndar
         np.ascontiguousarray(valid, np.bool_),
         np.ascontiguousarray(pairs if pairs is not None else np.zeros((4,) + z.shape, bool)),
         np.ascontiguousarray(np.broadcast_to(jump_mm, z.shape), np.float32), s, min_reach(s))
-    gains = np.array([1.0] + [rounding_gain(window, t) for t in range(1, s + 1)], np.float32)
-    bends /= gains[reach]
-    strength, across = sl_strength(bends, min_lines)
+    corrected, across, cone = crossing_bends(bends, reach, window)
+    strength, tested = cone_strength(corrected, cone, min_lines)
     noise = bend_noise(z, footprint, s)
     tol = sl_tolerance(noise, window, s, k)
+    kn = lines_k(k, np.arange(5)).astype(np.float32)
+    inc = np.isfinite(corrected) & cone & ~_frame_cut(z.shape, s)
+    tested = inc.sum(axis=0)
+    strength = np.where(np.isfinite(strength) & (tested >= 2),
+                        np.min(np.where(inc, corrected, np.inf), axis=0), np.nan).astype(np.float32)
+    lag_noise = np.array([noise] + [bend_noise(z, footprint, t) if t < s else noise
+                                    for t in range(1, s + 1)], np.float32)
+    raw_min = np.min(np.where(inc, bends / np.maximum(lag_noise[reach], np.float32(1e-9)), np.inf), axis=0)
+    floor = np.float32(np.radians(FLOOR_DEG))
     ridge = nan_gaussian(strength, ridge_sigma(window, s))
     with np.errstate(invalid="ignore"):
-        crease = _nms(ridge, across, strength > tol)
+        keep = (strength > floor) & (raw_min > kn[tested])
+        crease = _nms(ridge, across, keep)
     return crease, {"stride": s, "tolerance_deg": float(np.degrees(tol)), "bend_noise": noise,
                     "strength": strength}
