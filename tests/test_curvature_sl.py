@@ -28,8 +28,6 @@ F, Z0 = 400.0, 500.0
 STEP = WINDOW // 2
 
 
-
-
 def _cylinder(radius: float, concave: bool, size: int = 91):
     """A pinhole view of a cylinder whose axis runs along image y, its nearest (convex) or
     farthest (concave, seen from inside) line at depth Z0 through the image centre."""
@@ -40,8 +38,6 @@ def _cylinder(radius: float, concave: bool, size: int = 91):
     root = np.sqrt(b * b - 4 * a * cc)
     t = (-b + root) / (2 * a) if concave else (-b - root) / (2 * a)
     return grid_scan(rays * t[..., None], K)
-
-
 
 
 @pytest.mark.parametrize("edge_deg", [0.0, 30.0, 90.0, 135.0])

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import rangesim as rs
+from rangesim.core.constants import EdgeLabel
 from rangesim.edges._normal_sl import K_HIGH, K_LOW, RAYLEIGH_MEDIAN, axis_bends, bend_noise
 from tests.test_edge_detectors import roof_distance, synthetic_roof
 from tests.test_structured_light_edges import (
@@ -25,10 +26,6 @@ from tests.test_structured_light_edges import (
 )
 
 STEP = WINDOW // 2
-
-
-
-
 
 
 @pytest.mark.parametrize("edge_deg", [0.0, 30.0, 90.0, 135.0])
@@ -95,3 +92,30 @@ def test_an_explicit_threshold_or_window_and_laser_scans_keep_their_paths():
     assert "matching_window" not in stencil.params and stencil.params["window"] == 5
     laser = rs.edges.normal(synthetic_roof(40.0, 30.0, True))
     assert "matching_window" not in laser.params
+
+
+@pytest.mark.parametrize("convex", [True, False])
+def test_a_crease_beside_a_gap_is_found_with_the_normal_at_the_pixel_standing_in(convex):
+    """A dropout strip 3-5 px beside a 60 degree crease (a ragged shadow): the chords into the
+    gap are unusable, the normal at the pixel stands in for that side, and the crease is still
+    found along its length with its type (dropping such pairs loses it beside the gap)."""
+    scan = block_matched(synthetic_roof(60.0, 0.0, convex, size=91), noise_px=0.05, seed=3)
+    dist = roof_distance(scan, 0.0)
+    cols = np.arange(scan.shape[1]) + 0.5 - scan.shape[1] / 2 - 0.3
+    gap = np.zeros(scan.shape, bool)
+    gap[:, (cols > 3) & (cols < 6)] = True
+    scan.valid[gap] = False
+    scan.depth[gap] = np.nan
+    scan.xyz[gap] = np.nan
+    em = rs.edges.normal(scan)
+    inner = inner_mask(scan.shape)
+    found = em.mask & inner & (em.labels != EdgeLabel.JUMP) & (em.labels != rs.edges.RIM)
+    rows = np.unique(np.nonzero(inner & (dist <= 0.5))[0])
+    assert np.unique(np.nonzero(found & (dist <= 1.5))[0]).size >= 0.9 * rows.size
+    kind = EdgeLabel.CONVEX if convex else EdgeLabel.CONCAVE
+    assert (em.labels[found & (dist <= 1.5)] == kind).mean() >= 0.95
+
+
+def test_window_and_block_planes_are_refused_together():
+    with pytest.raises(ValueError, match="window and blocks=True"):
+        rs.edges.normal(block_matched(synthetic_roof(40.0, 0.0, True, size=41)), window=5, blocks=True)

@@ -146,3 +146,20 @@ def test_clean_laser_scans_keep_pcls_3x3_canny():
     assert em.params["scale"] == "3x3" and em.params["normal_window"] == 3
     assert em.params["curvature_threshold"] == [0.4, 1.1]
     assert em.high_curvature.any()
+
+
+def test_pcls_own_pipeline_on_any_scan_with_scale_3x3():
+    """``scale="3x3"`` runs PCL's 3 x 3 pipeline on a noisy scan (to compare with PCL itself):
+    at PCL's fixed thresholds 0.8 footprints of noise flood a plane with creases, as PCL's
+    own would, while the default measures at the sensor's scale and stays (nearly) silent;
+    ``"sensor"`` forces the scaled path on a clean scan; a bad scale is refused."""
+    noisy = _noisy(_plane(), 0.8, 0)
+    own = rs.edges.pcl_organized(noisy, scale="3x3", normal_window=3, curvature_threshold=(0.4, 1.1))
+    assert own.params["scale"] == "3x3" and own.params["normal_window"] == 3
+    auto = rs.edges.pcl_organized(noisy)
+    assert auto.params["scale"] == "sensor"
+    assert own.high_curvature.sum() > 10 * max(auto.high_curvature.sum(), 1)
+    forced = rs.edges.pcl_organized(synthetic_roof(30.0, 30.0, True), scale="sensor")
+    assert forced.params["scale"] == "sensor"
+    with pytest.raises(ValueError, match="scale must be"):
+        rs.edges.pcl_organized(noisy, scale="5x5")

@@ -144,7 +144,7 @@ def disparity_lattice(z: np.ndarray) -> dict[str, float] | None:
 
     Accepted when all hold:
 
-    * the image is quantised (:func:`~rangesim.edges._noise.depth_quantum`: neighbours a level
+    * the image is quantised (:func:`depth_quantum`: neighbours a level
       or two apart, at least 20 levels);
     * at least 20 resolved single-step gaps (``q z^2`` within a factor 0.6-1.6, ``q`` the
       resolved gaps' median of ``gap / z^2``; larger ones are levels no pixel took) deeper

@@ -141,7 +141,6 @@ def form_sigma(step: int) -> float:
     return float(step) / float(np.sqrt(12.0))
 
 
-
 def matched_creases(scan: Any, valid: np.ndarray, disc: Any, window: int,
                     threshold: float | None = None) -> tuple[np.ndarray, dict[str, Any], dict[str, Any]]:
     """Crease points of :func:`~rangesim.edges.curvature`'s ``extrema`` rule on a block-matched scan.

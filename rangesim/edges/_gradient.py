@@ -731,6 +731,11 @@ def crease_sigma(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, footpri
     gain cannot beat that even at the threshold's floor is not measured). At the White
     Scanner preset's noise the rule's ~1 px stays; the INRIA preset's 0.8 gets ~1.75 px.
 
+    The noise is measured with the plain normalised smoothing and no response within ``ceil(2
+    sigma)`` px of a jump, as :func:`gradient` smoothed before its step-preserving smoothing
+    (:func:`~rangesim.edges._gradient_steps.step_smooth`); away from steps the two agree, and
+    the search was kept so that the chosen sigma did not move.
+
     Parameters
     ----------
     z : (H, W) float32

@@ -76,7 +76,7 @@ def normal(
     Block-matched scans (structured light: ``scan.meta["sensor"]`` of mode
     ``"structured_light"`` with its matching ``window``,
     :func:`~rangesim.edges._matching_scale.matching_window`), unless ``window`` or ``blocks``
-    is given: the matcher rounds a crease over its window under errors correlated over it,
+    (True: block planes; False: the stencil normals) is given: the matcher rounds a crease over its window under errors correlated over it,
     so the normals compared are one matching window apart
     (:func:`~rangesim.edges._normal_sl.sl_creases`): chord normals at ``h = window // 2``
     (:func:`~rangesim.edges._pcl_scale.chord_normals`), the angle between those at ``p - h d``
@@ -157,6 +157,8 @@ def normal(
     """
     if window is not None:
         stencil_window(window, "window", None)  # a bad window is refused before any work
+        if blocks:
+            raise ValueError("window and blocks=True cannot be combined: the block sizes follow the noise")
     z, valid = scan_depth(scan)
     xyz = scan_points(scan, valid, component_major=True)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
@@ -165,7 +167,7 @@ def normal(
         noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
     matcher = matching_window(scan)
-    if matcher is not None and window is None and not blocks:
+    if matcher is not None and window is None and blocks is None:
         return _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search)
     if blocks is None:
         blocks = window is None and noisy and getattr(scan, "sigma", None) is not None

@@ -24,7 +24,8 @@ same depth noise, 5.2 times than a 7 x 7's). A face slanted by ``t`` from the vi
 (:func:`block_planes`, with ``sigma^2`` the mean predicted variance of the block's points).
 Two blocks fitted to one plane give normals whose angle is, for small independent errors,
 Rayleigh-like with ``angle^2 / (v_A + v_B)`` about exponential: ``P(angle > k sqrt(v_A +
-v_B)) = exp(-k^2)``, so ``k = 3.5`` is a false alarm rate of ``5e-6`` per pair.
+v_B)) = exp(-k^2)``, so the detector's ``k = 4`` (:data:`~rangesim.edges._normal_blocks.BLOCK_K`)
+is a false alarm rate of ``1e-7`` per pair.
 """
 from __future__ import annotations
 

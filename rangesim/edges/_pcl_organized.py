@@ -87,7 +87,6 @@ def _smooth3(a: np.ndarray, axis: int, weights: tuple[float, float] = (2.0, 1.0)
     return out
 
 
-
 def _depth_threshold(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, geo: PixelGeometry, relative: float,
                      distance_mm: float | np.ndarray | None) -> np.ndarray:
     """(H, W) float32 jump threshold, mm: ``relative`` times the distance to the sensor.
@@ -132,6 +131,7 @@ def pcl_organized(
     edge_types: tuple[str, ...] = EDGE_TYPES,
     normal_window: int | None = None,
     distance_mm: float | np.ndarray | None = None,
+    scale: str | None = None,
 ) -> OrganizedEdgeMap:
     """Organized-cloud edges as in PCL's ``OrganizedEdgeFromNormals``, written in NumPy.
 
@@ -228,6 +228,11 @@ def pcl_organized(
         Distance from the sensor to each point, mm (one number: the same for every pixel,
         e.g. a scanner's stand-off). Default: ``|xyz|`` on camera-frame scans; none on
         grids in a scanner frame (see above).
+    scale : {None, "3x3", "sensor"}, optional
+        ``"3x3"``: PCL's own pipeline (3 x 3 Gaussian-weighted normals, Sobel, Canny) on any
+        scan, to compare with PCL itself; ``"sensor"``: the chord normals and strided Sobel at
+        the sensor's scale; default (None): ``"sensor"`` on block-matched and noisy scans,
+        ``"3x3"`` on clean laser scans.
 
     Returns
     -------
@@ -253,6 +258,8 @@ def pcl_organized(
     .. [2] C. Choi, A. J. B. Trevor, H. I. Christensen, "RGB-D edge detection and edge-based
        registration", IROS 2013 (the organized edge detector PCL implements).
     """
+    if scale not in (None, "3x3", "sensor"):
+        raise ValueError(f"scale must be None, '3x3' or 'sensor', got {scale!r}")
     unknown = set(edge_types) - set(EDGE_TYPES)
     if unknown:
         raise ValueError(f"unknown edge types {sorted(unknown)}; choose from {EDGE_TYPES}")
@@ -266,7 +273,7 @@ def pcl_organized(
         noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
     noisy = noise is not None and noise >= NOISE_FLOOR
     # PCL's 3 x 3 Canny on clean laser scans; at the sensor's scale on block-matched or noisy ones
-    scaled = window is not None or noisy
+    scaled = (window is not None or noisy) if scale is None else scale == "sensor"
     auto_threshold = curvature_threshold is None
     low, high = (0.4, 1.1) if auto_threshold else (float(t) for t in curvature_threshold)
     xyz = scan_points(scan, valid, component_major=True)

@@ -101,7 +101,7 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None,
         that the edge detectors measure a structured-light recording at its block matcher's
         scale (``mode = "structured_light"``, ``structured_light.window``). ``"auto"``: only
         if the depths sit on a disparity lattice
-        (:func:`~rangesim.edges._matching_scale.disparity_lattice`: gaps between depth
+        (:func:`~rangesim.core.quantisation.disparity_lattice`: gaps between depth
         levels growing as z^2), the ``kinect_v1`` preset's, with the evidence in
         ``meta["sensor_evidence"]``; nothing otherwise. Default: no ``meta["sensor"]``.
 
