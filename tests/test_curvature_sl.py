@@ -21,6 +21,7 @@ from tests.test_structured_light_edges import (
     assert_one_line_on_the_roof,
     block_matched,
     inner_mask,
+    roof_beside_a_gap,
     xyz_stack,
 )
 
@@ -100,14 +101,8 @@ def test_a_block_matched_plane_has_no_creases():
 def test_a_crease_beside_a_gap_is_found(convex):
     """A dropout strip 3-5 px beside the crease (a ragged shadow): every 13 px block there holds
     a gap, so the block fits found nothing; the one-sided chords keep the crease."""
-    scan = block_matched(synthetic_roof(60.0, 0.0, convex, size=91), noise_px=0.05, seed=3)
+    scan = roof_beside_a_gap(convex)
     dist = roof_distance(scan, 0.0)
-    cols = np.arange(scan.shape[1]) + 0.5 - scan.shape[1] / 2 - 0.3
-    gap = np.zeros(scan.shape, bool)
-    gap[:, (cols > 3) & (cols < 6)] = True
-    scan.valid[gap] = False
-    scan.depth[gap] = np.nan
-    scan.xyz[gap] = np.nan
     em = rs.edges.curvature(scan)
     inner = inner_mask(scan.shape)
     found = em.mask & inner & (em.labels != EdgeLabel.JUMP)

@@ -22,6 +22,7 @@ from tests.test_structured_light_edges import (
     assert_one_line_on_the_roof,
     block_matched,
     inner_mask,
+    roof_beside_a_gap,
     xyz_stack,
 )
 
@@ -99,14 +100,8 @@ def test_a_crease_beside_a_gap_is_found_with_the_normal_at_the_pixel_standing_in
     """A dropout strip 3-5 px beside a 60 degree crease (a ragged shadow): the chords into the
     gap are unusable, the normal at the pixel stands in for that side, and the crease is still
     found along its length with its type (dropping such pairs loses it beside the gap)."""
-    scan = block_matched(synthetic_roof(60.0, 0.0, convex, size=91), noise_px=0.05, seed=3)
+    scan = roof_beside_a_gap(convex)
     dist = roof_distance(scan, 0.0)
-    cols = np.arange(scan.shape[1]) + 0.5 - scan.shape[1] / 2 - 0.3
-    gap = np.zeros(scan.shape, bool)
-    gap[:, (cols > 3) & (cols < 6)] = True
-    scan.valid[gap] = False
-    scan.depth[gap] = np.nan
-    scan.xyz[gap] = np.nan
     em = rs.edges.normal(scan)
     inner = inner_mask(scan.shape)
     found = em.mask & inner & (em.labels != EdgeLabel.JUMP) & (em.labels != rs.edges.RIM)

@@ -51,6 +51,19 @@ def assert_one_line_on_the_roof(found: np.ndarray, labels: np.ndarray, scan: Ran
     assert (labels[found] == kind).mean() >= 0.95
 
 
+def roof_beside_a_gap(convex: bool, seed: int = 3) -> RangeScan:
+    """A block-matched 60 degree roof (crease along image y through the centre) with a dropout
+    strip 3-5 px beside the crease, as a ragged shadow leaves one."""
+    scan = block_matched(synthetic_roof(60.0, 0.0, convex, size=91), noise_px=0.05, seed=seed)
+    cols = np.arange(scan.shape[1]) + 0.5 - scan.shape[1] / 2 - 0.3
+    gap = np.zeros(scan.shape, bool)
+    gap[:, (cols > 3) & (cols < 6)] = True
+    scan.valid[gap] = False
+    scan.depth[gap] = np.nan
+    scan.xyz[gap] = np.nan
+    return scan
+
+
 def block_matched(scan: RangeScan, window: int = WINDOW, steps: int = 8, noise_px: float = 0.0,
                   seed: int = 0) -> RangeScan:
     """``scan`` as a block matcher of ``window`` px would measure it: disparity ``FB / z``
