@@ -250,20 +250,28 @@ def _piece_moments(xy, pts, start, cnt, frame, buf, out):  # pragma: no cover - 
 
 
 @numba.njit(**_JIT)
+def _counting_sort(key, n, n_keys):  # pragma: no cover - compiled
+    """The indices ``0 .. n - 1`` ordered by ``key`` (stable counting sort; keys in
+    ``0 .. n_keys - 1``) and each key's start in that order, (n_keys + 1,)."""
+    start = np.zeros(n_keys + 1, np.int64)
+    for i in range(n):
+        start[key[i] + 1] += 1
+    for c in range(n_keys):
+        start[c + 1] += start[c]
+    order = np.empty(n, np.int64)
+    fill = start[:-1].copy()
+    for i in range(n):
+        order[fill[key[i]]] = i
+        fill[key[i]] += 1
+    return order, start
+
+
+@numba.njit(**_JIT)
 def _by_curve_count_sum(curve, cnt, psum, P, n_curves):  # pragma: no cover - compiled
     """The order of the pieces ``0 .. P - 1`` by (curve, count, sum), stable: a counting sort by
     curve, then each curve's pieces by (count, sum) (insertion sort; two stable merge sorts
     for a curve of many pieces)."""
-    start = np.zeros(n_curves + 1, np.int64)
-    for p in range(P):
-        start[curve[p] + 1] += 1
-    for c in range(n_curves):
-        start[c + 1] += start[c]
-    o = np.empty(P, np.int64)
-    fill = start[:-1].copy()
-    for p in range(P):
-        o[fill[curve[p]]] = p
-        fill[curve[p]] += 1
+    o, start = _counting_sort(curve, P, n_curves)
     for c in range(n_curves):
         lo, hi = start[c], start[c + 1]
         if hi - lo <= 64:
@@ -307,16 +315,7 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
     N = len(xy)
     T = 2 * len(tiles)
     # points by curve (stable): each tiling's counting sort by tile then keeps (tile, curve, index)
-    cstart = np.zeros(n_curves + 1, np.int64)
-    for i in range(N):
-        cstart[curve[i] + 1] += 1
-    for c in range(n_curves):
-        cstart[c + 1] += cstart[c]
-    by_curve = np.empty(N, np.int64)
-    fill = cstart[:-1].copy()
-    for i in range(N):
-        by_curve[fill[curve[i]]] = i
-        fill[curve[i]] += 1
+    by_curve, cstart = _counting_sort(curve, N, n_curves)
     pts = np.empty(T * N, np.int64)  # the pieces' points, piece after piece
     p_start = np.empty(T * N, np.int64)
     p_cnt = np.empty(T * N, np.int64)
