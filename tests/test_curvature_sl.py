@@ -21,6 +21,7 @@ from tests.test_structured_light_edges import (
     assert_one_line_on_the_roof,
     block_matched,
     inner_mask,
+    roof_bend_ratio,
     roof_beside_a_gap,
     xyz_stack,
 )
@@ -60,8 +61,7 @@ def test_the_bend_is_the_creases_angle(bend_deg, edge_deg):
     the crease than 2h, and the bend reads up to 25 % high (a known anisotropy)."""
     scan = block_matched(synthetic_roof(bend_deg, edge_deg, True, size=91))
     bend = chord_bend(chord_curvatures(xyz_stack(scan), None, STEP, form_sigma(STEP)), STEP, WINDOW)
-    on = inner_mask(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
-    ratio = np.degrees(np.median(bend[on])) / bend_deg
+    ratio = roof_bend_ratio(scan, bend, edge_deg, bend_deg)
     if edge_deg in (0.0, 90.0):
         assert ratio == pytest.approx(1.0, abs=0.06)
     else:

@@ -22,6 +22,7 @@ from tests.test_structured_light_edges import (
     assert_one_line_on_the_roof,
     block_matched,
     inner_mask,
+    roof_bend_ratio,
     roof_beside_a_gap,
     xyz_stack,
 )
@@ -48,9 +49,7 @@ def test_the_bend_is_the_creases_angle(bend_deg, edge_deg):
     of the rounding than the gain allows for, and the bend reads 25-40 % high (a known
     anisotropy, as curvature's)."""
     scan = block_matched(synthetic_roof(bend_deg, edge_deg, True, size=91))
-    strength = axis_bends(xyz_stack(scan), None, WINDOW)["strength"]
-    on = inner_mask(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
-    ratio = np.degrees(np.median(strength[on])) / bend_deg
+    ratio = roof_bend_ratio(scan, axis_bends(xyz_stack(scan), None, WINDOW)["strength"], edge_deg, bend_deg)
     if edge_deg in (0.0, 90.0):
         assert ratio == pytest.approx(1.0, abs=0.12)
     else:

@@ -51,6 +51,13 @@ def assert_one_line_on_the_roof(found: np.ndarray, labels: np.ndarray, scan: Ran
     assert (labels[found] == kind).mean() >= 0.95
 
 
+def roof_bend_ratio(scan: RangeScan, bend_rad: np.ndarray, edge_deg: float, bend_deg: float) -> float:
+    """The median of a measured bend (radians) on the crease of :func:`synthetic_roof` over
+    the roof's true bend."""
+    on = inner_mask(scan.shape) & (roof_distance(scan, edge_deg) <= 0.5)
+    return float(np.degrees(np.median(bend_rad[on])) / bend_deg)
+
+
 def roof_beside_a_gap(convex: bool, seed: int = 3) -> RangeScan:
     """A block-matched 60 degree roof (crease along image y through the centre) with a dropout
     strip 3-5 px beside the crease, as a ragged shadow leaves one."""
