@@ -51,6 +51,59 @@ def normal_angle_std(sigma: float, spacing: float, b: int) -> float:
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def _own_side(xyz, use, bad, s2, ref, i, j, r, q, stack, seen):  # pragma: no cover - compiled
+    """The sums of :func:`block_planes` (``q[0..9]``) over the pixels of the block centred
+    at ``(i, j)`` (half side ``r``) that are joined to its centre inside the block by
+    4-neighbour steps through used pixels that are not ``bad``: the centre's own side of a
+    depth jump (whose pixels either side are bad) or of a gap (unmeasured pixels). False
+    where the centre itself is unused or bad."""
+    _, h, w = xyz.shape
+    if not use[i, j] or bad[i, j]:
+        return False
+    b = 2 * r + 1
+    seen[:] = False
+    for k in range(10):
+        q[k] = 0.0
+    top = 0
+    stack[0] = r * b + r
+    seen[r * b + r] = True
+    top = 1
+    while top > 0:
+        top -= 1
+        cell = stack[top]
+        di, dj = cell // b, cell % b
+        y0, x0 = i - r + di, j - r + dj
+        x = xyz[0, y0, x0] - ref[0]
+        y = xyz[1, y0, x0] - ref[1]
+        z = xyz[2, y0, x0] - ref[2]
+        q[0] += 1.0
+        q[1] += x
+        q[2] += y
+        q[3] += z
+        q[4] += x * x
+        q[5] += x * y
+        q[6] += y * y
+        q[7] += x * z
+        q[8] += y * z
+        q[9] += s2[y0, x0]
+        for ei, ej in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+            ni, nj = di + ei, dj + ej
+            if ni < 0 or ni >= b or nj < 0 or nj >= b:
+                continue
+            c2 = ni * b + nj
+            if seen[c2]:
+                continue
+            seen[c2] = True
+            yy, xx = i - r + ni, j - r + nj
+            if yy < 0 or yy >= h or xx < 0 or xx >= w:
+                continue
+            if use[yy, xx] and not bad[yy, xx]:
+                stack[top] = c2
+                top += 1
+    return True
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def block_planes(xyz, use, bad, s2, b, min_fill, normal, var, centroid, max_slope_var=MAX_SLOPE_VAR):  # pragma: no cover - compiled
     """Least-squares planes ``z = a x + b y + c`` on the ``b x b`` block centred at every pixel.
 
@@ -61,8 +114,10 @@ def block_planes(xyz, use, bad, s2, b, min_fill, normal, var, centroid, max_slop
     use : (H, W) bool
         Points that enter the fits (valid).
     bad : (H, W) bool
-        Points a block must not contain (the pixels beside a depth jump): a block holding
-        one is not fitted.
+        Points beside a depth jump. A block holding one, or cut by unmeasured pixels (away
+        from the image border), is fitted on its centre's own side only: the points joined
+        to the centre inside the block through used, not bad points (:func:`_own_side`); a
+        bad or unused centre is not fitted.
     s2 : (H, W) float32
         Predicted depth variance of each point, mm^2 (0: noise-free).
     b : int
@@ -102,6 +157,10 @@ def block_planes(xyz, use, bad, s2, b, min_fill, normal, var, centroid, max_slop
     var[...] = np.nan
     centroid[...] = np.nan
     need = max(3.0, min_fill * b * b)
+    full = b * b - 0.5
+    side = np.zeros(nq)
+    stack = np.empty(b * b, np.int64)
+    seen = np.zeros(b * b, np.bool_)
     for i in range(-r, h + r):
         # add row i + r, drop row i - r - 1
         for sgn, row in ((1.0, i + r), (-1.0, i - r - 1)):
@@ -139,15 +198,21 @@ def block_planes(xyz, use, bad, s2, b, min_fill, normal, var, centroid, max_slop
                     q[k] -= col[k, jo]
             if j < 0 or j >= w:
                 continue
-            n = q[0]
-            if n < need or q[10] > 0.5:
+            qq = q
+            if q[10] > 0.5 or (q[0] < full and i >= r and i < h - r and j >= r and j < w - r):
+                # cut by a jump or a gap: only the centre's own side is fitted
+                if not _own_side(xyz, use, bad, s2, ref, i, j, r, side, stack, seen):
+                    continue
+                qq = side
+            n = qq[0]
+            if n < need:
                 continue
-            mx, my, mz = q[1] / n, q[2] / n, q[3] / n
-            cxx = q[4] - q[1] * mx
-            cxy = q[5] - q[1] * my
-            cyy = q[6] - q[2] * my
-            cxz = q[7] - q[1] * mz
-            cyz = q[8] - q[2] * mz
+            mx, my, mz = qq[1] / n, qq[2] / n, qq[3] / n
+            cxx = qq[4] - qq[1] * mx
+            cxy = qq[5] - qq[1] * my
+            cyy = qq[6] - qq[2] * my
+            cxz = qq[7] - qq[1] * mz
+            cyz = qq[8] - qq[2] * mz
             det = cxx * cyy - cxy * cxy
             if not det > 1e-12 * (cxx + cyy) * (cxx + cyy):
                 continue
@@ -159,7 +224,7 @@ def block_planes(xyz, use, bad, s2, b, min_fill, normal, var, centroid, max_slop
             nx, ny, nz = ga / sq, gb / sq, -1.0 / sq
             if nx * px + ny * py + nz * pz > 0:
                 nx, ny, nz = -nx, -ny, -nz
-            sig2 = max(q[9], 0.0) / n
+            sig2 = max(qq[9], 0.0) / n
             # C = sig2 M^-1, M^-1 = [[cyy, -cxy], [-cxy, cxx]] / det
             tr = sig2 * (cxx + cyy) / det
             if tr > max_slope_var:
