@@ -328,7 +328,7 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
     # operators (compiled, one pass), in the same order of operations as the exact rule
     # below. A NaN anywhere in the window makes them NaN, and a broken pair can only lie in
     # the window of a pixel next to it: those pixels (a few percent) are redone exactly.
-    out = list(_plain_second_differences(z))
+    out = list(_plain_second_differences(z, 1))
     r0 = out[0]
     p = np.pad(z, 1, constant_values=np.nan)
 
@@ -355,7 +355,7 @@ def sampled_second_differences(z: np.ndarray, pairs: np.ndarray | None, skip: np
     noise search samples its medians so)."""
     h, w = z.shape
     z = np.ascontiguousarray(z, np.float32)
-    out = list(_plain_second_differences_sampled(z, step))
+    out = list(_plain_second_differences(z, step))
     sub = (slice(None, None, step), slice(None, None, step))
     redo = np.isnan(out[0])
     if pairs is not None:
@@ -381,9 +381,10 @@ def sampled_second_differences(z: np.ndarray, pairs: np.ndarray | None, skip: np
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _plain_second_differences_sampled(z, step):  # pragma: no cover - compiled
-    """:func:`_plain_second_differences` at every ``step``-th row and column (the same
-    operations, so the same bits; NaN on the image border)."""
+def _plain_second_differences(z, step):  # pragma: no cover - compiled
+    """The four operators at every ``step``-th row and column (1: every pixel) as if the 3x3
+    window were valid and unbroken (float32, the exact rule's order of operations; NaN on
+    the image border)."""
     h, w = z.shape
     hs, ws = (h + step - 1) // step, (w + step - 1) // step
     two, three, two_steps = np.float32(2), np.float32(3), np.float32(2) * _SQRT2
@@ -409,32 +410,6 @@ def _plain_second_differences_sampled(z, step):  # pragma: no cover - compiled
             s4 = ((n + west) + e) + s
             r45[a, b] = (((nw - c2) + se) + (s4 - (ne + sw) * two)) / two_steps
             r135[a, b] = (((ne - c2) + sw) + (s4 - (nw + se) * two)) / two_steps
-    return r0, r45, r90, r135
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _plain_second_differences(z):  # pragma: no cover - compiled
-    """The four operators at every pixel as if its 3x3 window were valid and unbroken
-    (float32, the exact rule's order of operations; NaN on the image border)."""
-    h, w = z.shape
-    two, three, two_steps = np.float32(2), np.float32(3), np.float32(2) * _SQRT2
-    r0 = np.full((h, w), np.nan, np.float32)
-    r45 = np.full((h, w), np.nan, np.float32)
-    r90 = np.full((h, w), np.nan, np.float32)
-    r135 = np.full((h, w), np.nan, np.float32)
-    for i in range(1, h - 1):
-        up, mid, dn = z[i - 1], z[i], z[i + 1]
-        for j in range(1, w - 1):
-            nw, n, ne = up[j - 1], up[j], up[j + 1]
-            west, c, e = mid[j - 1], mid[j], mid[j + 1]
-            sw, s, se = dn[j - 1], dn[j], dn[j + 1]
-            # rows' second differences along x, summed over the 3 rows; columns' along y
-            r0[i, j] = ((((nw - two * n) + ne) + ((west - two * c) + e)) + ((sw - two * s) + se)) / three
-            r90[i, j] = ((((nw - two * west) + sw) + ((n - two * c) + s)) + ((ne - two * e) + se)) / three
-            c2 = two * c
-            s4 = ((n + west) + e) + s
-            r45[i, j] = (((nw - c2) + se) + (s4 - (ne + sw) * two)) / two_steps
-            r135[i, j] = (((ne - c2) + sw) + (s4 - (nw + se) * two)) / two_steps
     return r0, r45, r90, r135
 
 
