@@ -533,82 +533,6 @@ def smoothing_gain(sigma: float) -> float:
     return float(np.mean(seen))
 
 
-def _gaps_as_before(zs: np.ndarray, z: np.ndarray, pairs: np.ndarray, sigma: float) -> None:
-    """In place: beside gaps (invalid pixels) and away from every broken pair, the 2-D
-    normalised convolution of :func:`_nan_gaussian` instead of the step-aware smoothing's.
-
-    :func:`~rangesim.edges._gradient_steps.step_smooth` renormalises each pass on its own at
-    an open end; on a slanted face the row pass's one-sided means are biased along x, and the
-    column pass mixes biased and unbiased rows at a gap's corners: false creases (18-21
-    degrees at the corners of a 7 x 7 dropout on a plate at the White Scanner's noise), where
-    the joint 2-D weights leave none. Within the kernel's reach of a broken pair the
-    step-aware values stay. One compiled pass for the 5-tap kernel (the same bits as
-    :func:`_nan_gaussian`'s), else from the full Gaussian.
-    """
-    r = 2 if sigma <= SMALL_SIGMA else int(3.0 * sigma + 0.5)
-    broken = pairs[0] | pairs[1]
-    broken |= pairs[2]
-    broken |= pairs[3]
-    z = np.ascontiguousarray(z, np.float32)
-    bad = np.isnan(z)
-    if not bad.any():
-        return
-    # a pair is broken at its first pixel: its second lies within 1 px, so r + 1 covers both
-    redo = _near(bad, r, border=False)
-    redo &= ~bad
-    redo &= ~_near(broken, r + 1, border=False)
-    if sigma <= SMALL_SIGMA:
-        w0, w1, w2 = _taps5(sigma)
-        _gap_smooth5(zs, z, bad, redo, w0, w1, w2)
-        return
-    idx = np.flatnonzero(redo)
-    if idx.size:
-        zs.ravel()[idx] = _nan_gaussian(z, sigma).ravel()[idx]
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _gap_smooth5(zs, z, bad, redo, w0, w1, w2):  # pragma: no cover - compiled
-    """:func:`_gaps_as_before` for the 5-tap kernel: at the ``redo`` pixels the normalised
-    5-tap smoothing ``num / den`` with :func:`_smooth5_at`'s operations in its order (zeros
-    outside the image and at the ``bad`` pixels; ``den`` the same sums of the validity)."""
-    h, w = z.shape
-    zero, one = np.float32(0), np.float32(1)
-    nums = np.empty(5, np.float32)
-    dens = np.empty(5, np.float32)
-    vals = np.empty(5, np.float32)
-    oks = np.empty(5, np.float32)
-    for i in range(h):
-        for j in range(w):
-            if not redo[i, j]:
-                continue
-            for k in range(5):
-                ii = i + k - 2
-                for m in range(5):
-                    vals[m] = zero
-                    oks[m] = zero
-                if 0 <= ii < h:
-                    for m in range(5):
-                        jj = j + m - 2
-                        if 0 <= jj < w and not bad[ii, jj]:
-                            vals[m] = z[ii, jj]
-                            oks[m] = one
-                rn = (vals[0] + vals[4]) * w2
-                rn += (vals[1] + vals[3]) * w1
-                rn += w0 * vals[2]
-                rd = (oks[0] + oks[4]) * w2
-                rd += (oks[1] + oks[3]) * w1
-                rd += w0 * oks[2]
-                nums[k], dens[k] = rn, rd
-            num = (nums[0] + nums[4]) * w2
-            num += (nums[1] + nums[3]) * w1
-            num += w0 * nums[2]
-            den = (dens[0] + dens[4]) * w2
-            den += (dens[1] + dens[3]) * w1
-            den += w0 * dens[2]
-            zs[i, j] = num / den if den != zero else np.float32(np.nan)
-    return zs
-
-
 def _near_jump(touching: np.ndarray, sigma: float) -> np.ndarray:
     """Pixels within ``ceil(2 sigma)`` px (4-connected steps) of a discontinuity's pixels:
     smoothing drags a step's slope out by ~2 sigma, so no responses that close to one."""
@@ -943,7 +867,6 @@ def gradient(
         # smoothed without averaging across a broken pair (rangesim.edges._gradient_steps): a
         # step is not smeared into a slope change, so no response near it need be dropped
         zs = step_smooth(z, disc.pairs, sigma)
-        _gaps_as_before(zs, z, disc.pairs, sigma)
     elif sigma > 0:
         # (an explicit sigma on strided operators) smoothing drags a step's slope out by ~2
         # sigma: no responses that close to one
