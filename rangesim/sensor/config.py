@@ -87,6 +87,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "min_score": 0.5,  # lowest accepted zero-mean normalised cross-correlation
         "uniqueness": 0.1,  # (1 - second best) must exceed (1 + uniqueness) (1 - best)
         "lr_check": True,  # left-right consistency (within 1 px)
+        "speckle_window": 100,  # disparity regions under this many pixels are rejected (0: off)
+        "speckle_range": 2.0,  # largest disparity step (px) between 4-neighbours of one region
     },
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
@@ -303,6 +305,8 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
     _number(params, "structured_light", "uniqueness", source, nonneg=True)
     if not isinstance(sl["lr_check"], bool):
         raise RangesimError(f"structured_light.lr_check must be true or false, got {sl['lr_check']!r}", source=source)
+    _number(params, "structured_light", "speckle_window", source, nonneg=True, integer=True)
+    _number(params, "structured_light", "speckle_range", source, nonneg=True)
 
 
 def _validate_render(params: dict[str, dict[str, Any]], source) -> None:

@@ -23,13 +23,17 @@ on the IR camera's -x side), looking along +z: a rectified pair):
    a device stores it from its factory calibration) along the rows over the disparities of
    the working range; sub-pixel disparity quantised to 1 / ``subpixel_steps`` px;
    z = f b / d, the point on the pixel's ray.
+6. Speckle filter (:func:`rangesim.sensor.speckle_filter.filter_speckles`): regions of the
+   disparity image smaller than ``speckle_window`` px, whose 4-neighbours differ by at most
+   ``speckle_range`` px, are chance matches and rejected, as a device's pipeline does.
 
 So depth noise follows sigma_z = z^2 sigma_d / (f b), depth comes in steps of
 f b / d - f b / (d + 1/8), projector shadows are h b / (D - h) wide behind an edge of height h
 in front of a surface at D, and depth edges fatten outwards by about half the window.
 
 Status: valid where a disparity was accepted and its depth lies in [near, far]; otherwise
-no surface (1), projector shadow (2), outside the range (4) or dropout (3, rejected match).
+no surface (1), projector shadow (2), outside the range (4) or dropout (3, rejected match
+or speckle).
 A valid pixel may lie in a true shadow (fattening): its ``xyz_true`` is the true surface.
 """
 from __future__ import annotations
@@ -48,6 +52,7 @@ from rangesim.sensor.dot_pattern import DotPattern
 from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
+from rangesim.sensor.speckle_filter import filter_speckles
 
 __all__ = ["scan_structured_light", "ir_image", "disparity_range", "reference_disparity", "matching_setup",
            "MatchingSetup"]
@@ -172,6 +177,10 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     disparity = relative + d0
     with np.errstate(invalid="ignore", divide="ignore"):
         z = f * b / disparity
+    # 6. chance matches come as small islands of the disparity image (of the working range)
+    with np.errstate(invalid="ignore"):
+        disparity[~((z >= near) & (z <= far))] = np.nan
+    z[filter_speckles(disparity, sl["speckle_window"], sl["speckle_range"])] = np.nan
     jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
     rays = np.stack([(jj - K[0, 2]) / f, (ii - K[1, 2]) / K[1, 1], np.ones_like(jj)], axis=-1)
     matched = np.isfinite(z) & (z >= near) & (z <= far)
