@@ -330,7 +330,6 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
     # the window of a pixel next to it: those pixels (a few percent) are redone exactly.
     out = list(_plain_second_differences(z, 1))
     r0 = out[0]
-    p = np.pad(z, 1, constant_values=np.nan)
 
     redo = np.isnan(r0)
     if pairs is not None:
@@ -341,11 +340,17 @@ def second_differences(z: np.ndarray, pairs: np.ndarray | None = None,
     redo &= ~np.isnan(z)
     if skip is not None:
         redo &= ~skip
-    idx = np.flatnonzero(redo)
-    if idx.size:
-        for r, exact in zip(out, _second_differences_at(p, pairs, idx, w)):
-            r.ravel()[idx] = exact
+    ri, ci = np.nonzero(redo)
+    if ri.size:
+        _exact_at(z, *_pairs_arg(pairs), ri, ci, 1, *out)
     return out
+
+
+def _pairs_arg(pairs: np.ndarray | None) -> tuple[np.ndarray, bool]:
+    """``pairs`` and whether there are any, as :func:`_exact_at` takes them."""
+    if pairs is None:
+        return np.zeros((4, 1, 1), bool), False
+    return pairs, True
 
 
 def sampled_second_differences(z: np.ndarray, pairs: np.ndarray | None, skip: np.ndarray | None,
@@ -373,18 +378,22 @@ def sampled_second_differences(z: np.ndarray, pairs: np.ndarray | None, skip: np
         redo &= ~skip[sub]
     ri, ci = np.nonzero(redo)
     if ri.size:
-        idx = (ri * step) * w + ci * step
-        p = np.pad(z, 1, constant_values=np.nan)
-        for r, exact in zip(out, _second_differences_at(p, pairs, idx, w)):
-            r[ri, ci] = exact
+        _exact_at(z, *_pairs_arg(pairs), ri, ci, step, *out)
     return out
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _plain_second_differences(z, step):  # pragma: no cover - compiled
+def _plain_second_differences(z: np.ndarray, step: int) -> tuple[np.ndarray, ...]:
     """The four operators at every ``step``-th row and column (1: every pixel) as if the 3x3
     window were valid and unbroken (float32, the exact rule's order of operations; NaN on
-    the image border)."""
+    the image border): :func:`_plain_dense` at every pixel, else :func:`_plain_strided`."""
+    if step == 1 and z.shape[0] >= 3 and z.shape[1] >= 3:
+        return _plain_dense(z)
+    return _plain_strided(z, step)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _plain_strided(z, step):  # pragma: no cover - compiled
+    """:func:`_plain_second_differences` at every ``step``-th row and column."""
     h, w = z.shape
     hs, ws = (h + step - 1) // step, (w + step - 1) // step
     two, three, two_steps = np.float32(2), np.float32(3), np.float32(2) * _SQRT2
@@ -413,6 +422,40 @@ def _plain_second_differences(z, step):  # pragma: no cover - compiled
     return r0, r45, r90, r135
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _plain_dense(z):  # pragma: no cover - compiled
+    """:func:`_plain_second_differences` at every pixel (``step`` 1, at least 3 x 3): the same
+    operations on row slices aligned to the output, so that no index is offset and the
+    compiler vectorises the loop (2-3x faster than the strided loop)."""
+    h, w = z.shape
+    two, three, two_steps = np.float32(2), np.float32(3), np.float32(2) * _SQRT2
+    nan = np.float32(np.nan)
+    out = np.empty((4, h, w), np.float32)
+    r0, r45, r90, r135 = out[0], out[1], out[2], out[3]
+    for r in (r0, r45, r90, r135):
+        r[0, :] = nan
+        r[h - 1, :] = nan
+    for i in range(1, h - 1):
+        up, mid, dn = z[i - 1], z[i], z[i + 1]
+        nw, n, ne = up[0:w - 2], up[1:w - 1], up[2:w]
+        we, c, e = mid[0:w - 2], mid[1:w - 1], mid[2:w]
+        sw, s, se = dn[0:w - 2], dn[1:w - 1], dn[2:w]
+        o0, o45, o90, o135 = r0[i, 1:w - 1], r45[i, 1:w - 1], r90[i, 1:w - 1], r135[i, 1:w - 1]
+        for k in range(w - 2):
+            o0[k] = ((((nw[k] - two * n[k]) + ne[k]) + ((we[k] - two * c[k]) + e[k]))
+                     + ((sw[k] - two * s[k]) + se[k])) / three
+            o90[k] = ((((nw[k] - two * we[k]) + sw[k]) + ((n[k] - two * c[k]) + s[k]))
+                      + ((ne[k] - two * e[k]) + se[k])) / three
+            c2 = two * c[k]
+            s4 = ((n[k] + we[k]) + e[k]) + s[k]
+            o45[k] = (((nw[k] - c2) + se[k]) + (s4 - (ne[k] + sw[k]) * two)) / two_steps
+            o135[k] = (((ne[k] - c2) + sw[k]) + (s4 - (nw[k] + se[k]) * two)) / two_steps
+        for r in (r0, r45, r90, r135):
+            r[i, 0] = nan
+            r[i, w - 1] = nan
+    return r0, r45, r90, r135
+
+
 def _second_differences_at(p: np.ndarray, pairs: np.ndarray | None, idx: np.ndarray,
                            w: int) -> list[np.ndarray]:
     """The exact rule of :func:`second_differences` at the flat pixel indices ``idx``.
@@ -421,6 +464,7 @@ def _second_differences_at(p: np.ndarray, pairs: np.ndarray | None, idx: np.ndar
     one of whose steps crosses a broken pair, is dropped, and the response is the sum of
     the remaining parts over the sum of their steps (NaN if too few remain), with the
     same operations in the same order as the dense pass, so that both agree to the bit.
+    (The array form of :func:`_exact_at`, kept as its reference.)
     """
     stride = w + 2
     flat = p.ravel()
@@ -477,6 +521,108 @@ def _second_differences_at(p: np.ndarray, pairs: np.ndarray | None, idx: np.ndar
         ell = cut(s4 - 2 * (g(*e0) + g(*e1)), lbreaks)    # two half-step L's, step sqrt 2
         diag.append(mean_of([centre, ell], _SQRT2, 1))
     return [r0, diag[0], r90, diag[1]]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _px(z, i, j):  # pragma: no cover - compiled
+    """``z[i, j]``, NaN outside the image (the padding of the array form)."""
+    # (no chained comparison: Numba compiles ``0 <= i < h`` some ten times slower)
+    h, w = z.shape
+    if i >= 0 and i < h and j >= 0 and j < w:
+        return z[i, j]
+    return np.float32(np.nan)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _broken(pairs, use_pairs, a, i, j):  # pragma: no cover - compiled
+    """``pairs[a, i, j]``, False outside the image or without pairs."""
+    if not use_pairs:
+        return False
+    _, h, w = pairs.shape
+    if i >= 0 and i < h and j >= 0 and j < w:
+        return pairs[a, i, j]
+    return False
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _part(v, cut):  # pragma: no cover - compiled
+    """A stencil part, NaN where one of its steps crosses a discontinuity."""
+    return np.float32(np.nan) if cut else v
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _exact_at(z, pairs, use_pairs, rows, cols, step, r0, r45, r90, r135):  # pragma: no cover - compiled
+    """The exact rule of :func:`second_differences` (:func:`_second_differences_at`, the same
+    float32 operations in the same order: the same bits) at the pixels ``(rows, cols) *
+    step`` of ``z``, written to ``r*[rows, cols]`` (one compiled pass instead of some hundred
+    NumPy calls on gathered copies: 4 ms -> well under 1 at 1024^2)."""
+    zero, two = np.float32(0), np.float32(2)
+    sq2 = _SQRT2
+    for n in range(rows.size):
+        i, j = rows[n] * step, cols[n] * step
+        nw, no, ne = _px(z, i - 1, j - 1), _px(z, i - 1, j), _px(z, i - 1, j + 1)
+        we, c, ea = _px(z, i, j - 1), z[i, j], _px(z, i, j + 1)
+        sw, so, se = _px(z, i + 1, j - 1), _px(z, i + 1, j), _px(z, i + 1, j + 1)
+        # 0 deg: the three rows' second differences, 2 of 3 needed
+        total, count = zero, 0
+        for k in range(3):
+            ii = i + k - 1
+            a, b, d = _px(z, ii, j - 1), _px(z, ii, j), _px(z, ii, j + 1)
+            part = _part((a - two * b) + d, _broken(pairs, use_pairs, 0, ii, j - 1)
+                         or _broken(pairs, use_pairs, 0, ii, j))
+            ok = part == part
+            total += part if ok else zero
+            count += ok
+        r0[rows[n], cols[n]] = total / np.float32(count) if count >= 2 else np.float32(np.nan)
+        # 90 deg: the three columns'
+        total, count = zero, 0
+        for k in range(3):
+            jj = j + k - 1
+            a, b, d = _px(z, i - 1, jj), _px(z, i, jj), _px(z, i + 1, jj)
+            part = _part((a - two * b) + d, _broken(pairs, use_pairs, 2, i - 1, jj)
+                         or _broken(pairs, use_pairs, 2, i, jj))
+            ok = part == part
+            total += part if ok else zero
+            count += ok
+        r90[rows[n], cols[n]] = total / np.float32(count) if count >= 2 else np.float32(np.nan)
+        c2 = two * c
+        s4 = ((no + we) + ea) + so
+        # 45 deg: the centre diagonal nw-se and the two L's through ne and sw
+        centre = _part((nw - c2) + se, _broken(pairs, use_pairs, 1, i - 1, j - 1)
+                       or _broken(pairs, use_pairs, 1, i, j))
+        ell = _part(s4 - two * (ne + sw), _broken(pairs, use_pairs, 0, i - 1, j)
+                    or _broken(pairs, use_pairs, 2, i - 1, j + 1) or _broken(pairs, use_pairs, 2, i, j - 1)
+                    or _broken(pairs, use_pairs, 0, i + 1, j - 1))
+        r45[rows[n], cols[n]] = _diagonal(centre, ell, sq2)
+        # 135 deg: the centre diagonal ne-sw and the two L's through nw and se
+        centre = _part((ne - c2) + sw, _broken(pairs, use_pairs, 3, i - 1, j + 1)
+                       or _broken(pairs, use_pairs, 3, i, j))
+        ell = _part(s4 - two * (nw + se), _broken(pairs, use_pairs, 0, i - 1, j - 1)
+                    or _broken(pairs, use_pairs, 2, i - 1, j - 1) or _broken(pairs, use_pairs, 2, i, j + 1)
+                    or _broken(pairs, use_pairs, 0, i + 1, j))
+        r135[rows[n], cols[n]] = _diagonal(centre, ell, sq2)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _diagonal(centre, ell, sq2):  # pragma: no cover - compiled
+    """A diagonal operator from its two parts (step sqrt 2 each), NaN if neither is valid:
+    ``(0 + parts) / (count * sqrt 2)``, as the array form."""
+    zero = np.float32(0)
+    total = zero
+    count = 0
+    if centre == centre:
+        total += centre
+        count += 1
+    else:
+        total += zero
+    if ell == ell:
+        total += ell
+        count += 1
+    else:
+        total += zero
+    if count == 0:
+        return np.float32(np.nan)
+    return total / (np.float32(count) * sq2)
 
 
 #: the strided operators' half-width over the block matcher's window (see :func:`matching_stride`)

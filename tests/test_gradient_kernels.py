@@ -1,0 +1,50 @@
+"""The gradient detector's compiled kernels give the same bits as the array forms they replace
+(issue 14 item 8: speed without changing any output)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rangesim.edges._gradient import (
+    _exact_at,
+    _pairs_arg,
+    _plain_dense,
+    _plain_strided,
+    _second_differences_at,
+)
+
+
+def _random_depth(rng: np.random.Generator, shape: tuple[int, int], holes: float) -> np.ndarray:
+    """Float32 depth with NaN holes and some +-0 (their signs must survive the sums)."""
+    z = (rng.normal(size=shape) * rng.choice([1e-3, 1.0, 100.0])).astype(np.float32)
+    z[rng.random(shape) < 0.1] = 0.0
+    z[rng.random(shape) < 0.1] = -0.0
+    z[rng.random(shape) < holes] = np.nan
+    return z
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, np.float32).view(np.int32)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_exact_rule_kernel_matches_its_array_form(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        h, w = (int(v) for v in rng.integers(3, 30, 2))
+        z = _random_depth(rng, (h, w), float(rng.choice([0.0, 0.1, 0.4])))
+        pairs = rng.random((4, h, w)) < rng.choice([0.0, 0.05, 0.3])
+        idx = np.flatnonzero(~np.isnan(z))
+        for pp in (pairs, None):
+            ref = _second_differences_at(np.pad(z, 1, constant_values=np.nan), pp, idx, w)
+            out = [np.full((h, w), 7.0, np.float32) for _ in range(4)]
+            _exact_at(z, *_pairs_arg(pp), *np.divmod(idx, w), 1, *out)
+            for r, o in zip(ref, out):
+                assert np.array_equal(_bits(r), _bits(o.ravel()[idx]))
+
+
+@pytest.mark.parametrize("shape", [(3, 3), (5, 17), (31, 8), (64, 65)])
+def test_dense_plain_operators_match_the_strided_loop(shape):
+    z = _random_depth(np.random.default_rng(1), shape, 0.1)
+    for d, r in zip(_plain_dense(z), _plain_strided(z, 1)):
+        assert np.array_equal(_bits(d), _bits(r))
