@@ -11,11 +11,14 @@ from rangesim.core.errors import RangesimError
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing file or a syntax error raises :class:`RangesimError`."""
     path = Path(path)
+    if path.is_dir():
+        raise RangesimError("is a directory, not a TOML file", source=path)
     if not path.is_file():
         raise RangesimError("no such file", source=path)
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        data = path.read_bytes()
+        # a byte-order mark (Windows editors write one) is no TOML syntax error
+        return tomllib.loads(data.removeprefix(b"\xef\xbb\xbf").decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise RangesimError(f"invalid TOML: {exc}", source=path) from exc
 

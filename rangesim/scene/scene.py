@@ -214,15 +214,27 @@ def expand_data_path(text: str) -> str:
 
 
 def _unit_scale(value: str, where: str, source) -> float:
-    if value not in UNITS_MM:
+    if not isinstance(value, str) or value not in UNITS_MM:
         raise RangesimError(
             f"unknown units {value!r} in {where}; use one of {', '.join(UNITS_MM)}", source=source
         )
     return UNITS_MM[value]
 
 
+def _numbers(value, what: str, source) -> np.ndarray:
+    """``value`` as float64 numbers, or a RangesimError naming ``what`` (a TOML string, table or
+    ragged list where numbers belong)."""
+    if isinstance(value, (str, dict, bool)) or (isinstance(value, list) and any(isinstance(v, (str, dict, list, bool))
+                                                                         for v in value)):
+        raise RangesimError(f"{what} must be numbers, got {value!r}", source=source)
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise RangesimError(f"{what} must be numbers, got {value!r}", source=source) from exc
+
+
 def _vector(table: dict, key: str, default, where: str, source) -> np.ndarray:
-    value = np.asarray(table.get(key, default), dtype=np.float64)
+    value = _numbers(table.get(key, default), f"{where}.{key}", source)
     if value.shape != (3,) or not np.all(np.isfinite(value)):
         raise RangesimError(f"{where}.{key} must be 3 finite numbers", source=source)
     return value
@@ -235,19 +247,22 @@ def _scene_from_toml(path: Path) -> Scene:
     tables = data.get("object", [])
     if isinstance(tables, dict):
         tables = [tables]
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise RangesimError("'object' must be [[object]] tables", source=path)
     if not tables:
         raise RangesimError("scene has no [[object]] tables", source=path)
     objects = [_object_from_table(t, k, scene_mm, path) for k, t in enumerate(tables)]
     view = None
     if "view" in data:
         v = data["view"]
+        if not isinstance(v, dict):
+            raise RangesimError("'view' must be a [view] table", source=path)
         check_keys(v, VIEW_KEYS, "[view]", path)
+        position = _vector(v, "position", None, "view", path) * scene_mm
+        target = _vector(v, "look_at", (0, 0, 0), "view", path) * scene_mm
+        up = _vector(v, "up", (0, 0, 1), "view", path)
         try:
-            view = look_at(
-                _vector(v, "position", None, "view", path) * scene_mm,
-                _vector(v, "look_at", (0, 0, 0), "view", path) * scene_mm,
-                _vector(v, "up", (0, 0, 1), "view", path),
-            )
+            view = look_at(position, target, up)
         except ValueError as exc:
             raise RangesimError(str(exc), source=path) from exc
     return Scene(objects, view=view, source=str(path.resolve()))
@@ -270,10 +285,13 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
         mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
     # the object's own units (for a mesh file), else the scene's
     object_mm = _unit_scale(t["units"], where, path) if "units" in t else scene_mm
-    scale = np.asarray(t.get("scale", 1.0), dtype=np.float64)
+    scale = _numbers(t.get("scale", 1.0), f"{where}.scale", path)
     if not np.all(np.isfinite(scale)) or np.any(scale <= 0) or scale.shape not in ((), (3,)):
         raise RangesimError(f"{where}.scale must be a positive number or 3 of them", source=path)
-    albedo = float(t.get("albedo", 0.6))
+    albedo = _numbers(t.get("albedo", 0.6), f"{where}.albedo", path)
+    if albedo.shape != ():
+        raise RangesimError(f"{where}.albedo must be one number, got {t['albedo']!r}", source=path)
+    albedo = float(albedo)
     if not 0.0 <= albedo <= 1.0:
         raise RangesimError(f"{where}.albedo must lie in 0..1, got {albedo}", source=path)
     matrix = object_transform(
@@ -296,7 +314,7 @@ def _build_model(t: dict, where: str, path: Path):
     """A built-in parametric model (``model = "green_piece"``, optional ``params`` table)."""
     from rangesim.cad.models import MODELS, model_names
 
-    if t["model"] not in MODELS:
+    if not isinstance(t["model"], str) or t["model"] not in MODELS:
         raise RangesimError(
             f"{where}: unknown model {t['model']!r}; built-in models: {', '.join(model_names())}", source=path
         )
