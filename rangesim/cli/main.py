@@ -50,7 +50,7 @@ from rangesim.viz.intensity import save_intensity_image
 PROG = "rangesim"
 DEFAULT_SENSOR = "white_scanner"
 #: extensions ``save_scan`` writes and ``save_preview`` accepts, checked before any work
-SCAN_SUFFIXES = (".exr", ".npz", ".ply")
+SCAN_SUFFIXES = (".exr", ".npz", ".ply", ".pcd")  # .pcd: an organized PCD (rangesim.recorded)
 PREVIEW_SUFFIXES = (".png",)
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130

@@ -369,6 +369,8 @@ def write_pcd(
     if precision not in ("float32", "float64"):
         raise RangesimError(f"precision must be 'float32' or 'float64', not {precision!r}", path)
     h, w = scan.shape
+    if h == 0 or w == 0:  # PCD's WIDTH and HEIGHT are positive: no reader takes the file back
+        raise RangesimError(f"cannot write an empty {h}x{w} scan as PCD", path)
     n = h * w
     real = np.dtype(precision)
     valid = scan.valid[..., None]
