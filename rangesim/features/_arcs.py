@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.features._circles import _dedupe, _support, circle_hypotheses
-from rangesim.features._edge_points import edge_points
+from rangesim.features._edge_points import check_range, edge_points
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,7 @@ def arcs(
     .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
+    radii = check_range(radii, "radii")
     xy, _ = edge_points(edge_map, keep)
     found = []
     for c, r, votes, _ in circle_hypotheses(edge_map, radii, angle_tol_deg=angle_tol_deg,

@@ -16,7 +16,7 @@ from rangesim.features._arc_ellipses import coverage as ellipse_coverage
 from rangesim.features._circle_kernels import centres_and_radii, claim_pairs, refine
 from rangesim.features._circle_votes import cast_votes, n_cells, peaks, radius_bands, voters
 from rangesim.features._conic_kernels import grow_few
-from rangesim.features._edge_points import angular_coverage, edge_points, point_labels
+from rangesim.features._edge_points import angular_coverage, check_range, edge_points, point_labels
 
 DIRECTION_TOL_DEG = 15.0  # an inlier's edge normal is radial within this, degrees
 REL_CELL = 1 / 4  # accumulator cell over the band's smallest radius (radius_bands)
@@ -86,6 +86,7 @@ def circle_hypotheses(
     list of (center (2,), radius, votes, inlier indices into the edge points), best first
     (largest fraction of 2 pi r in inliers).
     """
+    radii = check_range(radii, "radii")
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, band_px,
@@ -250,6 +251,7 @@ def circles(
     .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
+    radii = check_range(radii, "radii")
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     labels = point_labels(edge_map, pixels)

@@ -9,6 +9,45 @@ import numba
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
+
+
+def edge_mask(edge_map: Any, keep: np.ndarray | None = None) -> np.ndarray:
+    """The (H, W) bool mask of an edge map (an EdgeMap or a bare mask), times ``keep``.
+
+    Raises :class:`RangesimError` for anything that is not a 2-D image, and for a ``keep``
+    of another shape.
+    """
+    mask = np.asarray(getattr(edge_map, "mask", edge_map))
+    if mask.ndim != 2 or mask.dtype == object:
+        raise RangesimError(f"must be an EdgeMap or an (H, W) bool mask, got {type(edge_map).__name__} of shape "
+                            f"{mask.shape}", "edge_map")
+    mask = mask.astype(bool, copy=False)
+    if keep is not None:
+        keep = np.asarray(keep)
+        if keep.shape != mask.shape:
+            raise RangesimError(f"has shape {keep.shape}, the edge map {mask.shape}", "keep")
+        mask = mask & keep.astype(bool, copy=False)
+    return mask
+
+
+def check_scan_shape(scan: Any, mask: np.ndarray) -> None:
+    """A scan passed with an edge map must be the one it was detected on (same H x W)."""
+    shape = tuple(np.shape(getattr(scan, "depth", None)))
+    if shape != mask.shape:
+        raise RangesimError(f"is {'x'.join(map(str, shape)) or 'no RangeScan'}, the edge map "
+                            f"{mask.shape[0]}x{mask.shape[1]}: pass the scan the edges were found on", "scan")
+
+
+def check_range(values: Any, name: str, what: str = "pixels") -> tuple[float, float]:
+    """``(min, max)`` of a range parameter (radii, axes) as two finite floats, 0 <= min <= max."""
+    try:
+        lo, hi = (float(v) for v in values)
+    except (TypeError, ValueError) as exc:
+        raise RangesimError(f"must be two numbers (min, max), {what}; got {values!r}", name) from exc
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+        raise RangesimError(f"must be two finite numbers 0 <= min <= max, {what}; got {values!r}", name)
+    return lo, hi
 
 
 def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
@@ -35,9 +74,7 @@ def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
     pixels : (N, 2) int64
         (column, row) of each point's pixel; only with ``return_pixels``.
     """
-    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
-    if keep is not None:
-        mask = mask & keep
+    mask = edge_mask(edge_map, keep)
     flat = np.flatnonzero(mask)
     rows, cols = np.divmod(flat, mask.shape[1])  # 5x faster than 2D np.nonzero
     direction = getattr(edge_map, "direction", None)

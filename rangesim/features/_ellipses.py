@@ -15,8 +15,9 @@ from rangesim.core.conics import (
     fit_conic,
     sampson_distance,
 )
+from rangesim.core.errors import RangesimError
 from rangesim.features._arc_ellipses import free_ellipses
-from rangesim.features._edge_points import edge_points, point_labels
+from rangesim.features._edge_points import check_range, check_scan_shape, edge_mask, edge_points, point_labels
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,9 @@ def predict_ellipses(scan: Any, circles3d: list, world: bool = True) -> list[tup
     """
     from rangesim.core.geometry import project_circle
 
+    if getattr(scan, "K", None) is None:
+        raise RangesimError("has no camera intrinsics (meta['K']): ellipses predicted from a model need a "
+                            "pinhole scan; without a scene, ellipses() finds them from the edges alone", "scan")
     inv = np.linalg.inv(np.asarray(scan.pose, float)) if world else np.eye(4)
     R, t = inv[:3, :3], inv[:3, 3]
     out = []
@@ -229,7 +233,10 @@ def ellipses(
     .. [2] A. Fitzgibbon, M. Pilu, R. B. Fisher, "Direct least square fitting of ellipses", IEEE
        TPAMI 21(5), 476-480 (1999), doi:10.1109/34.765658.
     """
-    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
+    mask = edge_mask(edge_map)
+    if scan is not None:
+        check_scan_shape(scan, mask)
+    axes_range = check_range(axes_range, "axes_range")
     H, W = mask.shape
     xy, theta, pixels = edge_points(edge_map, return_pixels=True)
     if not remove_explained and (scene is None or scan is None):

@@ -8,7 +8,8 @@ import numpy as np
 from scipy import ndimage
 from skimage.transform import hough_line
 
-from rangesim.features._edge_points import edge_points
+from rangesim.core.errors import RangesimError
+from rangesim.features._edge_points import check_scan_shape, edge_mask, edge_points
 from rangesim.features._line_kernels import suppress_near, window_maxima
 
 
@@ -106,15 +107,19 @@ def lines(
     .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
-    mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
-    if keep is not None:
-        mask = mask & keep
+    for name, value in (("min_length", min_length), ("max_gap", max_gap), ("band_px", band_px)):
+        if not (np.isfinite(value) and value >= 0):
+            raise RangesimError(f"must be a finite number >= 0, got {value!r}", name)
+    mask = edge_mask(edge_map, keep)
+    if scan is not None:
+        check_scan_shape(scan, mask)
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     if len(xy) < 2:
         return []
     angles = np.deg2rad(np.arange(-90, 90, 0.5))
     acc, ang, dist = hough_line(mask, angles)
-    pa, pd = _line_peaks(acc, ang, dist, 3, 3, threshold or min_length / 2, max_lines)
+    # a line has at least one vote: a threshold of 0 (min_length=0) would make every empty cell a peak
+    pa, pd = _line_peaks(acc, ang, dist, 3, 3, max(threshold or min_length / 2, 1), max_lines)
     used = np.zeros(len(xy), bool)
     cos_tol = np.cos(np.deg2rad(angle_tol_deg))
     out: list[tuple[np.ndarray, np.ndarray, int, float]] = []
@@ -167,7 +172,7 @@ def _line_peaks(acc: np.ndarray, angles: np.ndarray, dists: np.ndarray, min_dist
     the threshold (most of the run time on an edge map of a part).
     """
     di, ai = window_maxima(acc, float(threshold), int(min_distance), int(min_angle))
-    order = np.argsort(-acc[di, ai], kind="stable")
+    order = np.argsort(-acc[di, ai].astype(np.int64), kind="stable")  # hough_line's counts are unsigned
     di, ai = di[order], ai[order]
     k = suppress_near(di, ai, int(min_distance), int(min_angle), int(num_peaks))
     return angles[ai[k]], dists[di[k]]
