@@ -196,3 +196,17 @@ def test_cli_scene_of_the_wrong_type(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and len(err.splitlines()) == 1 and "scene.toml" in err and "rotate_deg" in err, err
     assert not out.parent.exists() or not any(out.parent.iterdir())
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["scan", "x.toml", "--seed", "1e3", "--out", "x.exr"], "scan: argument --seed: invalid int value: '1e3'"),
+    (["detect", "x.exr", "--method", "nope", "--out", "d"], "detect: argument --method: invalid choice: 'nope'"),
+    (["scan"], "scan: the following arguments are required: SCENE_OR_MESH, --out"),
+    (["nope"], "argument COMMAND: invalid choice: 'nope'"),
+])
+def test_usage_errors_are_one_line(args, words, capsys):
+    """argparse printed its usage block over several lines before the error."""
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("rangesim: error: ") and words in err, err
+    assert "(see rangesim" in err

@@ -30,7 +30,7 @@ import traceback
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -296,9 +296,19 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 # -- parser and entry point ---------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    """argparse with a usage error on one line (``rangesim: error: scan: argument --seed: invalid int
+    value: '1e3' (see rangesim scan --help)``), exit code 2, like every other user error."""
+
+    def error(self, message: str) -> NoReturn:
+        command = self.prog.removeprefix(PROG).strip()
+        _error(f"{command + ': ' if command else ''}{message} (see {self.prog} --help)")
+        self.exit(EXIT_USER)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with its three subcommands."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG,
         description="Laser-stripe range-scanner simulator on Mitsuba 3.",
         epilog="Set RANGESIM_DEBUG=1 to see tracebacks of internal errors.",
