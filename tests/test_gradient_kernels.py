@@ -7,11 +7,15 @@ import pytest
 
 from rangesim.edges._gradient import (
     _exact_at,
+    _hessian,
+    _hessian_direction,
     _pairs_arg,
     _plain_dense,
     _plain_strided,
     _second_differences_at,
+    _to_direction,
 )
+from rangesim.edges._trig import half_atan2
 
 
 def _random_depth(rng: np.random.Generator, shape: tuple[int, int], holes: float) -> np.ndarray:
@@ -48,3 +52,19 @@ def test_dense_plain_operators_match_the_strided_loop(shape):
     z = _random_depth(np.random.default_rng(1), shape, 0.1)
     for d, r in zip(_plain_dense(z), _plain_strided(z, 1)):
         assert np.array_equal(_bits(d), _bits(r))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fused_hessian_direction_matches_its_three_steps(seed):
+    rng = np.random.default_rng(seed)
+    r = (rng.normal(size=(4, 37, 41)) * rng.choice([1e-3, 1.0, 50.0])).astype(np.float32)
+    r[rng.random(r.shape) < 0.05] = np.nan
+    r[rng.random(r.shape) < 0.05] = 0.0
+    mag = np.abs(r[0])
+    mag[rng.random(mag.shape) < 0.1] = np.nan
+    direction, positive = _hessian_direction(*r, mag)
+    mean, rad, minor, two_dxy, dxx_dyy = _hessian(*r)
+    theta = half_atan2(two_dxy, dxx_dyy)
+    _to_direction(theta, minor, mag)
+    assert np.array_equal(_bits(direction), _bits(theta))
+    assert np.array_equal(positive, np.where(minor, mean - rad, mean + rad) > 0)
