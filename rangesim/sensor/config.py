@@ -89,6 +89,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "lr_check": True,  # left-right consistency (within 1 px)
         "speckle_window": 100,  # disparity regions under this many pixels are rejected (0: off)
         "speckle_range": 2.0,  # largest disparity step (px) between 4-neighbours of one region
+        # predicted disparity error (rangesim.sensor.matching_noise), px: sqrt(s0^2 + (a s)^2 + (c s^2)^2),
+        # s = window x the surface's disparity gradient; calibrated on tilted planes
+        "match_sigma_px": 0.08,  # s0: on a fronto-parallel plane
+        "slant_linear": 0.09,  # a
+        "slant_quadratic": 0.036,  # c, per px
     },
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
@@ -307,6 +312,8 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
         raise RangesimError(f"structured_light.lr_check must be true or false, got {sl['lr_check']!r}", source=source)
     _number(params, "structured_light", "speckle_window", source, nonneg=True, integer=True)
     _number(params, "structured_light", "speckle_range", source, nonneg=True)
+    for key in ("match_sigma_px", "slant_linear", "slant_quadratic"):
+        _number(params, "structured_light", key, source, nonneg=True)
 
 
 def _validate_render(params: dict[str, dict[str, Any]], source) -> None:

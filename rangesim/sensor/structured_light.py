@@ -27,7 +27,8 @@ on the IR camera's -x side), looking along +z: a rectified pair):
    disparity image smaller than ``speckle_window`` px, whose 4-neighbours differ by at most
    ``speckle_range`` px, are chance matches and rejected, as a device's pipeline does.
 
-So depth noise follows sigma_z = z^2 sigma_d / (f b), depth comes in steps of
+So depth noise follows sigma_z = z^2 sigma_d / (f b), with sigma_d growing with the surface's
+slant (:mod:`rangesim.sensor.matching_noise`: the scan's ``sigma``), depth comes in steps of
 f b / d - f b / (d + 1/8), projector shadows are h b / (D - h) wide behind an edge of height h
 in front of a surface at D, and depth edges fatten outwards by about half the window.
 
@@ -49,6 +50,7 @@ from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.block_matching import block_match
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.dot_pattern import DotPattern
+from rangesim.sensor.matching_noise import matching_sigma_mm
 from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
@@ -193,6 +195,12 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     status = status.reshape(h, w)
     status[matched] = Status.VALID
 
+    # the predicted std of each valid depth (mm), from the true surface's slant
+    with np.errstate(invalid="ignore"):
+        sigma = matching_sigma_mm(P, n, f, b, sl["window"], sl["match_sigma_px"], sl["slant_linear"],
+                                  sl["slant_quadratic"]).reshape(h, w)
+    sigma = np.where(status == Status.VALID, sigma, np.nan).astype(np.float32)
+
     part = np.asarray(hits.part, np.int32).reshape(h, w)
     face = np.asarray(hits.face, np.int32).reshape(h, w)
     meta = scan_meta(scene, sensor, seed, "structured_light", disparity_range_px=[d_min, d_max],
@@ -203,5 +211,5 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
         normal=n.reshape(h, w, 3).astype(np.float32),
         intensity=(electrons / sl["exposure_e"]).astype(np.float32),
         part=np.where(hit.reshape(h, w), part, -1), face=np.where(hit.reshape(h, w), face, -1), status=status,
-        pose=pose, meta=meta, xyz_true=P.reshape(h, w, 3).astype(np.float32),
+        pose=pose, meta=meta, xyz_true=P.reshape(h, w, 3).astype(np.float32), sigma=sigma,
     )
