@@ -210,3 +210,39 @@ def test_usage_errors_are_one_line(args, words, capsys):
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and err.startswith("rangesim: error: ") and words in err, err
     assert "(see rangesim" in err
+
+
+def test_detectors_refuse_what_is_not_a_scan_and_empty_or_odd_scans():
+    for bad in (None, np.zeros((3, 3))):
+        with pytest.raises(RangesimError, match="take a RangeScan"):
+            rs.edges.gradient(bad)
+    for detector in rs.edges.DETECTORS.values():
+        with pytest.raises(RangesimError, match=r"non-empty \(H, W\) image, got shape \(0, 40\)"):
+            detector(_scan(np.zeros((0, 40))))
+    scan = _scan(np.full((30, 40), 300.0))
+    scan.meta["K"] = "abc"
+    with pytest.raises(RangesimError, match=r"meta\['K'\] must be a 3 x 3"):
+        rs.edges.normal(scan)
+
+
+def test_line_fit_skips_valid_pixels_without_a_finite_point():
+    scan = rs.datasets.plate_scan({"noise.sigma_px": 0, "noise.speckle_contrast": 0})
+    reference = rs.edges.line_fit(scan).mask
+    r, c = np.argwhere(scan.valid & ~reference)[len(reference) // 2]
+    scan.xyz[r, c] = np.nan  # depth stays finite and valid stays True: the point is unusable
+    edges = rs.edges.line_fit(scan).mask
+    assert not edges[r, c] and (edges != reference).sum() < 40
+
+
+def test_detector_parameters_are_checked_before_any_work():
+    scan = _scan(np.full((30, 40), 300.0))
+    with pytest.raises(ValueError, match="k must be an integer of at least 2, got 0"):
+        rs.edges.line_fit(scan, k=0)
+    with pytest.raises(ValueError, match="curvature_threshold must be two numbers"):
+        rs.edges.pcl_organized(scan, curvature_threshold=(1,))
+    plate = rs.datasets.plate_scan()
+    one = rs.edges.pcl_organized(plate, edge_types="occluding")  # one type named alone
+    assert one.params["edge_types"] == ["occluding"]
+    assert one.mask.sum() == rs.edges.pcl_organized(plate, edge_types=("occluding",)).mask.sum() > 0
+    with pytest.raises(RangesimError, match="with_params takes a mapping"):
+        rs.load_sensor("kinect_v1").with_params(None)

@@ -17,7 +17,7 @@ from rangesim.edges._line_fit_sl import sl_creases
 from rangesim.edges._line_rings import ring_edges, ring_strides
 from rangesim.edges._matching_scale import matching_window
 from rangesim.edges._noise import NOISE_FLOOR, estimate_depth_noise, noise_in_footprints, stride_gain
-from rangesim.edges._scan_access import scan_depth, scan_points
+from rangesim.edges._scan_access import scan_arrays
 from rangesim.edges.edgemap import RIM, EdgeMap
 
 __all__ = ["line_fit", "line_fit_points"]
@@ -312,9 +312,10 @@ def line_fit(
     if not hasattr(points_or_scan, "xyz"):
         tol = 15.0 if angle_tol_deg is None else angle_tol_deg
         return line_fit_points(points_or_scan, k, tol, line_sep_deg, workers)
+    if int(k) != k or k < 2:
+        raise ValueError(f"k must be an integer of at least 2, got {k}")
     scan = points_or_scan
-    z, valid = scan_depth(scan)
-    xyz = scan_points(scan, valid)
+    xyz, z, valid = scan_arrays(scan)
     noise = None
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     tolerance: float | np.ndarray = 15.0 if angle_tol_deg is None else float(angle_tol_deg)

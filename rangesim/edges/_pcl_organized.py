@@ -260,6 +260,15 @@ def pcl_organized(
     """
     if scale not in (None, "3x3", "sensor"):
         raise ValueError(f"scale must be None, '3x3' or 'sensor', got {scale!r}")
+    if isinstance(edge_types, str):  # one type named alone
+        edge_types = (edge_types,)
+    if curvature_threshold is not None:
+        try:
+            low_high = [float(t) for t in curvature_threshold]
+        except (TypeError, ValueError):
+            low_high = []
+        if len(low_high) != 2 or not all(np.isfinite(low_high)) or not 0 <= low_high[0] <= low_high[1]:
+            raise ValueError(f"curvature_threshold must be two numbers 0 <= low <= high, got {curvature_threshold!r}")
     unknown = set(edge_types) - set(EDGE_TYPES)
     if unknown:
         raise ValueError(f"unknown edge types {sorted(unknown)}; choose from {EDGE_TYPES}")

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
+
 __all__ = [
     "PixelGeometry", "scan_arrays", "scan_depth", "scan_points", "focal_length_px",
     "pixel_geometry", "footprint",
@@ -41,12 +43,23 @@ def scan_arrays(scan: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         ``scan.valid`` and a finite depth.
     """
     z, valid = scan_depth(scan)
-    return scan_points(scan, valid), z, valid
+    xyz = scan_points(scan, valid)
+    # a valid pixel with a finite depth but no finite point (an edited or odd file) has no point
+    unusable = valid & ~np.isfinite(xyz).all(axis=-1)
+    if unusable.any():
+        valid &= ~unusable
+        z[unusable] = np.nan
+        xyz[unusable] = np.nan
+    return xyz, z, valid
 
 
 def scan_depth(scan: Any) -> tuple[np.ndarray, np.ndarray]:
     """Depth (H, W) float32 with NaN at unusable pixels, and validity; see :func:`scan_arrays`."""
+    if not (hasattr(scan, "depth") and hasattr(scan, "valid")):
+        raise RangesimError(f"the edge detectors take a RangeScan (depth, valid, xyz, meta), got {type(scan).__name__}")
     z = np.array(scan.depth, dtype=np.float32)          # a copy: NaN goes in below
+    if z.ndim != 2 or 0 in z.shape:
+        raise RangesimError(f"the scan's depth must be a non-empty (H, W) image, got shape {z.shape}")
     valid = np.asarray(scan.valid, dtype=bool) & np.isfinite(z)
     np.copyto(z, np.nan, where=~valid)                  # (np.where is ~5x slower)
     return z, valid
@@ -73,7 +86,10 @@ def focal_length_px(scan: Any) -> float | None:
     K = meta.get("K")
     if K is None:
         return None
-    K = np.asarray(K, dtype=np.float64)
+    try:
+        K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    except (TypeError, ValueError):
+        raise RangesimError(f"the scan's meta['K'] must be a 3 x 3 intrinsic matrix, got {K!r:.60}") from None
     f = float(np.sqrt(abs(K[0, 0] * K[1, 1])))
     return f if np.isfinite(f) and f > 0 else None
 

@@ -167,6 +167,9 @@ class Sensor:
 
     def with_params(self, changes: Mapping[str, Any]) -> "Sensor":
         """A copy with dotted keys replaced, e.g. ``{"noise.sigma_px": 0, "laser.baseline": 90}``."""
+        if not isinstance(changes, Mapping):
+            raise RangesimError(f"with_params takes a mapping of dotted keys to values, got {type(changes).__name__}",
+                                source=self.source)
         data = self.to_dict()
         for dotted, value in changes.items():
             table, _, key = dotted.partition(".")
