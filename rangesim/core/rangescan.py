@@ -67,8 +67,9 @@ class RangeScan:
         recorded data.
     sigma : (H, W) float32 or None
         The noise model's predicted std of ``depth`` at every valid pixel (mm; NaN where
-        invalid): what a detector threshold can use. Simulated laser-stripe scans carry it
-        (see :mod:`rangesim.sensor.stripe_noise`); None where no model predicts it.
+        invalid): what a detector threshold can use. Simulated scans carry it (laser stripes:
+        :mod:`rangesim.sensor.stripe_noise`; block matching: :mod:`rangesim.sensor.matching_noise`);
+        None where no model predicts it (recorded data).
     """
 
     depth: np.ndarray

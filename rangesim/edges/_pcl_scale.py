@@ -34,9 +34,9 @@ along the edge leaves ``sqrt 6 / 4`` of it. In raw Sobel units (times 4) that is
 ``3 sigma / h`` (:func:`predicted_noise_law`). Faces seen obliquely have quieter normals (the
 law is their upper bound). Scans that carry the noise model's prediction
 (``RangeScan.sigma``, laser stripes) get this law per pixel, with the least sigma over 5 x 5
-(:func:`~rangesim.edges._noise.predicted_noise`); scans without it, block-matched ones
-(whose errors are correlated over the window, so no independent-error law holds), get the
-noise measured on the strength itself: its magnitude over the four tangential components
+(:func:`~rangesim.edges._noise.predicted_noise`); scans without it, and block-matched ones
+(which carry it too, but whose errors are correlated over the window, so no
+independent-error law holds), get the noise measured on the strength itself: its magnitude over the four tangential components
 is chi-distributed with 4 degrees of freedom, of median :data:`CHI4_MEDIAN` sigmas.
 """
 from __future__ import annotations
@@ -177,8 +177,8 @@ def strength_noise(scan: Any, magnitude: np.ndarray, valid: np.ndarray, footprin
     """The strength's noise sigma (raw Sobel units): per pixel from the noise model, or measured.
 
     ``scan.sigma`` (the noise model's prediction, least over 5 x 5) gives
-    :func:`predicted_noise_law` per pixel (0 where nothing is predicted); a scan without it
-    the median of ``magnitude`` over valid pixels (every 4th row and column) over
+    :func:`predicted_noise_law` per pixel (0 where nothing is predicted); a scan without it,
+    or a block-matched one (``window``), the median of ``magnitude`` over valid pixels (every 4th row and column) over
     :data:`CHI4_MEDIAN`.
 
     Returns
