@@ -1126,8 +1126,12 @@ def gradient(
     thin, beside = nonmax_suppress(ridge, direction, candidates, return_sides=True)
     gx = central_difference(zs, 0, disc.pairs)
     gy = central_difference(zs, 2, disc.pairs)
-    t = gx * np.cos(theta)
-    t += gy * np.sin(theta)
+    # t = gx cos + gy sin in gx's and gy's own memory (fresh images cost more than their
+    # arithmetic; NumPy's cos and sin give the same bits whichever buffer they fill)
+    trig = np.cos(theta)
+    t = np.multiply(gx, trig, out=gx)
+    t += np.multiply(gy, np.sin(theta, out=trig), out=gy)
+    del trig
     t *= inv_fp
     np.copyto(t, 0, where=np.isnan(t))
     # half the response summed over the ridge: the side's share only at NMS survivors
@@ -1160,7 +1164,8 @@ def gradient(
     labels[jump] = EdgeLabel.JUMP
     # a crease between pixel centres: the kept pixel moved along the crease's normal to the
     # vertex of the ridge it was thinned on (its own direction, before jumps overwrite it)
-    offset = disc.offsets_at(jump | rim)
+    jump_or_rim = jump | rim
+    offset = disc.offsets_at(jump_or_rim)
     if nms:
         # unsmoothed, a roof's response is a 2-sample triangle (a parabola goes half the way)
         peak = "parabola" if sigma > 0 or stride > 1 else "triangle"
@@ -1168,7 +1173,10 @@ def gradient(
         # step's own slope there, not the roof's, whatever jump_clearance kept)
         placed = crease & ~jump & ~rim
         placed &= ~near_mask(placed, jump | disc.occluded | rim, JUMP_CLEARANCE)
-        offset += ridge_offsets(ridge, direction, placed, peak=peak)
+        # added in place at the placed pixels (0 elsewhere); at the jump and rim pixels the
+        # sum with those zeros that it replaces (x + 0: -0 becomes +0)
+        ridge_offsets(ridge, direction, placed, peak=peak, out=offset)
+        offset.reshape(-1, 2)[np.flatnonzero(jump_or_rim)] += np.float32(0)
     np.copyto(direction, disc.direction, where=np.isfinite(disc.direction))
     params = {
         "threshold": float(threshold), "jump_threshold": float(jump_threshold), "nms": bool(nms),

@@ -125,7 +125,7 @@ def nonmax_suppress(
 
 
 def ridge_offsets(strength: np.ndarray, direction: np.ndarray, where: np.ndarray,
-                  limit: float = 0.5, peak: str = "parabola") -> np.ndarray:
+                  limit: float = 0.5, peak: str = "parabola", out: np.ndarray | None = None) -> np.ndarray:
     """Sub-pixel position of a ridge across its line: a parabola through three samples.
 
     At each pixel of ``where`` the strength is sampled as :func:`nonmax_suppress` samples
@@ -159,10 +159,15 @@ def ridge_offsets(strength: np.ndarray, direction: np.ndarray, where: np.ndarray
         (dx, dy), pixels, from each pixel of ``where`` to the vertex; 0 elsewhere, and
         where a side sample is undefined (NaN, outside the image) or the three samples
         are not a maximum.
+    out : (H, W, 2) float32, optional
+        Offsets to add these to in place (float32 sums, as ``out += ridge_offsets(...)``
+        at the placed pixels), saving a fresh image; returned.
     """
     if peak not in ("parabola", "triangle"):
         raise ValueError(f"peak must be 'parabola' or 'triangle', got {peak!r}")
-    out = np.zeros(strength.shape + (2,), np.float32)
+    add = out is not None
+    if out is None:
+        out = np.zeros(strength.shape + (2,), np.float32)
     ii, jj = nonzero2(where & ~np.isnan(strength))
     if ii.size == 0:
         return out
@@ -179,8 +184,13 @@ def ridge_offsets(strength: np.ndarray, direction: np.ndarray, where: np.ndarray
         t = np.where(curv < 0, np.clip(t, -limit, limit), 0.0)
     t = np.nan_to_num(t, nan=0.0)
     # theta is in [0, pi): (cos, sin) with dx's sign is the plus side's unit vector
-    out[ii, jj, 0] = t * np.cos(theta)
-    out[ii, jj, 1] = t * np.sin(theta)
+    dx, dy = (t * np.cos(theta)).astype(np.float32), (t * np.sin(theta)).astype(np.float32)
+    if add:
+        out[ii, jj, 0] += dx
+        out[ii, jj, 1] += dy
+    else:
+        out[ii, jj, 0] = dx
+        out[ii, jj, 1] = dy
     return out
 
 
