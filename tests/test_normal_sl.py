@@ -113,3 +113,25 @@ def test_a_crease_beside_a_gap_is_found_with_the_normal_at_the_pixel_standing_in
 def test_window_and_block_planes_are_refused_together():
     with pytest.raises(ValueError, match="window and blocks=True"):
         rs.edges.normal(block_matched(synthetic_roof(40.0, 0.0, True, size=41)), window=5, blocks=True)
+
+
+def test_thresholds_rise_where_the_noise_model_predicts_a_noisier_face():
+    """Half a block-matched plane 8x noisier than the other: the measured noise is the scan's
+    typical level, so the noisy half fills with false creases unless the scan's predicted
+    ``sigma`` raises the thresholds there (its sigma / z over the median, never below 1)."""
+    import dataclasses
+
+    from tests.test_structured_light_edges import FB
+
+    plane = synthetic_roof(0.0, 0.0, True, size=121)
+    quiet, noisy = block_matched(plane, noise_px=0.05, seed=1), block_matched(plane, noise_px=0.4, seed=2)
+    half = np.zeros(quiet.shape, bool)
+    half[:, 60:] = True
+    depth = np.where(half, noisy.depth, quiet.depth)
+    spliced = dataclasses.replace(quiet, depth=depth, xyz=np.where(half[..., None], noisy.xyz, quiet.xyz))
+    sigma = (depth.astype(np.float64) ** 2 * np.where(half, 0.4, 0.05) / FB).astype(np.float32)
+    inner_noisy, inner_quiet = (slice(12, -12), slice(70, -12)), (slice(12, -12), slice(12, 50))
+    without = rs.edges.normal(spliced).mask
+    with_sigma = rs.edges.normal(dataclasses.replace(spliced, sigma=sigma)).mask
+    assert without[inner_noisy].sum() > 100
+    assert not with_sigma[inner_noisy].any() and not with_sigma[inner_quiet].any()
