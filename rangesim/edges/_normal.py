@@ -9,7 +9,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
-from rangesim.edges._matching_scale import matching_window
+from rangesim.edges._matching_scale import matching_window, relative_noise
 from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_NORMAL,
@@ -289,7 +289,7 @@ def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_thresho
 def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search) -> EdgeMap:
     """:func:`normal` on a block-matched scan: chord normals one matching window apart
     (:func:`~rangesim.edges._normal_sl.sl_creases`)."""
-    res = sl_creases(xyz, valid, disc.pairs, matcher, threshold_deg, nms, relative_noise=_relative_noise(disc.noise, z, valid))
+    res = sl_creases(xyz, valid, disc.pairs, matcher, threshold_deg, nms, relative_noise=relative_noise(disc.noise, z, valid))
     crease = res["crease"]
     jump = disc.occluding
     rim = disc.rim
@@ -314,17 +314,3 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
     return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=res["strength"],
                    method="normal", params=params, offset=offset)
 
-
-def _relative_noise(sigma: np.ndarray | None, z: np.ndarray, valid: np.ndarray) -> np.ndarray | None:
-    """The predicted angular noise of each pixel over its median (sigma over the footprint, which is
-    z / f): where the noise model predicts a noisier face (a steeper slant), a bend must be larger."""
-    if sigma is None:
-        return None
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = sigma / z
-    ok = valid & np.isfinite(ratio) & (ratio > 0)
-    if not ok.any():
-        return None
-    out = ratio / np.float32(np.median(ratio[ok]))
-    out[~ok] = 1.0
-    return np.maximum(out, np.float32(1.0)).astype(np.float32)
