@@ -227,7 +227,7 @@ def relative_noise(sigma: np.ndarray | None, z: np.ndarray, valid: np.ndarray) -
     Examples
     --------
     >>> z = np.full((2, 3), 500.0); s = np.array([[1.0, 1.0, 1.0], [1.0, 3.0, 0.5]])
-    >>> relative_noise(s, z, np.ones((2, 3), bool)).tolist()
+    >>> np.round(relative_noise(s, z, np.ones((2, 3), bool)), 6).tolist()
     [[1.0, 1.0, 1.0], [1.0, 3.0, 1.0]]
     """
     if sigma is None:
