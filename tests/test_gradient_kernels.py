@@ -14,6 +14,7 @@ from rangesim.edges._gradient import (
     _plain_strided,
     _second_differences_at,
     _to_direction,
+    second_differences,
 )
 from rangesim.edges._trig import half_atan2
 
@@ -68,3 +69,41 @@ def test_fused_hessian_direction_matches_its_three_steps(seed):
     _to_direction(theta, minor, mag)
     assert np.array_equal(_bits(direction), _bits(theta))
     assert np.array_equal(positive, np.where(minor, mean - rad, mean + rad) > 0)
+
+
+def _second_differences_reference(z, pairs, skip):
+    """second_differences as its array form had it: plain everywhere, the exact rule where the
+    plain one is NaN or a pair lies in the 3 x 3 window, on valid pixels not skipped."""
+    out = list(_plain_strided(z, 1))
+    redo = np.isnan(out[0])
+    if pairs is not None:
+        any_pair = pairs.any(axis=0)
+        pad = np.pad(any_pair, 1)
+        for dr in range(3):
+            for dc in range(3):
+                redo |= pad[dr:dr + z.shape[0], dc:dc + z.shape[1]]
+    redo &= ~np.isnan(z)
+    if skip is not None:
+        redo &= ~skip
+    idx = np.flatnonzero(redo)
+    p = np.pad(z, 1, constant_values=np.nan)
+    for r, exact in zip(out, _second_differences_at(p, pairs, idx, z.shape[1])):
+        r.ravel()[idx] = exact
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_second_differences_redo_pass_matches_its_array_form(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(10):
+        h, w = (int(v) for v in rng.integers(1, 80, 2))
+        z = _random_depth(rng, (h, w), float(rng.choice([0.0, 0.02, 0.3])))
+        pairs = rng.random((4, h, w)) < rng.choice([0.0, 0.01, 0.2])
+        skip = rng.random((h, w)) < 0.3
+        for pp in (pairs, None):
+            for sk in (skip, None):
+                got = second_differences(z, pp, sk)
+                ref = _second_differences_reference(z, pp, sk)
+                keep = ~sk if sk is not None else np.ones((h, w), bool)   # skipped: undefined
+                for g, r in zip(got, ref):
+                    assert np.array_equal(_bits(g)[keep], _bits(r)[keep])
