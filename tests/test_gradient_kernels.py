@@ -13,9 +13,13 @@ from rangesim.edges._gradient import (
     _plain_dense,
     _plain_strided,
     _second_differences_at,
+    _smooth5_at,
+    _taps5,
     _to_direction,
+    _validity5_at,
     second_differences,
 )
+from rangesim.edges._noise import local_noise_scale, raised_noise_threshold, raised_threshold
 from rangesim.edges._trig import half_atan2
 
 
@@ -107,3 +111,29 @@ def test_second_differences_redo_pass_matches_its_array_form(seed):
                 keep = ~sk if sk is not None else np.ones((h, w), bool)   # skipped: undefined
                 for g, r in zip(got, ref):
                     assert np.array_equal(_bits(g)[keep], _bits(r)[keep])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_raised_noise_threshold_matches_scale_then_raise(seed):
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(10, 90, 2))
+    sigma = (rng.random((h, w)) * rng.choice([0.01, 1.0])).astype(np.float32)
+    sigma[rng.random((h, w)) < 0.1] = np.nan
+    sigma[rng.random((h, w)) < 0.05] = 0.0
+    footprint = (0.2 + rng.random((h, w))).astype(np.float32)
+    valid = rng.random((h, w)) < 0.9
+    for cap in (89.0, None, 1.0):
+        ref = raised_threshold(20.0, local_noise_scale(None, valid, footprint, sigma), cap)
+        got = raised_noise_threshold(None, valid, footprint, 20.0, cap, sigma)
+        assert np.array_equal(_bits(np.broadcast_to(got, (h, w))), _bits(np.broadcast_to(ref, (h, w))))
+    # too few usable pixels: the scalar threshold, as the scale's None
+    assert raised_noise_threshold(None, np.zeros((h, w), bool), footprint, 20.0, 89.0, sigma) == 20.0
+
+
+@pytest.mark.parametrize("sigma", [1.0, 0.8, 1.2])
+def test_validity_smoothing_kernel_matches_smooth5_at(sigma):
+    rng = np.random.default_rng(3)
+    bad = rng.random((23, 31)) < 0.3
+    idx = np.flatnonzero(rng.random(bad.shape) < 0.5)
+    ref = _smooth5_at((~bad).astype(np.float32), sigma, idx)
+    assert np.array_equal(_bits(_validity5_at(bad, idx, *_taps5(sigma))), _bits(ref))

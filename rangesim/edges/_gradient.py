@@ -17,9 +17,8 @@ from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_GRADIENT,
     estimate_depth_noise,
-    local_noise_scale,
     noise_threshold,
-    raised_threshold,
+    raised_noise_threshold,
 )
 from rangesim.edges._scan_access import scan_depth
 from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, ridge_offsets, thin_staircases
@@ -106,15 +105,46 @@ def _smooth5_rows_cols(a, w0, w1, w2):  # pragma: no cover - compiled
 
 def _near(mask: np.ndarray, r: int, border: bool = True) -> np.ndarray:
     """Pixels within chessboard distance ``r`` of a ``mask`` pixel (or of the image border)."""
+    if r <= 0:
+        return np.array(mask, bool)
+    return _dilate(np.ascontiguousarray(mask, np.bool_), int(r), bool(border))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _dilate(mask, r, border):  # pragma: no cover - compiled
+    """:func:`_near`: OR over the (2r + 1)^2 window, separable (rows, then columns; shifted
+    ORs on aligned slices, loops that vectorise; a third of the padded array form's time)."""
     h, w = mask.shape
-    p = np.full((h + 2 * r, w + 2 * r), border)
-    p[r:-r, r:-r] = mask
-    rows = p[:, :w].copy()
-    for k in range(1, 2 * r + 1):
-        rows |= p[:, k:k + w]
-    out = rows[:h].copy()
-    for k in range(1, 2 * r + 1):
-        out |= rows[k:k + h]
+    rows = np.empty((h, w), np.bool_)
+    for i in range(h):
+        m, rr = mask[i], rows[i]
+        for j in range(w):
+            rr[j] = m[j]
+        for k in range(1, min(r, w - 1) + 1):
+            dst, src = rr[k:w], m[0:w - k]
+            for j in range(w - k):
+                dst[j] |= src[j]
+            dst, src = rr[0:w - k], m[k:w]
+            for j in range(w - k):
+                dst[j] |= src[j]
+        if border:
+            for j in range(min(r, w)):
+                rr[j] = True
+                rr[w - 1 - j] = True
+    out = np.empty((h, w), np.bool_)
+    for i in range(h):
+        o = out[i]
+        if border and (i < r or i >= h - r):
+            o[:] = True
+            continue
+        src = rows[i]
+        for j in range(w):
+            o[j] = src[j]
+        for k in range(max(0, i - r), min(h, i + r + 1)):
+            if k != i:
+                src = rows[k]
+                for j in range(w):
+                    o[j] |= src[j]
     return out
 
 
@@ -151,6 +181,35 @@ def _smooth5_at(a: np.ndarray, sigma: float, idx: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _validity5_at(bad, idx, w0, w1, w2):  # pragma: no cover - compiled
+    """``_smooth5_at((~bad).astype(np.float32), sigma, idx)`` to the bit (its operations in
+    its order, on the validity read from ``bad``; zeros outside the image), compiled: no
+    full-size validity image, no gathers."""
+    h, w = bad.shape
+    zero, one = np.float32(0), np.float32(1)
+    out = np.empty(idx.size, np.float32)
+    rows = np.empty(5, np.float32)
+    v = np.empty(5, np.float32)
+    for n in range(idx.size):
+        i, j = idx[n] // w, idx[n] % w
+        for k in range(5):
+            ii = i + k - 2
+            for m in range(5):
+                jj = j + m - 2
+                inside = ii >= 0 and ii < h and jj >= 0 and jj < w
+                v[m] = one if inside and not bad[ii, jj] else zero
+            r = (v[0] + v[4]) * w2
+            r += (v[1] + v[3]) * w1
+            r += w0 * v[2]
+            rows[k] = r
+        o = (rows[0] + rows[4]) * w2
+        o += (rows[1] + rows[3]) * w1
+        o += w0 * rows[2]
+        out[n] = o
+    return out
+
+
 def _nan_gaussian(z: np.ndarray, sigma: float) -> np.ndarray:
     """Gaussian smoothing by normalised convolution; NaN stays NaN and never leaks.
 
@@ -170,7 +229,7 @@ def _nan_gaussian(z: np.ndarray, sigma: float) -> np.ndarray:
         # (the same value as smoothing the validity mask, for a fraction of the cost)
         interior = _smooth5(np.ones((5, 5), np.float32), sigma)[2, 2]
         idx = np.flatnonzero(_near(bad, 2) & ~bad)
-        den = _smooth5_at((~bad).astype(np.float32), sigma, idx)
+        den = _validity5_at(bad, idx, *_taps5(sigma))
         with np.errstate(invalid="ignore", divide="ignore"):
             edge = num.ravel()[idx] / den
         num /= interior
@@ -1168,7 +1227,7 @@ def gradient(
     # per pixel: raised where the noise model predicts more noise than at the median pixel
     pixel_threshold: float | np.ndarray = threshold
     if auto_threshold and noisy:
-        pixel_threshold = raised_threshold(threshold, local_noise_scale(scan, valid, fp, disc.noise), 89.0)
+        pixel_threshold = raised_noise_threshold(scan, valid, fp, threshold, 89.0, disc.noise)
 
     # bend angle: the slopes on either side are t -+ d / 2 around the mean slope t across
     # the edge (central first difference, which straddles a crease at the centre); d is

@@ -126,18 +126,26 @@ def _gap_smooth5(zs, z, bad, redo, w0, w1, w2):  # pragma: no cover - compiled
     vals = np.empty(5, np.float32)
     oks = np.empty(5, np.float32)
     for i in range(h):
+        # rows without a pixel to redo skipped by a vectorised count (a branch per pixel of
+        # the image cost more than the pixels redone)
+        rr = redo[i]
+        n = 0
         for j in range(w):
-            if not redo[i, j]:
+            n += rr[j]
+        if n == 0:
+            continue
+        for j in range(w):
+            if not rr[j]:
                 continue
             for k in range(5):
                 ii = i + k - 2
                 for m in range(5):
                     vals[m] = zero
                     oks[m] = zero
-                if 0 <= ii < h:
+                if ii >= 0 and ii < h:          # (no chained comparisons: Numba is slow on them)
                     for m in range(5):
                         jj = j + m - 2
-                        if 0 <= jj < w and not bad[ii, jj]:
+                        if jj >= 0 and jj < w and not bad[ii, jj]:
                             vals[m] = z[ii, jj]
                             oks[m] = one
                 rn = (vals[0] + vals[4]) * w2

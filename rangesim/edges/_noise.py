@@ -240,33 +240,50 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
 def _window_min(a: np.ndarray, r: int) -> np.ndarray:  # pragma: no cover - compiled
     """Minimum over the (2r + 1)^2 window of each pixel, clipped to the image, non-finite
     values ignored (as ``scipy.ndimage.minimum_filter(a, 2r + 1, mode="nearest")`` with NaN
-    and +-inf read as +inf, to the bit, in a tenth of its time: separable, compiled)."""
+    and +-inf read as +inf, to the bit, in a tenth of its time: separable, compiled).
+
+    The row minima are kept for the 2r + 1 rows around the output row only (a ring), so
+    the output is the one full-size image made: on a shared VM a fresh image costs about
+    what this whole pass does."""
     h, w = a.shape
-    rows = np.empty((h, w), np.float32)
+    n = 2 * r + 1
+    ring = np.empty((n, w), np.float32)       # row minima of row k at k % n
     src = np.empty(w, np.float32)
-    inf = np.float32(np.inf)
+    out = np.empty((h, w), np.float32)
+    for k in range(min(r, h)):
+        _row_min(a[k], r, src, ring[k % n])
     for i in range(h):
-        ar, rr = a[i], rows[i]
-        for j in range(w):
-            src[j] = ar[j] if np.isfinite(ar[j]) else inf  # NaN and +-inf: no information
-            rr[j] = src[j]
-        for k in range(1, r + 1):  # shifted minima: simple loops the compiler vectorises
-            for j in range(k, w):
-                v = src[j - k]
-                rr[j] = v if v < rr[j] else rr[j]
-            for j in range(w - k):
-                v = src[j + k]
-                rr[j] = v if v < rr[j] else rr[j]
-    out = rows.copy()
-    for i in range(h):
+        if i + r < h:
+            _row_min(a[i + r], r, src, ring[(i + r) % n])
         o = out[i]
+        o[:] = ring[i % n]
         for k in range(max(0, i - r), min(h, i + r + 1)):
             if k == i:
                 continue
-            rk = rows[k]
+            rk = ring[k % n]
             for j in range(w):
                 o[j] = rk[j] if rk[j] < o[j] else o[j]
     return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _row_min(ar, r, src, rr):  # pragma: no cover - compiled
+    """``rr`` = the minimum of ``ar`` (non-finite read as +inf) over ``j - r..j + r`` (clipped),
+    in :func:`_window_min`'s order: the pixel, then the pairs of shifts 1..r."""
+    w = ar.shape[0]
+    inf = np.float32(np.inf)
+    for j in range(w):
+        src[j] = ar[j] if np.isfinite(ar[j]) else inf  # NaN and +-inf: no information
+        rr[j] = src[j]
+    for k in range(1, r + 1):  # shifted minima on aligned slices: simple loops that vectorise
+        lo, dst = src[0:max(w - k, 0)], rr[k:w]
+        for j in range(w - k):
+            v = lo[j]
+            dst[j] = v if v < dst[j] else dst[j]
+        hi, dst2 = src[k:w], rr[0:max(w - k, 0)]
+        for j in range(w - k):
+            v = hi[j]
+            dst2[j] = v if v < dst2[j] else dst2[j]
 
 
 def local_noise_scale(scan: Any, valid: np.ndarray, footprint: np.ndarray,
@@ -310,6 +327,71 @@ def _over_median(s, ok, median):  # pragma: no cover - compiled
         for j in range(w):
             v = s[i, j]
             out[i, j] = v / median if ok[i, j] and v > median else one
+    return out
+
+
+def raised_noise_threshold(scan: Any, valid: np.ndarray, footprint: np.ndarray, threshold: float,
+                           cap: float | None = None, sigma: np.ndarray | None = None) -> float | np.ndarray:
+    """``raised_threshold(threshold, local_noise_scale(scan, valid, footprint, sigma), cap)``,
+    to the bit, in two compiled passes without the four intermediate images (the scaled
+    noise, its mask, the scale and the raised threshold before the cap).
+
+    The first pass counts the usable pixels and gathers the scaled noise on the median's
+    grid (every 4th row and column), the second makes the thresholds. Falls back to the
+    two functions where that grid holds no usable pixel.
+    """
+    if sigma is None:
+        sigma = predicted_noise(scan)
+    if sigma is None:
+        return threshold
+    sg = np.ascontiguousarray(sigma, np.float32)
+    fp = np.ascontiguousarray(np.broadcast_to(np.asarray(footprint, np.float32), sg.shape))
+    ok = np.ascontiguousarray(np.broadcast_to(valid, sg.shape))
+    n, sample = _usable_on_grid(sg, fp, ok, 4)
+    if n < 100:
+        return threshold
+    if sample.size == 0:
+        return raised_threshold(threshold, local_noise_scale(scan, valid, footprint, sigma), cap)
+    median = np.float32(np.median(sample))
+    return _raised_by_noise(sg, fp, ok, median, np.float32(threshold), np.float32(np.inf if cap is None else cap))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _usable_on_grid(sigma, footprint, valid, step):  # pragma: no cover - compiled
+    """How many pixels :func:`_per_footprint` calls usable, and ``sigma / footprint`` at the
+    usable ones of every ``step``-th row and column (row-major, as ``s[::4, ::4][ok[::4, ::4]]``)."""
+    h, w = sigma.shape
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            v = sigma[i, j] / footprint[i, j]
+            n += valid[i, j] and np.isfinite(v) and v > 0
+    sample = np.empty(((h + step - 1) // step) * ((w + step - 1) // step), np.float32)
+    m = 0
+    for i in range(0, h, step):
+        for j in range(0, w, step):
+            v = sigma[i, j] / footprint[i, j]
+            if valid[i, j] and np.isfinite(v) and v > 0:
+                sample[m] = v
+                m += 1
+    return n, sample[:m]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _raised_by_noise(sigma, footprint, valid, median, threshold, cap):  # pragma: no cover - compiled
+    """``min(threshold * max(1, s / median), cap)`` with ``s = sigma / footprint`` where usable,
+    else ``min(threshold, cap)`` (float32: :func:`_per_footprint`, :func:`_over_median` and
+    :func:`raised_threshold`'s operations)."""
+    h, w = sigma.shape
+    out = np.empty((h, w), np.float32)
+    one = np.float32(1)
+    for i in range(h):
+        for j in range(w):
+            v = sigma[i, j] / footprint[i, j]
+            good = valid[i, j] and np.isfinite(v) and v > 0
+            scale = v / median if good and v > median else one
+            r = threshold * scale
+            out[i, j] = r if r < cap else cap
     return out
 
 
