@@ -1216,6 +1216,9 @@ def gradient(
     # scalar C-library calls on CPUs without AVX-512; the same but for last bits) and the
     # sign of its eigenvalue, in one pass (_hessian, half_atan2 and _to_direction fused)
     theta, dominant_positive = _hessian_direction(*resp, mag)
+    # (the responses' 16 MB freed here, for the images below to reuse: fresh pages cost
+    # about as much as the arithmetic on them)
+    del resp
     direction = theta
 
     if auto_threshold and noisy:
@@ -1248,12 +1251,13 @@ def gradient(
     thin, beside = nonmax_suppress(ridge, direction, candidates, return_sides=True)
     gx = central_difference(zs, 0, disc.pairs)
     gy = central_difference(zs, 2, disc.pairs)
+    del zs
     # t = gx cos + gy sin in gx's and gy's own memory (fresh images cost more than their
     # arithmetic; NumPy's cos and sin give the same bits whichever buffer they fill)
     trig = np.cos(theta)
     t = np.multiply(gx, trig, out=gx)
     t += np.multiply(gy, np.sin(theta, out=trig), out=gy)
-    del trig
+    del trig, gy
     t *= inv_fp
     np.copyto(t, 0, where=np.isnan(t))
     # half the response summed over the ridge: the side's share only at NMS survivors
@@ -1262,6 +1266,7 @@ def gradient(
     if stride == 1:
         ti = np.flatnonzero(thin)
         half.ravel()[ti] = (mag.ravel()[ti] + np.fmax(beside.ravel()[ti], 0)) / 2
+    del beside
     # (a strided response is not split between two pixels: a crease between centres gives
     # both (s - 1/2) / s of it, and the neighbour's share would count it twice)
     bend = bend_degrees(t, half)
