@@ -20,6 +20,7 @@ from rangesim.edges._gradient import (
     second_differences,
 )
 from rangesim.edges._noise import local_noise_scale, raised_noise_threshold, raised_threshold
+from rangesim.edges._pair_kernels import search_gaps
 from rangesim.edges._trig import half_atan2
 
 
@@ -137,3 +138,48 @@ def test_validity_smoothing_kernel_matches_smooth5_at(sigma):
     idx = np.flatnonzero(rng.random(bad.shape) < 0.5)
     ref = _smooth5_at((~bad).astype(np.float32), sigma, idx)
     assert np.array_equal(_bits(_validity5_at(bad, idx, *_taps5(sigma))), _bits(ref))
+
+
+def _search_reference(z, thr, shade, si, sj, sx, sy, max_search):
+    """The array form of search_gaps: every active pixel one step further per round."""
+    h, w = z.shape
+    found_z, found_t = np.full(si.size, np.nan), np.full(si.size, np.nan)
+    found_s, unlit_s = np.zeros(si.size), np.zeros(si.size, np.intp)
+    active = np.arange(si.size)
+    for s in range(1, max_search + 1):
+        ri = si[active] + np.rint(sy[active] * s).astype(np.intp)
+        rj = sj[active] + np.rint(sx[active] * s).astype(np.intp)
+        inside = (ri >= 0) & (ri < h) & (rj >= 0) & (rj < w)
+        active, ri, rj = active[inside], ri[inside], rj[inside]
+        zq = z[ri, rj]
+        hit = np.isfinite(zq)
+        found_z[active[hit]] = zq[hit]
+        found_t[active[hit]] = thr[ri[hit], rj[hit]]
+        found_s[active[hit]] = s
+        if shade is not None:
+            first = ~hit & shade[ri, rj] & (unlit_s[active] == 0)
+            unlit_s[active[first]] = s
+        active = active[~hit]
+    return found_z, found_t, found_s, unlit_s
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_gap_search_kernel_matches_its_array_form(seed):
+    rng = np.random.default_rng(seed)
+    h, w = 40, 50
+    z = _random_depth(rng, (h, w), 0.6)
+    thr = rng.random((h, w)).astype(np.float32)
+    shade = rng.random((h, w)) < 0.5
+    n = 300
+    si, sj = rng.integers(0, h, n), rng.integers(0, w, n)
+    # directions as the search makes them: the larger component +-1 (float32)
+    v = rng.normal(size=(2, n)).astype(np.float32)
+    scale = np.maximum(np.abs(v[0]), np.abs(v[1]))
+    sx, sy = v[0] / scale, v[1] / scale
+    sx[:20], sy[:20] = np.float32(0.5), np.float32(1.0)       # halves: rounded to even
+    for sh in (shade, None):
+        got = search_gaps(z, thr, shade if sh is not None else np.zeros((1, 1), bool), sh is not None,
+                          si, sj, sx, sy, 30)
+        ref = _search_reference(z, thr, sh, si, sj, sx, sy, 30)
+        for g, r in zip(got, ref):
+            assert np.array_equal(g, r, equal_nan=True)

@@ -20,7 +20,7 @@ import numpy as np
 
 from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
 from rangesim.edges._noise import depth_quantum, predicted_noise
-from rangesim.edges._pair_kernels import pair_tests
+from rangesim.edges._pair_kernels import pair_tests, search_gaps
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
 from rangesim.edges._self_shadow import CasterTest, shadow_gaps
 
@@ -413,29 +413,12 @@ def find_discontinuities(
                 else:
                     slope[smooth] = (z0[smooth] - zb[smooth]) / k
                 todo &= ~smooth
-        found_z = np.full(si.size, np.nan)
-        found_t = np.full(si.size, np.nan)
-        found_s = np.zeros(si.size)
         shade = np.asarray(unlit, bool) if unlit is not None and caster_test is not None else None
-        unlit_s = np.zeros(si.size, np.intp)
-        active = np.arange(si.size)
-        for s in range(1, int(max_search) + 1):
-            ri = si[active] + np.rint(sy[active] * s).astype(np.intp)
-            rj = sj[active] + np.rint(sx[active] * s).astype(np.intp)
-            inside = (ri >= 0) & (ri < h) & (rj >= 0) & (rj < w)
-            active, ri, rj = active[inside], ri[inside], rj[inside]
-            zq = z[ri, rj]
-            hit = np.isfinite(zq)
-            found_z[active[hit]] = zq[hit]
-            found_t[active[hit]] = thr[ri[hit], rj[hit]]
-            found_s[active[hit]] = s
-            if shade is not None:
-                # the first laser-shadow pixel of each gap (a dim pixel may come before it)
-                first = ~hit & shade[ri, rj] & (unlit_s[active] == 0)
-                unlit_s[active[first]] = s
-            active = active[~hit]
-            if active.size == 0:
-                break
+        # each pixel steps along (sx, sy) to the first valid pixel within max_search, noting
+        # the first laser-shadow pixel on the way (a dim pixel may come before it); compiled
+        found_z, found_t, found_s, unlit_s = search_gaps(
+            z, thr, np.ascontiguousarray(shade) if shade is not None else np.zeros((1, 1), bool), shade is not None,
+            si, sj, np.ascontiguousarray(sx, np.float32), np.ascontiguousarray(sy, np.float32), int(max_search))
         ok = np.isfinite(found_z)
         pred = _continued(z0, slope, found_s, perspective)
         occl = ok & (found_z - pred > t0)

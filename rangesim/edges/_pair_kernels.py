@@ -1,6 +1,7 @@
 """Compiled neighbour-pair tests of the jump rule (Numba): for every pixel and each of the four
 axes, whether it and its neighbour are either side of a depth jump, with the fold test, in one
-pass over the image (the array version pads and sweeps the image about forty times).
+pass over the image (the array version pads and sweeps the image about forty times); and the
+march of the search across NaN gaps (:func:`search_gaps`).
 
 Arithmetic is float32, as the array version's, so the result is the same to the bit.
 """
@@ -134,3 +135,44 @@ def pair_tests(z, thr, zt, folds, perspective, conn4, dominant):  # pragma: no c
                             occluded[i, j] = True
                             occluding[qi, qj] = True
     return occluding, occluded, pairs, far, near
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def search_gaps(z, thr, shade, use_shade, si, sj, sx, sy, max_search):  # pragma: no cover - compiled
+    """The search across NaN gaps of :func:`~rangesim.edges._discontinuities.find_discontinuities`:
+    from each pixel (si, sj) step ``s`` = 1, 2, ... to ``(si, sj) + rint((sy, sx) * s)``
+    (float32 products, rounded half to even, as the array form's) until a valid pixel, the
+    image's edge or ``max_search`` steps; one pass per pixel instead of some ten NumPy calls
+    per step on the shrinking set of active ones.
+
+    Returns
+    -------
+    found_z, found_t : (N,) float64
+        Depth and jump threshold of the valid pixel found (NaN: none).
+    found_s : (N,) float64
+        Its step (0: none).
+    unlit_s : (N,) intp
+        With ``use_shade``: the step of the first ``shade`` pixel passed before it (0: none).
+    """
+    n = si.size
+    h, w = z.shape
+    found_z = np.full(n, np.nan)
+    found_t = np.full(n, np.nan)
+    found_s = np.zeros(n)
+    unlit_s = np.zeros(n, np.intp)
+    for k in range(n):
+        for s in range(1, max_search + 1):
+            fs = np.float32(s)
+            ri = si[k] + np.intp(np.rint(sy[k] * fs))
+            rj = sj[k] + np.intp(np.rint(sx[k] * fs))
+            if ri < 0 or ri >= h or rj < 0 or rj >= w:
+                break
+            zq = z[ri, rj]
+            if np.isfinite(zq):
+                found_z[k] = zq
+                found_t[k] = thr[ri, rj]
+                found_s[k] = s
+                break
+            if use_shade and unlit_s[k] == 0 and shade[ri, rj]:
+                unlit_s[k] = s
+    return found_z, found_t, found_s, unlit_s
