@@ -1248,7 +1248,7 @@ def gradient(
         # ridges a few pixels apart. Its ridge is found on it smoothed over the matcher's
         # own support, a Gaussian of the box's variance (w^2 / 12), which keeps the peak
         ridge = _nan_gaussian(mag, ridge_sigma(window, stride))
-    thin, beside = nonmax_suppress(ridge, direction, candidates, return_sides=True)
+    thin, ti, beside = nonmax_suppress(ridge, direction, candidates, return_sides=True)
     gx = central_difference(zs, 0, disc.pairs)
     gy = central_difference(zs, 2, disc.pairs)
     del zs
@@ -1264,9 +1264,7 @@ def gradient(
     # (sparse; (mag + 0) / 2 elsewhere is mag / 2 to the bit)
     half = mag * np.float32(0.5)
     if stride == 1:
-        ti = np.flatnonzero(thin)
-        half.ravel()[ti] = (mag.ravel()[ti] + np.fmax(beside.ravel()[ti], 0)) / 2
-    del beside
+        half.ravel()[ti] = (mag.ravel()[ti] + np.fmax(beside, 0)) / 2
     # (a strided response is not split between two pixels: a crease between centres gives
     # both (s - 1/2) / s of it, and the neighbour's share would count it twice)
     bend = bend_degrees(t, half)
@@ -1276,13 +1274,15 @@ def gradient(
         crease &= thin
     jump = disc.occluding
     rim = disc.rim
+    jump_or_rim = jump | rim
+    beside_jumps = jump_or_rim | disc.occluded
     # the crest beside an occluding jump (or a rim) is the jump itself (a mixed or
     # half-seen pixel next to it): no crease within JUMP_CLEARANCE px of one
     if jump_clearance > 0:
-        crease &= ~near_mask(crease, jump | disc.occluded | rim, jump_clearance)
+        crease &= ~near_mask(crease, beside_jumps, jump_clearance)
     if nms:
         # 1 px diagonals: NMS leaves 4-connected staircases, the truth is 8-connected
-        crease = thin_staircases(crease | jump | rim, crease)
+        crease = thin_staircases(crease | jump_or_rim, crease)
     # the type from the sign of the Hessian's dominant eigenvalue, needed on creases only
     labels = np.zeros(z.shape, np.uint8)
     ci = np.flatnonzero(crease)
@@ -1291,15 +1291,14 @@ def gradient(
     labels[jump] = EdgeLabel.JUMP
     # a crease between pixel centres: the kept pixel moved along the crease's normal to the
     # vertex of the ridge it was thinned on (its own direction, before jumps overwrite it)
-    jump_or_rim = jump | rim
     offset = disc.offsets_at(jump_or_rim)
     if nms:
         # unsmoothed, a roof's response is a 2-sample triangle (a parabola goes half the way)
         peak = "parabola" if sigma > 0 or stride > 1 else "triangle"
         # (none within JUMP_CLEARANCE px of a discontinuity: the neighbour across is the
         # step's own slope there, not the roof's, whatever jump_clearance kept)
-        placed = crease & ~jump & ~rim
-        placed &= ~near_mask(placed, jump | disc.occluded | rim, JUMP_CLEARANCE)
+        placed = crease & ~jump_or_rim
+        placed &= ~near_mask(placed, beside_jumps, JUMP_CLEARANCE)
         # added in place at the placed pixels (0 elsewhere); at the jump and rim pixels the
         # sum with those zeros that it replaces (x + 0: -0 becomes +0)
         ridge_offsets(ridge, direction, placed, peak=peak, out=offset)

@@ -78,7 +78,7 @@ def nonmax_suppress(
     direction: np.ndarray,
     candidates: np.ndarray | None = None,
     return_sides: bool = False,
-) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Keep pixels that are maxima of ``strength`` across the edge (Canny's thinning).
 
     The strength one pixel away on either side along ``direction`` is interpolated
@@ -97,31 +97,32 @@ def nonmax_suppress(
         Only these pixels are tested (e.g. those above a threshold; much faster when they
         are few); default all pixels with a finite strength.
     return_sides : bool
-        Also return the larger of the two interpolated side strengths.
+        Also return the kept pixels and the larger of the two interpolated side strengths
+        at each (sparse: a full image of them cost more than the thinning).
 
     Returns
     -------
     keep : (H, W) bool
-    sides : (H, W) float32, only with ``return_sides``
-        At the tested pixels the larger interpolated strength beside them (NaN where there
-        is none), NaN elsewhere.
+    kept : (K,) intp, only with ``return_sides``
+        Flat indices of the kept pixels, ascending (``np.flatnonzero(keep)``).
+    sides : (K,) float32, only with ``return_sides``
+        The larger interpolated strength beside each kept pixel (NaN where there is none).
     """
     h, w = strength.shape
     if candidates is None:
         candidates = ~np.isnan(strength)
     ii, jj = nonzero2(candidates & ~np.isnan(strength))
     keep = np.zeros((h, w), bool)
-    sides = np.full((h, w), np.nan, np.float32) if return_sides else None
     if ii.size == 0:
-        return (keep, sides) if return_sides else keep
+        return (keep, np.zeros(0, np.intp), np.zeros(0, np.float32)) if return_sides else keep
     low = np.float32(-1e30)                      # not -inf: 0 * -inf would be NaN
     s0, minus, plus, _, _ = _across(strength, direction, ii, jj, low)
-    keep[ii, jj] = (s0 > minus) & (s0 >= plus)
+    kept = (s0 > minus) & (s0 >= plus)
+    keep[ii, jj] = kept
     if not return_sides:
         return keep
-    side = np.maximum(plus, minus)
-    sides[ii, jj] = np.where(side > low / 2, side, np.nan)
-    return keep, sides
+    side = np.maximum(plus[kept], minus[kept])
+    return keep, ii[kept] * w + jj[kept], np.where(side > low / 2, side, np.nan).astype(np.float32)
 
 
 def ridge_offsets(strength: np.ndarray, direction: np.ndarray, where: np.ndarray,
@@ -248,21 +249,40 @@ def near_mask(where: np.ndarray, ref: np.ndarray, r: int) -> np.ndarray:
     """True at pixels of ``where`` within chessboard distance ``r`` of a ``ref`` pixel.
 
     Sparse: only the pixels of ``where`` look at their (2r+1)^2 window (cheap when
-    ``where`` is thin, e.g. edge candidates); False elsewhere.
+    ``where`` is thin, e.g. edge candidates); False elsewhere. Compiled: rows without a
+    pixel of ``where`` are skipped, windows clipped to the image (no padded copy of ``ref``).
     """
+    if r <= 0:
+        return np.zeros(where.shape, bool)
+    return _near_mask(np.ascontiguousarray(where, np.bool_), np.ascontiguousarray(ref, np.bool_), int(r))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _near_mask(where, ref, r):  # pragma: no cover - compiled
+    """:func:`near_mask`."""
     h, w = where.shape
-    out = np.zeros((h, w), bool)
-    ii, jj = nonzero2(where)
-    if ii.size == 0 or r <= 0:
-        return out
-    stride = w + 2 * r
-    rp = np.pad(ref, r).ravel()
-    base = (ii + r) * stride + (jj + r)
-    hit = np.zeros(ii.size, bool)
-    for dr in range(-r, r + 1):
-        for dc in range(-r, r + 1):
-            hit |= rp[base + dr * stride + dc]
-    out[ii[hit], jj[hit]] = True
+    out = np.zeros((h, w), np.bool_)
+    for i in range(h):
+        row = where[i]
+        n = 0
+        for j in range(w):
+            n += row[j]
+        if n == 0:
+            continue
+        i0, i1 = max(i - r, 0), min(i + r + 1, h)
+        for j in range(w):
+            if not row[j]:
+                continue
+            j0, j1 = max(j - r, 0), min(j + r + 1, w)
+            hit = False
+            for a in range(i0, i1):
+                for b in range(j0, j1):
+                    if ref[a, b]:
+                        hit = True
+                        break
+                if hit:
+                    break
+            out[i, j] = hit
     return out
 
 
