@@ -12,8 +12,10 @@ from rangesim.edges._gradient import (
     _pairs_arg,
     _plain_dense,
     _plain_strided,
+    _scale_and_magnitude,
     _second_differences_at,
     _smooth5_at,
+    _streamed_responses,
     _taps5,
     _to_direction,
     _validity5_at,
@@ -183,3 +185,21 @@ def test_gap_search_kernel_matches_its_array_form(seed):
         ref = _search_reference(z, thr, sh, si, sj, sx, sy, 30)
         for g, r in zip(got, ref):
             assert np.array_equal(g, r, equal_nan=True)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_streamed_responses_match_the_three_passes(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(5):
+        h, w = (int(v) for v in rng.integers(3, 70, 2))
+        z = _random_depth(rng, (h, w), float(rng.choice([0.0, 0.05, 0.3])))
+        pairs = rng.random((4, h, w)) < rng.choice([0.0, 0.01, 0.2])
+        scale = (0.5 + rng.random((h, w))).astype(np.float32)
+        for pp in (pairs, None):
+            mag, direction, positive = _streamed_responses(z, *_pairs_arg(pp), scale)
+            resp = second_differences(z, pp)
+            ref_mag = _scale_and_magnitude(*resp, scale)
+            ref_dir, ref_pos = _hessian_direction(*resp, ref_mag)
+            assert np.array_equal(_bits(mag), _bits(ref_mag))
+            assert np.array_equal(_bits(direction), _bits(ref_dir))
+            assert np.array_equal(positive, ref_pos)

@@ -319,53 +319,63 @@ def _hessian_direction(r0, r45, r90, r135, mag):  # pragma: no cover - compiled
     the dominant eigenvalue is positive (the crease type), without the five full-size
     images of the three steps (on a shared VM a fresh image costs more than its arithmetic)."""
     h, w = r0.shape
+    direction = np.empty((h, w), np.float32)
+    positive = np.empty((h, w), np.bool_)
+    zrow = np.zeros(w, np.float32)            # the rows beyond the image: zeros
+    work = np.zeros((7, w + 2), np.float32)
+    for i in range(h):
+        up = i - 1 if i >= 1 else -1
+        dn = i + 1 if i + 1 < h else -1
+        _hessian_row(r0[up] if up >= 0 else zrow, r45[up] if up >= 0 else zrow, r90[up] if up >= 0 else zrow,
+                     r135[up] if up >= 0 else zrow, r0[i], r45[i], r90[i], r135[i],
+                     r0[dn] if dn >= 0 else zrow, r45[dn] if dn >= 0 else zrow, r90[dn] if dn >= 0 else zrow,
+                     r135[dn] if dn >= 0 else zrow, mag[i], direction[i], positive[i], work)
+    return direction, positive
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _nan0(v):  # pragma: no cover - compiled
+    """``v``, 0 in place of NaN."""
+    return v if v == v else np.float32(0)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _hessian_row(u0, u45, u90, u135, m0, m45, m90, m135, d0, d45, d90, d135, mag, direction, positive,
+                 work):  # pragma: no cover - compiled
+    """One row of :func:`_hessian_direction` from the responses of the rows above (``u*``), at
+    (``m*``) and below it (``d*``; zeros beyond the image): column sums ``(up + mid) +
+    down`` (NaN read as 0), then ``(left + centre) + right``, the eigen-terms, the arc
+    tangent and the direction, each in a simple loop over the row (each vectorises; one loop
+    with all of it did not). ``work``: (7, W + 2) float32 scratch, columns 0 and W + 1 zero."""
+    w = m0.shape[0]
     zero = np.float32(0)
     k = np.float32(np.sqrt(2.0) / 6.0)
     two, half_f = np.float32(2), np.float32(0.5)
     quarter, half_turn = np.float32(np.pi / 2), np.float32(np.pi)
     nan = np.float32(np.nan)
-    direction = np.empty((h, w), np.float32)
-    positive = np.empty((h, w), np.bool_)
-    cxx = np.zeros(w + 2, np.float32)       # column sums, a zero column either side
-    cyy = np.zeros(w + 2, np.float32)
-    cxy = np.zeros(w + 2, np.float32)
-    minor = np.empty(w, np.bool_)
-    t2 = np.empty(w, np.float32)
-    dd = np.empty(w, np.float32)
-    th = np.empty(w, np.float32)
-    for i in range(h):
-        for j in range(w):
-            cxx[j + 1] = _col3(r0, i, j, h)
-            cyy[j + 1] = _col3(r90, i, j, h)
-            up = (r45[i - 1, j] - r135[i - 1, j]) if i >= 1 else zero
-            mid = r45[i, j] - r135[i, j]
-            dn = (r45[i + 1, j] - r135[i + 1, j]) if i + 1 < h else zero
-            up = up if up == up else zero
-            mid = mid if mid == mid else zero
-            dn = dn if dn == dn else zero
-            cxy[j + 1] = (up + mid) + dn
-        # three simple loops over the row (each vectorises; one loop with all of it did not)
-        pos = positive[i]
-        for j in range(w):
-            xx = (cxx[j] + cxx[j + 1]) + cxx[j + 2]
-            yy = (cyy[j] + cyy[j + 1]) + cyy[j + 2]
-            xy = ((cxy[j] + cxy[j + 1]) + cxy[j + 2]) * k
-            m = (xx + yy) / two
-            hd = (xx - yy) / two
-            r = np.sqrt(hd * hd + xy * xy)
-            mn = abs(m - r) > abs(m + r)
-            minor[j] = mn
-            pos[j] = (m - r if mn else m + r) > zero
-            t2[j] = two * xy
-            dd[j] = xx - yy
-        for j in range(w):
-            th[j] = half_f * np.float32(atan2(np.float64(t2[j]), np.float64(dd[j])))
-        d, g = direction[i], mag[i]
-        for j in range(w):
-            t = th[j] + quarter if minor[j] else th[j] + zero
-            t = t + half_turn if t < 0 else t
-            d[j] = nan if np.isnan(g[j]) else t
-    return direction, positive
+    cxx, cyy, cxy, t2, dd, th, mn = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
+    for j in range(w):
+        cxx[j + 1] = (_nan0(u0[j]) + _nan0(m0[j])) + _nan0(d0[j])
+        cyy[j + 1] = (_nan0(u90[j]) + _nan0(m90[j])) + _nan0(d90[j])
+        cxy[j + 1] = (_nan0(u45[j] - u135[j]) + _nan0(m45[j] - m135[j])) + _nan0(d45[j] - d135[j])
+    for j in range(w):
+        xx = (cxx[j] + cxx[j + 1]) + cxx[j + 2]
+        yy = (cyy[j] + cyy[j + 1]) + cyy[j + 2]
+        xy = ((cxy[j] + cxy[j + 1]) + cxy[j + 2]) * k
+        m = (xx + yy) / two
+        hd = (xx - yy) / two
+        r = np.sqrt(hd * hd + xy * xy)
+        minor = abs(m - r) > abs(m + r)
+        mn[j] = np.float32(1) if minor else zero
+        positive[j] = (m - r if minor else m + r) > zero
+        t2[j] = two * xy
+        dd[j] = xx - yy
+    for j in range(w):
+        th[j] = half_f * np.float32(atan2(np.float64(t2[j]), np.float64(dd[j])))
+    for j in range(w):
+        t = th[j] + quarter if mn[j] != zero else th[j] + zero
+        t = t + half_turn if t < 0 else t
+        direction[j] = nan if np.isnan(mag[j]) else t
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -375,16 +385,22 @@ def _scale_and_magnitude(r0, r45, r90, r135, scale):  # pragma: no cover - compi
     h, w = r0.shape
     mag = np.empty((h, w), np.float32)
     for i in range(h):
-        for j in range(w):
-            f = scale[i, j]
-            a, b, c, d = r0[i, j] * f, r45[i, j] * f, r90[i, j] * f, r135[i, j] * f
-            r0[i, j], r45[i, j], r90[i, j], r135[i, j] = a, b, c, d
-            m = abs(a)
-            for v in (abs(b), abs(c), abs(d)):
-                if m != m or v > m:
-                    m = v
-            mag[i, j] = m
+        _scale_mag_row(r0[i], r45[i], r90[i], r135[i], scale[i], mag[i])
     return mag
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _scale_mag_row(r0, r45, r90, r135, scale, mag):  # pragma: no cover - compiled
+    """One row of :func:`_scale_and_magnitude`."""
+    for j in range(r0.shape[0]):
+        f = scale[j]
+        a, b, c, d = r0[j] * f, r45[j] * f, r90[j] * f, r135[j] * f
+        r0[j], r45[j], r90[j], r135[j] = a, b, c, d
+        m = abs(a)
+        for v in (abs(b), abs(c), abs(d)):
+            if m != m or v > m:
+                m = v
+        mag[j] = m
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -534,33 +550,41 @@ def _plain_dense(z):  # pragma: no cover - compiled
     operations on row slices aligned to the output, so that no index is offset and the
     compiler vectorises the loop (2-3x faster than the strided loop)."""
     h, w = z.shape
-    two, three, two_steps = np.float32(2), np.float32(3), np.float32(2) * _SQRT2
-    nan = np.float32(np.nan)
     # four images, not one (4, H, W) block: a block that size is mapped fresh on every call
     r0, r45 = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
     r90, r135 = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
-    for r in (r0, r45, r90, r135):
-        r[0, :] = nan
-        r[h - 1, :] = nan
-    for i in range(1, h - 1):
-        up, mid, dn = z[i - 1], z[i], z[i + 1]
-        nw, n, ne = up[0:w - 2], up[1:w - 1], up[2:w]
-        we, c, e = mid[0:w - 2], mid[1:w - 1], mid[2:w]
-        sw, s, se = dn[0:w - 2], dn[1:w - 1], dn[2:w]
-        o0, o45, o90, o135 = r0[i, 1:w - 1], r45[i, 1:w - 1], r90[i, 1:w - 1], r135[i, 1:w - 1]
-        for k in range(w - 2):
-            o0[k] = ((((nw[k] - two * n[k]) + ne[k]) + ((we[k] - two * c[k]) + e[k]))
-                     + ((sw[k] - two * s[k]) + se[k])) / three
-            o90[k] = ((((nw[k] - two * we[k]) + sw[k]) + ((n[k] - two * c[k]) + s[k]))
-                      + ((ne[k] - two * e[k]) + se[k])) / three
-            c2 = two * c[k]
-            s4 = ((n[k] + we[k]) + e[k]) + s[k]
-            o45[k] = (((nw[k] - c2) + se[k]) + (s4 - (ne[k] + sw[k]) * two)) / two_steps
-            o135[k] = (((ne[k] - c2) + sw[k]) + (s4 - (nw[k] + se[k]) * two)) / two_steps
-        for r in (r0, r45, r90, r135):
-            r[i, 0] = nan
-            r[i, w - 1] = nan
+    for i in range(h):
+        _plain_row(z, i, r0[i], r45[i], r90[i], r135[i])
     return r0, r45, r90, r135
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _plain_row(z, i, o0, o45, o90, o135):  # pragma: no cover - compiled
+    """Row ``i`` of :func:`_plain_dense` (NaN on the image's border)."""
+    h, w = z.shape
+    two, three, two_steps = np.float32(2), np.float32(3), np.float32(2) * _SQRT2
+    nan = np.float32(np.nan)
+    if i < 1 or i >= h - 1:
+        for o in (o0, o45, o90, o135):
+            o[:] = nan
+        return
+    up, mid, dn = z[i - 1], z[i], z[i + 1]
+    nw, n, ne = up[0:w - 2], up[1:w - 1], up[2:w]
+    we, c, e = mid[0:w - 2], mid[1:w - 1], mid[2:w]
+    sw, s, se = dn[0:w - 2], dn[1:w - 1], dn[2:w]
+    p0, p45, p90, p135 = o0[1:w - 1], o45[1:w - 1], o90[1:w - 1], o135[1:w - 1]
+    for k in range(w - 2):
+        p0[k] = ((((nw[k] - two * n[k]) + ne[k]) + ((we[k] - two * c[k]) + e[k]))
+                 + ((sw[k] - two * s[k]) + se[k])) / three
+        p90[k] = ((((nw[k] - two * we[k]) + sw[k]) + ((n[k] - two * c[k]) + s[k]))
+                  + ((ne[k] - two * e[k]) + se[k])) / three
+        c2 = two * c[k]
+        s4 = ((n[k] + we[k]) + e[k]) + s[k]
+        p45[k] = (((nw[k] - c2) + se[k]) + (s4 - (ne[k] + sw[k]) * two)) / two_steps
+        p135[k] = (((ne[k] - c2) + sw[k]) + (s4 - (nw[k] + se[k]) * two)) / two_steps
+    for o in (o0, o45, o90, o135):
+        o[0] = nan
+        o[w - 1] = nan
 
 
 def _second_differences_at(p: np.ndarray, pairs: np.ndarray | None, idx: np.ndarray,
@@ -676,52 +700,97 @@ def _exact_where_needed(z, pairs, use_pairs, skip, use_skip, r0, r45, r90, r135)
     The pixels are flagged a row at a time by loops that vectorise (no mask images, no
     index arrays) and visited in blocks of 32 that hold one."""
     h, w = z.shape
-    col = np.empty(w, np.uint8)
-    fm = np.empty(w, np.uint8)
-    ring = np.zeros((3, w), np.uint8)         # a pair of any axis, rows i - 1, i, i + 1 (mod 3)
+    work = np.zeros((5, w), np.uint8)
     if use_pairs:
-        _any_pair_row(pairs, 0, ring[0])
+        _any_pair_row(pairs, 0, work[0])
     for i in range(h):
-        # broken pairs in rows i - 1..i + 1, per column, then over columns j - 1..j + 1
-        col[:] = 0
-        if use_pairs:
-            if i + 1 < h:
-                _any_pair_row(pairs, i + 1, ring[(i + 1) % 3])
-            for r in range(max(i - 1, 0), min(i + 2, h)):
-                rr = ring[r % 3]
-                for j in range(w):
-                    col[j] |= rr[j]
-        for j in range(w):
-            fm[j] = col[j]
-        right, left_col = fm[1:w], col[0:w - 1]      # (aligned slices: vectorises)
-        for j in range(w - 1):
-            right[j] |= left_col[j]                   # a pair one column left
-        left_px, right_col = fm[0:w - 1], col[1:w]
-        for j in range(w - 1):
-            left_px[j] |= right_col[j]                # one column right
-        zr, r0r = z[i], r0[i]
-        for j in range(w):
-            fm[j] = (fm[j] | (r0r[j] != r0r[j])) & (zr[j] == zr[j])
-        if use_skip:
-            sk = skip[i]
+        _redo_row(z, pairs, use_pairs, skip, use_skip, i, work, r0[i], r45[i], r90[i], r135[i])
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _redo_row(z, pairs, use_pairs, skip, use_skip, i, work, o0, o45, o90, o135):  # pragma: no cover - compiled
+    """Row ``i`` of :func:`_exact_where_needed` (``o*``: the plain responses of the row, redone
+    in place). ``work`` (5, W) uint8: rows 0-2 a ring of the any-axis pairs of rows i - 1, i,
+    i + 1 (mod 3; row ``i``'s and the one above filled already, the one below filled here),
+    rows 3-4 scratch."""
+    h, w = z.shape
+    col, fm = work[3], work[4]
+    # broken pairs in rows i - 1..i + 1, per column, then over columns j - 1..j + 1
+    col[:] = 0
+    if use_pairs:
+        if i + 1 < h:
+            _any_pair_row(pairs, i + 1, work[(i + 1) % 3])
+        for r in range(max(i - 1, 0), min(i + 2, h)):
+            rr = work[r % 3]
             for j in range(w):
-                fm[j] = 0 if sk[j] else fm[j]
-        left = 0
+                col[j] |= rr[j]
+    for j in range(w):
+        fm[j] = col[j]
+    right, left_col = fm[1:w], col[0:w - 1]      # (aligned slices: vectorises)
+    for j in range(w - 1):
+        right[j] |= left_col[j]                   # a pair one column left
+    left_px, right_col = fm[0:w - 1], col[1:w]
+    for j in range(w - 1):
+        left_px[j] |= right_col[j]                # one column right
+    zr = z[i]
+    for j in range(w):
+        fm[j] = (fm[j] | (o0[j] != o0[j])) & (zr[j] == zr[j])
+    if use_skip:
+        sk = skip[i]
         for j in range(w):
-            left += fm[j]
-        for c0 in range(0, w, 32):
-            if left == 0:
-                break
-            c1 = min(c0 + 32, w)
-            n = 0
-            for j in range(c0, c1):
-                n += fm[j]
-            if n == 0:
-                continue
-            left -= n
-            for j in range(c0, c1):
-                if fm[j]:
-                    r0[i, j], r45[i, j], r90[i, j], r135[i, j] = _exact_px(z, pairs, use_pairs, i, j)
+            fm[j] = 0 if sk[j] else fm[j]
+    left = 0
+    for j in range(w):
+        left += fm[j]
+    for c0 in range(0, w, 32):
+        if left == 0:
+            break
+        c1 = min(c0 + 32, w)
+        n = 0
+        for j in range(c0, c1):
+            n += fm[j]
+        if n == 0:
+            continue
+        left -= n
+        for j in range(c0, c1):
+            if fm[j]:
+                o0[j], o45[j], o90[j], o135[j] = _exact_px(z, pairs, use_pairs, i, j)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _streamed_responses(z, pairs, use_pairs, scale):  # pragma: no cover - compiled
+    """:func:`second_differences` (no skip), :func:`_scale_and_magnitude` and
+    :func:`_hessian_direction` streamed a row at a time, to the same bits: the four responses
+    live in a ring of three rows, never as images (16 MB at 1024^2 that a VM maps fresh on
+    every call). Returns ``mag``, ``direction`` and ``positive`` as those do."""
+    h, w = z.shape
+    ring = np.empty((3, 4, w), np.float32)    # scaled responses of rows i - 1, i, i + 1 (mod 3)
+    zrow = np.zeros(w, np.float32)
+    mag = np.empty((h, w), np.float32)
+    direction = np.empty((h, w), np.float32)
+    positive = np.empty((h, w), np.bool_)
+    work = np.zeros((5, w), np.uint8)
+    hwork = np.zeros((7, w + 2), np.float32)
+    skip = np.zeros((1, 1), np.bool_)
+    if use_pairs:
+        _any_pair_row(pairs, 0, work[0])
+    for i in range(h + 1):
+        if i < h:
+            rr = ring[i % 3]
+            _plain_row(z, i, rr[0], rr[1], rr[2], rr[3])
+            _redo_row(z, pairs, use_pairs, skip, False, i, work, rr[0], rr[1], rr[2], rr[3])
+            _scale_mag_row(rr[0], rr[1], rr[2], rr[3], scale[i], mag[i])
+        if i >= 1:
+            c = i - 1                          # the row whose Hessian has all its rows now
+            m = ring[c % 3]
+            u = ring[(c - 1) % 3]
+            d = ring[(c + 1) % 3]
+            has_u, has_d = c >= 1, c + 1 < h
+            _hessian_row(u[0] if has_u else zrow, u[1] if has_u else zrow, u[2] if has_u else zrow,
+                         u[3] if has_u else zrow, m[0], m[1], m[2], m[3],
+                         d[0] if has_d else zrow, d[1] if has_d else zrow, d[2] if has_d else zrow,
+                         d[3] if has_d else zrow, mag[c], direction[c], positive[c], hwork)
+    return mag, direction, positive
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -1199,26 +1268,32 @@ def gradient(
         np.copyto(inv_fp, np.nan, where=near_jump)
     else:
         zs = z
-    # a depth step is not a roof: no stencil part may cross a discontinuity
-    if stride > 1:
-        # the operators dilated to the matcher's scale: chords beside the rounding, divided
-        # by the share of the bend they see after the window's box (1 without a matcher)
-        resp = strided_responses(zs, disc.pairs, stride, second_differences)
-        scale = inv_fp / np.float32(rounding_gain(window or 1, stride))
+    # a depth step is not a roof: no stencil part may cross a discontinuity. The responses
+    # scaled in place to slope changes per footprint; the largest |response|, where an
+    # undefined operator does not veto (NumPy's fmax); the Hessian from the operators (0 ->
+    # Dxx, 90 -> Dyy, 45/135 -> +-(6 / 2 sqrt 2) Dxy), its dominant eigenvector's angle
+    # (compiled arc tangents, rangesim.edges._trig: NumPy's are scalar C-library calls on
+    # CPUs without AVX-512; the same but for last bits) and the sign of its eigenvalue
+    h, w = z.shape
+    if stride == 1 and near_jump is None and h >= 3 and w >= 3:
+        # all in one compiled pass, a row at a time (the responses never made as images)
+        mag, theta, dominant_positive = _streamed_responses(
+            np.ascontiguousarray(zs, np.float32), *_pairs_arg(disc.pairs),
+            np.ascontiguousarray(np.broadcast_to(inv_fp, z.shape), np.float32))
     else:
-        resp = second_differences(zs, disc.pairs, skip=near_jump)
-        scale = inv_fp
-    # responses scaled in place to slope changes per footprint; the largest |response|,
-    # where an undefined operator does not veto (NumPy's fmax), in one compiled pass
-    mag = _scale_and_magnitude(*resp, np.ascontiguousarray(np.broadcast_to(scale, z.shape), np.float32))
-    # Hessian from the operators: 0 -> Dxx, 90 -> Dyy, 45/135 -> +-(6 / 2 sqrt 2) Dxy; the
-    # dominant eigenvector's angle (compiled arc tangents, rangesim.edges._trig: NumPy's are
-    # scalar C-library calls on CPUs without AVX-512; the same but for last bits) and the
-    # sign of its eigenvalue, in one pass (_hessian, half_atan2 and _to_direction fused)
-    theta, dominant_positive = _hessian_direction(*resp, mag)
-    # (the responses' 16 MB freed here, for the images below to reuse: fresh pages cost
-    # about as much as the arithmetic on them)
-    del resp
+        if stride > 1:
+            # the operators dilated to the matcher's scale: chords beside the rounding, divided
+            # by the share of the bend they see after the window's box (1 without a matcher)
+            resp = strided_responses(zs, disc.pairs, stride, second_differences)
+            scale = inv_fp / np.float32(rounding_gain(window or 1, stride))
+        else:
+            resp = second_differences(zs, disc.pairs, skip=near_jump)
+            scale = inv_fp
+        mag = _scale_and_magnitude(*resp, np.ascontiguousarray(np.broadcast_to(scale, z.shape), np.float32))
+        theta, dominant_positive = _hessian_direction(*resp, mag)
+        # (the responses' 16 MB freed here, for the images below to reuse: fresh pages cost
+        # about as much as the arithmetic on them)
+        del resp
     direction = theta
 
     if auto_threshold and noisy:
