@@ -246,3 +246,26 @@ def test_detector_parameters_are_checked_before_any_work():
     assert one.mask.sum() == rs.edges.pcl_organized(plate, edge_types=("occluding",)).mask.sum() > 0
     with pytest.raises(RangesimError, match="with_params takes a mapping"):
         rs.load_sensor("kinect_v1").with_params(None)
+
+
+def test_loaders_refuse_what_is_not_a_file_name():
+    with pytest.raises(RangesimError, match="load_scan takes a file name, got NoneType"):
+        rs.load_scan(None)
+    with pytest.raises(RangesimError, match="load_scene takes a Scene, meshes or a file name, got int"):
+        rs.load_scene(5)
+
+
+def test_pcl_organized_on_a_scan_with_nothing_measured_gives_no_edges_and_no_warning():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        em = rs.edges.pcl_organized(_scan(np.full((30, 40), np.nan)))
+    assert not em.mask.any()
+
+
+def test_cli_features_takes_one_radius_as_the_api_does(tmp_path):
+    scan_path = tmp_path / "plate.npz"
+    rs.datasets.plate_scan().save(scan_path)
+    assert main(["features", str(scan_path), "--rmin", "20", "--rmax", "20", "--out", str(tmp_path / "f")]) == 0
+    assert (tmp_path / "f").is_dir()

@@ -38,8 +38,8 @@ def cmd_features(args: argparse.Namespace) -> int:
         raise RangesimError("output must be a directory", source=out)
     positive("--rmin", args.rmin)
     positive("--rmax", args.rmax)
-    if args.rmin >= args.rmax:
-        raise RangesimError(f"--rmin ({args.rmin:g}) must be less than --rmax ({args.rmax:g})")
+    if args.rmin > args.rmax:  # equal: one radius, as the API's radii=(r, r)
+        raise RangesimError(f"--rmin ({args.rmin:g}) must not exceed --rmax ({args.rmax:g})")
     scan = load_scan(args.scan)
     from rangesim.cli.edge_commands import require_grid
 

@@ -108,6 +108,8 @@ def _depth_threshold(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, geo: Pix
     zv = z[valid]
     if geo.perspective and zv.size and np.all(zv > 0):
         return np.float32(relative) * np.sqrt(dot3(xyz, xyz))
+    if not zv.size:  # nothing measured: no threshold is used, and nothing to warn about
+        return np.float32(JUMP_THRESHOLD) * geo.footprint
     warnings.warn(
         "pcl_organized: the scan's depth is not the distance to the sensor (a grid in the scanner's frame); "
         f"jump threshold {JUMP_THRESHOLD:.2f} pixel footprints instead of {relative} x distance "

@@ -109,6 +109,8 @@ def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
     RangesimError
         If the file is missing, its extension has no reader, or it cannot be read.
     """
+    if not isinstance(path, (str, Path)):
+        raise RangesimError(f"load_scan takes a file name, got {type(path).__name__}")
     path = Path(path)
     if not path.exists():
         raise RangesimError("no such file", path)
