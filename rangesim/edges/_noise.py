@@ -221,7 +221,7 @@ NOISE_WINDOW = 5
 def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     """The noise model's depth std of the surface around each pixel, mm, (H, W) float32.
 
-    ``scan.sigma`` (the predicted std per pixel; simulated laser-stripe scans carry it), its
+    ``scan.sigma`` (the predicted std per pixel; simulated scans carry it), its
     least value over a ``window`` x ``window`` neighbourhood (default :data:`NOISE_WINDOW`):
     the model also raises sigma at the very pixels of an edge (mixed and truncated stripes),
     and a threshold raised there would hide the edge; a face that is noisy as a whole (seen
@@ -292,7 +292,7 @@ def local_noise_scale(scan: Any, valid: np.ndarray, footprint: np.ndarray,
     ``max(1, s / median(s))`` with ``s = sigma / footprint``.
 
     ``sigma`` is :func:`predicted_noise`, the noise model's predicted depth std around the
-    pixel (mm; simulated laser-stripe scans carry it), and ``footprint`` the pixel's lateral
+    pixel (mm; simulated scans carry it), and ``footprint`` the pixel's lateral
     size (``z / f`` mm): the detectors' strengths (bend angles, normal angles, ``|k| R``) are
     relative to the footprint, so their noise goes as ``sigma / footprint``. Noise grows
     steeply with incidence and range, so a face seen near grazing or a far table is several
