@@ -7,23 +7,21 @@ import pytest
 
 from rangesim.edges._gradient import (
     _exact_at,
-    _hessian,
     _hessian_direction,
     _pairs_arg,
     _plain_dense,
     _plain_strided,
     _scale_and_magnitude,
-    _second_differences_at,
     _smooth5_at,
     _streamed_responses,
     _taps5,
-    _to_direction,
     _validity5_at,
     second_differences,
 )
 from rangesim.edges._noise import local_noise_scale, raised_noise_threshold, raised_threshold
 from rangesim.edges._pair_kernels import search_gaps
 from rangesim.edges._trig import half_atan2
+from tests.gradient_reference import _hessian, _second_differences_at, _to_direction
 
 
 def _random_depth(rng: np.random.Generator, shape: tuple[int, int], holes: float) -> np.ndarray:
