@@ -22,8 +22,7 @@ from rangesim.core.quantisation import DEFAULT_MATCHER_WINDOW, disparity_lattice
 from rangesim.edges._discontinuities import segment_broken
 from rangesim.edges._grid import AXES
 
-__all__ = ["disparity_lattice", "matching_window", "relative_noise", "ridge_sigma", "rounding_gain", "strided_pairs",
-           "strided_responses"]
+__all__ = ["disparity_lattice", "matching_window", "ridge_sigma", "rounding_gain", "strided_pairs", "strided_responses"]
 
 
 def matching_window(scan: Any, *, detect: bool = False) -> int | None:
@@ -199,44 +198,3 @@ def strided_responses(
                 o[r::s, c::s] = rs_ * inv_s
     return out
 
-
-def relative_noise(sigma: np.ndarray | None, z: np.ndarray, valid: np.ndarray) -> np.ndarray | None:
-    """Each pixel's predicted angular noise over the scan's median, never below 1; None without sigma.
-
-    A block matcher's errors are correlated over its window, so the detectors measure the
-    scan's typical noise level on their own responses; the noise model's prediction
-    (``RangeScan.sigma``, :mod:`rangesim.sensor.matching_noise`) says where it is higher (a
-    steeper slant). An angle between normals a fixed number of pixels apart has noise
-    ``sigma / footprint``, and the footprint is ``z / f``: the ratio is ``sigma / z`` over its
-    median over valid pixels. Thresholds are raised where it exceeds 1 and left at the
-    measured level elsewhere (lowering them on quiet faces added false creases on the
-    machined parts' tuning seeds).
-
-    Parameters
-    ----------
-    sigma : (H, W) float or None
-        Predicted depth std, mm (the least over 5 x 5: :func:`~rangesim.edges._noise.predicted_noise`).
-    z : (H, W) float
-        Depth, mm (NaN where invalid).
-    valid : (H, W) bool
-
-    Returns
-    -------
-    (H, W) float32 >= 1, or None
-
-    Examples
-    --------
-    >>> z = np.full((2, 3), 500.0); s = np.array([[1.0, 1.0, 1.0], [1.0, 3.0, 0.5]])
-    >>> np.round(relative_noise(s, z, np.ones((2, 3), bool)), 6).tolist()
-    [[1.0, 1.0, 1.0], [1.0, 3.0, 1.0]]
-    """
-    if sigma is None:
-        return None
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = sigma / z
-    ok = valid & np.isfinite(ratio) & (ratio > 0)
-    if not ok.any():
-        return None
-    out = ratio / np.float32(np.median(ratio[ok]))
-    out[~ok] = 1.0
-    return np.maximum(out, np.float32(1.0)).astype(np.float32)

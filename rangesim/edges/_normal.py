@@ -9,7 +9,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
-from rangesim.edges._matching_scale import matching_window, relative_noise
+from rangesim.edges._matching_scale import matching_window
 from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_NORMAL,
@@ -168,7 +168,9 @@ def normal(
     noisy = noise is not None and noise >= NOISE_FLOOR
     matcher = matching_window(scan)
     if matcher is not None and window is None and blocks is None:
-        return _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search)
+        # thresholds raised where the noise model predicts a noisier face (its slant)
+        scale = local_noise_scale(scan, valid, geo.footprint, disc.noise)
+        return _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search, scale)
     if blocks is None:
         blocks = window is None and noisy and getattr(scan, "sigma", None) is not None
     if blocks:
@@ -286,10 +288,11 @@ def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_thresho
                    method="normal", params=params, offset=offset)
 
 
-def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search) -> EdgeMap:
+def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search,
+               scale=None) -> EdgeMap:
     """:func:`normal` on a block-matched scan: chord normals one matching window apart
     (:func:`~rangesim.edges._normal_sl.sl_creases`)."""
-    res = sl_creases(xyz, valid, disc.pairs, matcher, threshold_deg, nms, relative_noise=relative_noise(disc.noise, z, valid))
+    res = sl_creases(xyz, valid, disc.pairs, matcher, threshold_deg, nms, relative_noise=scale)
     crease = res["crease"]
     jump = disc.occluding
     rim = disc.rim

@@ -32,9 +32,10 @@ axes) exceeds ``k s`` on a plane with probability at most ``4 exp(-k^2 / 2)``. W
 carries the noise model's prediction (``RangeScan.sigma``,
 :mod:`rangesim.sensor.matching_noise`: the error grows steeply with the surface's slant),
 ``s`` is that typical level and each pixel's thresholds rise with its predicted angular
-noise ``sigma / z`` over the scan's median (never below the typical level:
-``relative_noise`` of :func:`sl_creases`): tuning seeds 0-7 mean F1 +0.006 (lowering them
-on quiet faces too: -0.002), check seeds 8-15 +0.003.
+noise ``sigma / footprint`` over the scan's median (never below the typical level:
+:func:`~rangesim.edges._noise.local_noise_scale`, as ``relative_noise`` of
+:func:`sl_creases`): tuning seeds 0-7 mean F1 +0.006 (lowering them on quiet faces too:
+-0.002), check seeds 8-15 +0.003.
 """
 from __future__ import annotations
 
