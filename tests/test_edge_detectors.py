@@ -546,10 +546,12 @@ def test_window_minimum_matches_scipy():
 
 
 def test_compiled_hessian_and_smoothing_match_scipy():
-    # the compiled Hessian's 3x3 sums and the 5-tap smoothing against scipy's filters (NaN read as 0)
+    # the Hessian's 3x3 sums (the reference the fused kernel is held to, bit for bit, in
+    # tests/test_gradient_kernels.py) and the 5-tap smoothing against scipy's filters (NaN read as 0)
     from scipy.ndimage import correlate1d, uniform_filter
 
-    from rangesim.edges._gradient import _hessian, _smooth5, _taps5
+    from rangesim.edges._gradient import _smooth5, _taps5
+    from tests.gradient_reference import _hessian
     rng = np.random.default_rng(4)
     r = rng.normal(size=(4, 23, 31)).astype(np.float32)
     r[0, 3, 4] = r[1, 10, 0] = r[2, 22, 30] = r[3, 0, 7] = np.nan
