@@ -213,6 +213,8 @@ def test_kinect_twin_of_a_recorded_frame(data_dir):
     assert m["iou"] > 0.9
     k = m["z2_coefficient_mm_per_m2"]
     assert 0.5 < k["twin"] / k["recorded"] < 2.0  # the z^2 law at the recording's size
+    # the same spread ratio as a mesh twin reports (the figure's histogram title)
+    assert 0.5 < m["noise_std_ratio"] < 2.0
     # both show depth in disparity steps: the recording's levels are 0.8-1 of the preset's 1/8 px step
     gaps = m["depth_level_gaps_in_steps"]
     assert gaps["twin"]["median"] == pytest.approx(1.0, abs=0.05)

@@ -16,7 +16,8 @@ each pixel labelled (0 no data, 1-9 table, 20-29 first object, 30-39 second, ...
 4. **Compare** (:func:`compare_kinect`): valid-mask IoU; the residual of recording and twin
    against the fitted surfaces per depth bin, with the z^2 coefficient of each (the law
    sigma_z = z^2 sigma_d / (f b)); the depth-level gaps in units of the twin's disparity step
-   z^2 / (8 f b); edge F1 twin vs recorded.
+   z^2 / (8 f b); edge F1 twin vs recorded; ``noise_std_ratio``, the robust std of the twin's
+   residuals over the recording's on pixels both measured (as :mod:`rangesim.twin.comparison`).
 """
 from __future__ import annotations
 
@@ -292,6 +293,9 @@ def compare_kinect(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinec
                   "both": int(np.count_nonzero(recorded.valid & twin_scan.valid))},
         "edges": edge_agreement(recorded, twin_scan, detectors, edge_maps=edge_maps),
     }
+    # robust std of the twin's residuals over the recording's, as rangesim.twin.comparison reports it
+    rec_std, twin_std = robust_std(rec_res[common]), robust_std(twin_res[common])
+    metrics["noise_std_ratio"] = float(twin_std / rec_std) if rec_std > 0 else float("nan")
     if return_scans:
         return metrics, twin_scan, edge_maps
     return metrics
