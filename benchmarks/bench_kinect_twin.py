@@ -52,6 +52,17 @@ def twin_row(frame: str, sensor, seed: int) -> dict:
     }
 
 
+def _nan_to_null(value):
+    """``value`` with NaN (empty depth bins) as None, so the JSON is strict."""
+    if isinstance(value, dict):
+        return {k: _nan_to_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_nan_to_null(v) for v in value]
+    if isinstance(value, float) and value != value:
+        return None
+    return float(value) if hasattr(value, "dtype") else value
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sensor", default="kinect_v1", help="preset name or TOML (default kinect_v1)")
@@ -75,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
               f"| {r['gaps']['recorded']:.2f} / {r['gaps']['twin']:.2f} "
               f"| {r['f1']['gradient']:.2f} / {r['f1']['normal']:.2f} |", flush=True)
     tmp = args.json.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(rows, indent=1, default=float))
+    tmp.write_text(json.dumps(_nan_to_null(rows), indent=1, allow_nan=False))
     tmp.replace(args.json)
     print(f"wrote {args.json}")
     return 0

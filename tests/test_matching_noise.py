@@ -85,3 +85,16 @@ def test_depth_errors_over_predicted_sigma_have_unit_spread_on_a_part():
     q25, q75 = np.percentile(z, [25, 75])
     assert keep.sum() > 5000
     assert 0.7 < (q75 - q25) / 1.349 < 1.3
+
+
+def test_every_valid_pixel_has_a_sigma_also_where_the_foreground_fattens_over_nothing():
+    # a box with no floor: the matcher's window carries the box's depth past its outline, where
+    # the pixel's ray hits nothing; such a pixel gets the fronto-parallel law at its measured depth
+    sensor = _sensor()
+    scan = rs.scan([box((-40, -30, 0), (40, 30, 35))], sensor, pose=top_down_pose(450.0), seed=7)
+    fattened = scan.valid & (scan.part < 0)
+    assert fattened.any()
+    assert np.isfinite(scan.sigma[scan.valid]).all()
+    fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
+    s0 = sensor.params["structured_light"]["match_sigma_px"]
+    np.testing.assert_allclose(scan.sigma[fattened], scan.depth[fattened] ** 2 * s0 / fb, rtol=1e-5)

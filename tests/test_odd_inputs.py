@@ -3,6 +3,8 @@ results; malformed arguments and files give a RangesimError naming the input (th
 exit code 2, no file left behind). Small synthetic inputs only; no Mitsuba scan but one tiny one."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -228,7 +230,8 @@ def test_detectors_refuse_what_is_not_a_scan_and_empty_or_odd_scans():
 def test_line_fit_skips_valid_pixels_without_a_finite_point():
     scan = rs.datasets.plate_scan({"noise.sigma_px": 0, "noise.speckle_contrast": 0})
     reference = rs.edges.line_fit(scan).mask
-    r, c = np.argwhere(scan.valid & ~reference)[len(reference) // 2]
+    creases = np.argwhere(reference & (rs.edges.line_fit(scan).labels != 1))
+    r, c = creases[len(creases) // 2]  # an edge pixel of the reference
     scan.xyz[r, c] = np.nan  # depth stays finite and valid stays True: the point is unusable
     edges = rs.edges.line_fit(scan).mask
     assert not edges[r, c] and (edges != reference).sum() < 40
@@ -236,8 +239,9 @@ def test_line_fit_skips_valid_pixels_without_a_finite_point():
 
 def test_detector_parameters_are_checked_before_any_work():
     scan = _scan(np.full((30, 40), 300.0))
-    with pytest.raises(ValueError, match="k must be an integer of at least 2, got 0"):
-        rs.edges.line_fit(scan, k=0)
+    for k in (0, float("nan"), None):
+        with pytest.raises(ValueError, match="k must be an integer of at least 2, got"):
+            rs.edges.line_fit(scan, k=k)
     with pytest.raises(ValueError, match="curvature_threshold must be two numbers"):
         rs.edges.pcl_organized(scan, curvature_threshold=(1,))
     plate = rs.datasets.plate_scan()
@@ -246,6 +250,12 @@ def test_detector_parameters_are_checked_before_any_work():
     assert one.mask.sum() == rs.edges.pcl_organized(plate, edge_types=("occluding",)).mask.sum() > 0
     with pytest.raises(RangesimError, match="with_params takes a mapping"):
         rs.load_sensor("kinect_v1").with_params(None)
+
+
+def test_loaders_take_path_like_objects(tmp_path):
+    rs.datasets.plate_scan().save(tmp_path / "plate.npz")
+    (entry,) = [e for e in os.scandir(tmp_path) if e.name == "plate.npz"]
+    assert rs.load_scan(entry).shape == rs.datasets.plate_scan().shape
 
 
 def test_loaders_refuse_what_is_not_a_file_name():

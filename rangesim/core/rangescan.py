@@ -68,7 +68,8 @@ class RangeScan:
     sigma : (H, W) float32 or None
         The noise model's predicted std of ``depth`` at every valid pixel (mm; NaN where
         invalid): what a detector threshold can use. Simulated scans carry it (laser stripes:
-        :mod:`rangesim.sensor.stripe_noise`; block matching: :mod:`rangesim.sensor.matching_noise`);
+        :mod:`rangesim.sensor.stripe_noise`; block matching: :mod:`rangesim.sensor.matching_noise`,
+        where a depth fattened over an edge errs by more than any noise law says);
         None where no model predicts it (recorded data).
     """
 

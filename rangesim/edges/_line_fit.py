@@ -312,8 +312,12 @@ def line_fit(
     if not hasattr(points_or_scan, "xyz"):
         tol = 15.0 if angle_tol_deg is None else angle_tol_deg
         return line_fit_points(points_or_scan, k, tol, line_sep_deg, workers)
-    if int(k) != k or k < 2:
-        raise ValueError(f"k must be an integer of at least 2, got {k}")
+    try:
+        ok = int(k) == k and k >= 2
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ValueError(f"k must be an integer of at least 2, got {k!r}")
     scan = points_or_scan
     xyz, z, valid = scan_arrays(scan)
     noise = None

@@ -60,7 +60,7 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     """Depth noise of a scan, in pixel footprints (sigma_z / (z / f)).
 
     A scan that carries its noise model's prediction (``scan.sigma``, mm, as simulated
-    laser-stripe scans do) gives the median of ``sigma / footprint`` over its valid pixels
+    scans do) gives the median of ``sigma / footprint`` over its valid pixels
     (every 4th row and column): the model knows its noise, correlated or not, which the
     data's second differences underestimate when neighbouring errors are correlated.
     Otherwise, from the data itself: the robust estimator of the module docstring:

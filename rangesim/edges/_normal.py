@@ -169,7 +169,7 @@ def normal(
     matcher = matching_window(scan)
     if matcher is not None and window is None and blocks is None:
         # thresholds raised where the noise model predicts a noisier face (its slant)
-        scale = local_noise_scale(scan, valid, geo.footprint, disc.noise)
+        scale = local_noise_scale(scan, valid, geo.footprint, disc.noise) if threshold_deg is None else None
         return _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search, scale)
     if blocks is None:
         blocks = window is None and noisy and getattr(scan, "sigma", None) is not None
@@ -208,7 +208,7 @@ def normal(
     if auto_threshold and noisy:
         # per pixel where the noise model predicts each pixel's noise: raised where it is
         # above the median's, and without the margin a scan-wide figure needs for them
-        scale = local_noise_scale(scan, valid, geo.footprint, disc.noise)
+        scale = local_noise_scale(scan, valid, geo.footprint, disc.noise) if threshold_deg is None else None
         k = NOISE_K_NORMAL if scale is None else NOISE_K_NORMAL_LOCAL
         threshold_deg = noise_threshold(strength, valid, threshold_deg, k)
         pixel_threshold = raised_threshold(threshold_deg, scale, 179.0)
@@ -292,7 +292,7 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
                scale=None) -> EdgeMap:
     """:func:`normal` on a block-matched scan: chord normals one matching window apart
     (:func:`~rangesim.edges._normal_sl.sl_creases`)."""
-    res = sl_creases(xyz, valid, disc.pairs, matcher, threshold_deg, nms, relative_noise=scale)
+    res = sl_creases(xyz, valid, disc.pairs, matcher, threshold_deg, nms, noise_scale=scale)
     crease = res["crease"]
     jump = disc.occluding
     rim = disc.rim
@@ -309,11 +309,11 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
     labels[rim] = RIM
     labels[jump] = EdgeLabel.JUMP
     params = {
-        "threshold_deg": res["threshold_deg"], "window": None, "matching_window": int(matcher),
+        "threshold_deg": res["threshold_deg"], "threshold_scale_max": res["threshold_scale_max"],
+        "window": None, "matching_window": int(matcher),
         "step": int(res["step"]), "bend_noise_deg": res["bend_noise_deg"],
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
     return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=res["strength"],
                    method="normal", params=params, offset=offset)
-

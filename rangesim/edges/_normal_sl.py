@@ -33,7 +33,7 @@ carries the noise model's prediction (``RangeScan.sigma``,
 :mod:`rangesim.sensor.matching_noise`: the error grows steeply with the surface's slant),
 ``s`` is that typical level and each pixel's thresholds rise with its predicted angular
 noise ``sigma / footprint`` over the scan's median (never below the typical level:
-:func:`~rangesim.edges._noise.local_noise_scale`, as ``relative_noise`` of
+:func:`~rangesim.edges._noise.local_noise_scale`, as ``noise_scale`` of
 :func:`sl_creases`): tuning seeds 0-7 mean F1 +0.006 (lowering them on quiet faces too:
 -0.002), check seeds 8-15 +0.003.
 """
@@ -125,7 +125,7 @@ def bend_noise(angles: list[np.ndarray], valid: np.ndarray) -> float:
 
 def sl_creases(xyz: np.ndarray, valid: np.ndarray, pairs: np.ndarray | None, window: int,
                threshold_deg: float | None = None, nms: bool = True,
-               relative_noise: np.ndarray | None = None) -> dict[str, Any]:
+               noise_scale: np.ndarray | None = None) -> dict[str, Any]:
     """Crease pixels of :func:`~rangesim.edges.normal` on a block-matched scan.
 
     :func:`axis_bends`; the direction across the crease from the second harmonic of the four
@@ -133,13 +133,15 @@ def sl_creases(xyz: np.ndarray, valid: np.ndarray, pairs: np.ndarray | None, win
     matcher's support (:func:`~rangesim.edges._matching_scale.ridge_sigma`); hysteresis on
     the strength between :data:`K_LOW` and :data:`K_HIGH` times :func:`bend_noise` (floors
     :data:`LOW_FLOOR_DEG`, :data:`HIGH_FLOOR_DEG`), or above ``threshold_deg`` where given.
-    ``relative_noise`` (H, W), optional, multiplies the noise thresholds per pixel.
+    ``noise_scale`` (H, W), optional, multiplies the noise thresholds per pixel
+    (``threshold_deg`` then reports the unscaled pair and ``threshold_scale_max`` the largest factor).
 
     Returns
     -------
     dict
         ``crease`` (H, W) bool, ``strength`` (degrees), ``concave``, ``theta``, ``ridge``,
-        ``threshold_deg`` ([low, high]), ``bend_noise_deg``, ``step``, ``ridge_sigma``.
+        ``threshold_deg`` ([low, high] before the per-pixel scale), ``threshold_scale_max``,
+        ``bend_noise_deg``, ``step``, ``ridge_sigma``.
     """
     b = axis_bends(xyz, pairs, window)
     angles = [np.where(np.isnan(a), np.float32(0), a) for a in b["angles"]]
@@ -150,18 +152,24 @@ def sl_creases(xyz: np.ndarray, valid: np.ndarray, pairs: np.ndarray | None, win
     rsig = ridge_sigma(window, 2 * b["step"])
     ridge = nan_gaussian(rank, rsig)
     noise = bend_noise(b["angles"], valid)
+    scale_max = 1.0
     if threshold_deg is None:
-        r = 1.0 if relative_noise is None else relative_noise
-        low = np.maximum(np.radians(LOW_FLOOR_DEG), K_LOW * noise * r)
-        high = np.maximum(np.radians(HIGH_FLOOR_DEG), K_HIGH * noise * r)
+        base_low = max(np.radians(LOW_FLOOR_DEG), K_LOW * noise)
+        base_high = max(np.radians(HIGH_FLOOR_DEG), K_HIGH * noise)
+        low, high = base_low, base_high
+        if noise_scale is not None:
+            low = np.maximum(np.radians(LOW_FLOOR_DEG), K_LOW * noise * noise_scale)
+            high = np.maximum(np.radians(HIGH_FLOOR_DEG), K_HIGH * noise * noise_scale)
+            scale_max = float(np.max(noise_scale[valid])) if valid.any() else 1.0
     else:
-        low = high = float(np.radians(threshold_deg))
+        base_low = base_high = low = high = float(np.radians(threshold_deg))
     with np.errstate(invalid="ignore"):
         above = (strength > low) & valid
     crease = nonmax_suppress(ridge, theta, above) if nms else above
     crease = hysteresis(np.where(crease, strength, 0), low, high) & crease
     return {
         "crease": crease, "strength": np.degrees(strength).astype(np.float32), "concave": b["concave"],
-        "theta": theta, "ridge": ridge, "threshold_deg": [float(np.degrees(np.median(low))), float(np.degrees(np.median(high)))],
+        "theta": theta, "ridge": ridge, "threshold_deg": [float(np.degrees(base_low)), float(np.degrees(base_high))],
+        "threshold_scale_max": scale_max,
         "bend_noise_deg": float(np.degrees(noise)), "step": b["step"], "ridge_sigma": rsig,
     }

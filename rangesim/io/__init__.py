@@ -11,6 +11,7 @@ the writers above there.
 """
 from __future__ import annotations
 
+import os
 import struct
 import tokenize
 import zipfile
@@ -109,7 +110,7 @@ def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
     RangesimError
         If the file is missing, its extension has no reader, or it cannot be read.
     """
-    if not isinstance(path, (str, Path)):
+    if not isinstance(path, (str, os.PathLike)):
         raise RangesimError(f"load_scan takes a file name, got {type(path).__name__}")
     path = Path(path)
     if not path.exists():

@@ -174,7 +174,7 @@ def load_scene(source) -> Scene:
         source = [source]
     if isinstance(source, (list, tuple)):
         return _scene_from_meshes(source)
-    if not isinstance(source, (str, Path)):
+    if not isinstance(source, (str, os.PathLike)):
         raise RangesimError(f"load_scene takes a Scene, meshes or a file name, got {type(source).__name__}")
     path = Path(source)
     if path.suffix.lower() == ".toml":

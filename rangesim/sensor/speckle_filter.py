@@ -15,7 +15,7 @@ one region of the scene and a few 1-3 px specks each, while matching without the
 The step must keep a real surface in one piece: along a row the disparity of a plane seen at
 incidence theta changes by about (b / z) tan(theta) px per pixel (b the baseline, z the depth),
 0.8 px at 75 degrees for a 100 mm baseline at 450 mm, so the default of 2 px splits faces only
-beyond atan(2 z / b) = 83.7 degrees there (beyond 88.9 degrees for a Kinect's 75 mm baseline at 1 m).
+beyond atan(2 z / b) = 83.7 degrees there (beyond 87.9 degrees for a Kinect's 75 mm baseline at 1 m).
 """
 from __future__ import annotations
 

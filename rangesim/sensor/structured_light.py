@@ -195,10 +195,15 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     status = status.reshape(h, w)
     status[matched] = Status.VALID
 
-    # the predicted std of each valid depth (mm), from the true surface's slant
+    # the predicted std of each valid depth (mm), from the true surface's slant; a valid pixel
+    # whose ray hits nothing (the foreground fattened over empty space) gets the law on a
+    # fronto-parallel face at its measured depth (its error is the fattening, which no noise
+    # law describes; neither does sigma where the fattened foreground covers a farther surface)
     with np.errstate(invalid="ignore"):
         sigma = matching_sigma_mm(P, n, f, b, sl["window"], sl["match_sigma_px"], sl["slant_linear"],
                                   sl["slant_quadratic"]).reshape(h, w)
+        flat = z * z * sl["match_sigma_px"] / (f * abs(b))
+    sigma = np.where(np.isfinite(sigma), sigma, flat)
     sigma = np.where(status == Status.VALID, sigma, np.nan).astype(np.float32)
 
     part = np.asarray(hits.part, np.int32).reshape(h, w)
