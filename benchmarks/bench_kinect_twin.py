@@ -46,6 +46,7 @@ def twin_row(frame: str, sensor, seed: int) -> dict:
         "iou_no_physics": m["iou_no_physics"],
         "k": m["z2_coefficient_mm_per_m2"],
         "noise_std_ratio": m["noise_std_ratio"],
+        "z_spread": m.get("z_spread"),
         "gaps": {k: v["median"] for k, v in m["depth_level_gaps_in_steps"].items()},
         "by_depth": m["residual_by_depth"],
         "f1": {name: e["f1"] for name, e in m["edges"].items()},

@@ -215,6 +215,10 @@ def test_kinect_twin_of_a_recorded_frame(data_dir):
     assert 0.5 < k["twin"] / k["recorded"] < 2.0  # the z^2 law at the recording's size
     # the same spread ratio as a mesh twin reports (the figure's histogram title)
     assert 0.5 < m["noise_std_ratio"] < 2.0
+    # the predicted noise: the twin's own errors have unit spread over it on this real geometry,
+    # the recording's a little more (it also holds the fitted scene's own error)
+    assert 0.85 < m["z_spread"]["twin"] < 1.2
+    assert m["z_spread"]["twin"] < m["z_spread"]["recorded"] < 2.0
     # both show depth in disparity steps: the recording's levels are 0.8-1 of the preset's 1/8 px step
     gaps = m["depth_level_gaps_in_steps"]
     assert gaps["twin"]["median"] == pytest.approx(1.0, abs=0.05)

@@ -17,7 +17,9 @@ each pixel labelled (0 no data, 1-9 table, 20-29 first object, 30-39 second, ...
    against the fitted surfaces per depth bin, with the z^2 coefficient of each (the law
    sigma_z = z^2 sigma_d / (f b)); the depth-level gaps in units of the twin's disparity step
    z^2 / (8 f b); edge F1 twin vs recorded; ``noise_std_ratio``, the robust std of the twin's
-   residuals over the recording's on pixels both measured (as :mod:`rangesim.twin.comparison`).
+   residuals over the recording's on pixels both measured (as :mod:`rangesim.twin.comparison`);
+   ``z_spread``, the robust std of each residual over the twin's predicted noise ``sigma``
+   (:mod:`rangesim.sensor.matching_noise`): 1 where the noise law holds.
 """
 from __future__ import annotations
 
@@ -296,6 +298,14 @@ def compare_kinect(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinec
     # robust std of the twin's residuals over the recording's, as rangesim.twin.comparison reports it
     rec_std, twin_std = robust_std(rec_res[common]), robust_std(twin_res[common])
     metrics["noise_std_ratio"] = float(twin_std / rec_std) if rec_std > 0 else float("nan")
+    # both residuals over the noise the twin's model predicts there (scan.sigma): about 1 for
+    # the twin if the law holds on this geometry, and for the recording if it is the device's
+    sigma = twin_scan.sigma
+    if sigma is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            scored = common & np.isfinite(sigma) & (sigma > 0)
+            metrics["z_spread"] = {"recorded": robust_std(rec_res[scored] / sigma[scored]),
+                                   "twin": robust_std(twin_res[scored] / sigma[scored])}
     if return_scans:
         return metrics, twin_scan, edge_maps
     return metrics
