@@ -63,3 +63,29 @@ def test_speckle_settings_are_validated():
         rs.load_sensor("kinect_v1").with_params({"structured_light.speckle_window": 2.5})
     with pytest.raises(rs.RangesimError, match="speckle_range"):
         rs.load_sensor("kinect_v1").with_params({"structured_light.speckle_range": -0.5})
+
+
+def test_region_areas_equal_scipys_connected_components_on_random_images():
+    # the compiled union-find against the graph form (scipy.sparse.csgraph) it replaced
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    def reference(d, max_diff):
+        h, w = d.shape
+        valid = np.isfinite(d)
+        index = np.arange(h * w).reshape(h, w)
+        with np.errstate(invalid="ignore"):
+            across = valid[:, :-1] & valid[:, 1:] & (np.abs(d[:, :-1] - d[:, 1:]) <= max_diff)
+            down = valid[:-1] & valid[1:] & (np.abs(d[:-1] - d[1:]) <= max_diff)
+        rows = np.concatenate([index[:, :-1][across], index[:-1][down]])
+        cols = np.concatenate([index[:, 1:][across], index[1:][down]])
+        _, label = connected_components(coo_matrix((np.ones(rows.size), (rows, cols)), shape=(h * w, h * w)),
+                                        directed=False)
+        return np.where(valid, np.bincount(label)[label].reshape(h, w), 0)
+
+    rng = np.random.default_rng(0)
+    for shape in [(1, 1), (1, 17), (13, 1), (40, 60), (97, 31)]:
+        for holes in (0.0, 0.3, 1.0):
+            d = np.round(rng.uniform(0, 6, shape), 1)
+            d[rng.random(shape) < holes] = np.nan
+            np.testing.assert_array_equal(speckle_regions(d, 2.0), reference(d, 2.0))
