@@ -10,7 +10,7 @@ import numpy as np
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import central_difference
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
-from rangesim.edges._gradient_steps import step_smooth
+from rangesim.edges._gradient_steps import step_smooth, tap5_sum
 from rangesim.edges._grid import shift
 from rangesim.edges._matching_scale import matching_window, ridge_sigma, rounding_gain, strided_responses
 from rangesim.edges._noise import (
@@ -199,14 +199,8 @@ def _validity5_at(bad, idx, w0, w1, w2):  # pragma: no cover - compiled
                 jj = j + m - 2
                 inside = ii >= 0 and ii < h and jj >= 0 and jj < w
                 v[m] = one if inside and not bad[ii, jj] else zero
-            r = (v[0] + v[4]) * w2
-            r += (v[1] + v[3]) * w1
-            r += w0 * v[2]
-            rows[k] = r
-        o = (rows[0] + rows[4]) * w2
-        o += (rows[1] + rows[3]) * w1
-        o += w0 * rows[2]
-        out[n] = o
+            rows[k] = tap5_sum(v, w0, w1, w2)
+        out[n] = tap5_sum(rows, w0, w1, w2)
     return out
 
 

@@ -114,6 +114,16 @@ def _joint_beside_gaps(zs: np.ndarray, z: np.ndarray, pairs: np.ndarray, sigma: 
         zs.ravel()[idx] = _nan_gaussian(z, sigma).ravel()[idx]
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def tap5_sum(a, w0, w1, w2):  # pragma: no cover - compiled
+    """The symmetric 5-tap sum ``((a0 + a4) w2 + (a1 + a3) w1) + w0 a2`` of ``a[0..4]`` in the
+    order every smoothing kernel of the gradient detector uses (so all agree to the bit)."""
+    r = (a[0] + a[4]) * w2
+    r += (a[1] + a[3]) * w1
+    r += w0 * a[2]
+    return r
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _gap_smooth5(zs, z, bad, redo, w0, w1, w2):  # pragma: no cover - compiled
     """:func:`_joint_beside_gaps` for the 5-tap kernel: at the ``redo`` pixels the normalised
@@ -148,19 +158,10 @@ def _gap_smooth5(zs, z, bad, redo, w0, w1, w2):  # pragma: no cover - compiled
                         if jj >= 0 and jj < w and not bad[ii, jj]:
                             vals[m] = z[ii, jj]
                             oks[m] = one
-                rn = (vals[0] + vals[4]) * w2
-                rn += (vals[1] + vals[3]) * w1
-                rn += w0 * vals[2]
-                rd = (oks[0] + oks[4]) * w2
-                rd += (oks[1] + oks[3]) * w1
-                rd += w0 * oks[2]
-                nums[k], dens[k] = rn, rd
-            num = (nums[0] + nums[4]) * w2
-            num += (nums[1] + nums[3]) * w1
-            num += w0 * nums[2]
-            den = (dens[0] + dens[4]) * w2
-            den += (dens[1] + dens[3]) * w1
-            den += w0 * dens[2]
+                nums[k] = tap5_sum(vals, w0, w1, w2)
+                dens[k] = tap5_sum(oks, w0, w1, w2)
+            num = tap5_sum(nums, w0, w1, w2)
+            den = tap5_sum(dens, w0, w1, w2)
             zs[i, j] = num / den if den != zero else np.float32(np.nan)
     return zs
 
