@@ -708,3 +708,42 @@ def test_compiled_axis_difference_matches_the_sides_rule():
                     stacked = central_difference(a[None], axis, pr)[0]
                     assert image.dtype == dtype
                     np.testing.assert_array_equal(image, stacked)
+
+
+def test_line_fit_keeps_no_crease_beside_a_stripe_rounded_step():
+    """A noise-free White Scanner scan of an 8 mm block on a plane, from straight above at
+    350 mm (footprint 0.27 mm, stripe 0.5 mm FWHM): the stripe's width rounds every step
+    over a pixel or two each side, which bends the nearest-neighbour lines of the pixels
+    beside the jump's pair. Without the clearance those become parallel false creases along
+    every step (the scene has no crease in view: the walls are vertical); the default (1 px
+    beyond the far side) clears the step's foot, the shoulder's (on the block's top, beside
+    the jump pixels) are left, and the jump pixels are the same."""
+    from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+    from rangesim.edges._line_fit import LINE_FIT_CLEARANCE
+    from rangesim.edges._scan_access import scan_arrays
+    from rangesim.edges._thinning import near_mask
+
+    def bare_occluded(scan):
+        return discontinuities(scan, scan_arrays(scan)[1], JUMP_THRESHOLD, 50)[0].occluded
+    sensor = rs.load_sensor("white_scanner").with_params({"noise.sigma_px": 0, "noise.speckle_contrast": 0})
+    scan = rs.scan([plane(), box([-30, -20, 0], [30, 20, 8])], sensor, pose=top_down_pose(350.0), seed=0)
+    bare, cleared = line_fit(scan, jump_clearance=0), line_fit(scan)
+    assert LINE_FIT_CLEARANCE == 1 and cleared.params["jump_clearance"] == 1
+
+    def parts(em):
+        crease = em.mask & np.isin(em.labels, [EdgeLabel.CONVEX, EdgeLabel.CONCAVE])
+        return crease, em.mask & (em.labels == EdgeLabel.JUMP)
+    crease0, jump0 = parts(bare)
+    crease1, jump1 = parts(cleared)
+    assert jump0.sum() > 500 and np.array_equal(jump0, jump1)
+    top = scan.depth < 350.0 - 4.0                   # the block's top (342 mm) vs the floor (350)
+    assert (jump0 & ~top).sum() == 0                 # the jumps are marked on the near side
+    # without the clearance: the step's foot (and the floor's border beyond the laser
+    # shadow, the same step's far side across the gap) is a line of false creases
+    foot = crease0 & ~top
+    assert foot.sum() > 200
+    assert near_mask(foot, bare_occluded(scan), 1).sum() >= 0.98 * foot.sum()   # 1 px beyond the far side
+    assert (crease1 & ~top).sum() == 0               # cleared
+    assert (crease1 & top).sum() == (crease0 & top).sum() > 0   # the shoulder's are left
+    with pytest.raises(ValueError, match="jump_clearance"):
+        line_fit(scan, jump_clearance=-1)
