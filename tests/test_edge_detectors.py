@@ -747,3 +747,46 @@ def test_line_fit_keeps_no_crease_beside_a_stripe_rounded_step():
     assert (crease1 & top).sum() == (crease0 & top).sum() > 0   # the shoulder's are left
     with pytest.raises(ValueError, match="jump_clearance"):
         line_fit(scan, jump_clearance=-1)
+
+
+def _l_corners(mask: np.ndarray) -> int:
+    """Pixels with two 4-neighbours at a right angle set and the diagonal between them clear
+    (the inner corner of a 4-connected staircase: an 8-connected line does without it)."""
+    p = np.pad(mask, 1)
+    c = p[1:-1, 1:-1]
+    n, s_, w, e = p[:-2, 1:-1], p[2:, 1:-1], p[1:-1, :-2], p[1:-1, 2:]
+    nw, ne, sw, se = p[:-2, :-2], p[:-2, 2:], p[2:, :-2], p[2:, 2:]
+    corner = (n & e & ~ne & ~s_ & ~w) | (n & w & ~nw & ~s_ & ~e) | (s_ & e & ~se & ~n & ~w) | (s_ & w & ~sw & ~n & ~e)
+    return int((c & corner).sum())
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal", "line_fit", "curvature"])
+def test_jumps_beside_a_ragged_gap_are_8_connected_lines(name, monkeypatch):
+    """A plane 20 mm in front of another, its edge at 30 degrees to the rows, and a band of
+    dropouts beyond the edge that eats 0-2 px into the near plane at random (a block
+    matcher's ragged occluding boundary): every measured pixel beside the band is a jump by
+    the rule, which leaves 4-connected staircases; the marked jumps drop their inner corners
+    (``thin_staircases`` in ``discontinuities``) and nothing else: fewer L corners, no pixel
+    added, every raw jump pixel within 1 px of a kept one."""
+    from scipy import ndimage
+
+    import rangesim.edges._discontinuities as disc_module
+    size, f = 120, 300.0
+    K, rays = pinhole_rays(size, f)
+    v, u = np.mgrid[0:size, 0:size]
+    s = (u - 60) * np.sin(np.radians(30)) - (v - 60) * np.cos(np.radians(30))  # px across the edge
+    depth = np.where(s < 0, 380.0, 400.0)
+    gap = (s >= -np.random.default_rng(3).integers(0, 3, depth.shape)) & (s < 5)
+    depth[gap] = np.nan
+    scan = grid_scan(rays * depth[..., None], K, None)
+
+    def jumps():
+        em = DETECTORS[name](scan)
+        return em.mask & (em.labels == EdgeLabel.JUMP)
+    thinned = jumps()
+    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
+    raw = jumps()
+    assert raw.sum() > 100 and _l_corners(raw) >= 5
+    assert _l_corners(thinned) <= 1
+    assert not (thinned & ~raw).any() and thinned.sum() < raw.sum()
+    assert ndimage.binary_dilation(thinned, np.ones((3, 3), bool))[raw].all()
