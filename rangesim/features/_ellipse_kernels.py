@@ -536,35 +536,66 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     ox, oy = pad - x0, pad - y0
     W = x1 + ox + pad + 1
     H = y1 + oy + pad + 1
-    grown = np.zeros((H, W), np.bool_)
+    # runs of each row, background and foreground alternating (the first and the last are
+    # background: the margin), from the points' footprints [x - g, x + g] on the rows y - g ..
+    # y + g merged, row by row: the work follows the points, not the box's pixels
+    o = np.argsort((pix[:, 1] + oy) * W + (pix[:, 0] + ox))
+    pstart = np.zeros(H + 1, np.int64)
     for i in range(N):
-        x, y = pix[i, 0] + ox, pix[i, 1] + oy
-        for yy in range(y - g, y + g + 1):
-            for xx in range(x - g, x + g + 1):
-                grown[yy, xx] = True
-    # runs of each row, foreground and background alternating
+        pstart[pix[i, 1] + oy + 1] += 1
+    for y in range(H):
+        pstart[y + 1] += pstart[y]
     cap = 64
     rs = np.empty(cap, np.int64)
     re = np.empty(cap, np.int64)
     rf = np.empty(cap, np.bool_)
     row0 = np.empty(H + 1, np.int64)
+    heads = np.empty(2 * g + 1, np.int64)
     n_runs = 0
     for y in range(H):
         row0[y] = n_runs
-        x = 0
-        while x < W:
-            v = grown[y, x]
-            x1 = x
-            while x1 + 1 < W and grown[y, x1 + 1] == v:
-                x1 += 1
-            if n_runs == cap:
-                cap *= 2
-                rs2, re2, rf2 = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.bool_)
-                rs2[:n_runs], re2[:n_runs], rf2[:n_runs] = rs[:n_runs], re[:n_runs], rf[:n_runs]
-                rs, re, rf = rs2, re2, rf2
-            rs[n_runs], re[n_runs], rf[n_runs] = x, x1, v
-            n_runs += 1
-            x = x1 + 1
+        # a (2 g + 1)-way merge of the rows' points by x
+        for k in range(2 * g + 1):
+            yy = y - g + k
+            heads[k] = pstart[yy] if 0 <= yy < H else 0
+        x_end = -1  # the last foreground column so far (-1: none yet)
+        x_beg = 0
+        bg_end = -1
+        while True:
+            best, bx = -1, 0
+            for k in range(2 * g + 1):
+                yy = y - g + k
+                if 0 <= yy < H and heads[k] < pstart[yy + 1]:
+                    xk = pix[o[heads[k]], 0] + ox
+                    if best < 0 or xk < bx:
+                        best, bx = k, xk
+            if best >= 0:
+                heads[best] += 1
+            if best >= 0 and x_end >= 0 and bx - g <= x_end + 1:
+                x_end = max(x_end, bx + g)  # extends the current foreground run
+                continue
+            # close the current foreground run (and the background before it), start another
+            if x_end >= 0:
+                if n_runs + 2 > cap:
+                    cap *= 2
+                    rs2, re2, rf2 = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.bool_)
+                    rs2[:n_runs], re2[:n_runs], rf2[:n_runs] = rs[:n_runs], re[:n_runs], rf[:n_runs]
+                    rs, re, rf = rs2, re2, rf2
+                rs[n_runs], re[n_runs], rf[n_runs] = x_beg, bg_end, False
+                rs[n_runs + 1], re[n_runs + 1], rf[n_runs + 1] = bg_end + 1, x_end, True
+                n_runs += 2
+                x_beg = x_end + 1
+            if best < 0:
+                break
+            bg_end = bx - g - 1
+            x_end = bx + g
+        if n_runs + 1 > cap:
+            cap *= 2
+            rs2, re2, rf2 = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.bool_)
+            rs2[:n_runs], re2[:n_runs], rf2[:n_runs] = rs[:n_runs], re[:n_runs], rf[:n_runs]
+            rs, re, rf = rs2, re2, rf2
+        rs[n_runs], re[n_runs], rf[n_runs] = x_beg, W - 1, False
+        n_runs += 1
     row0[H] = n_runs
     # components over the runs: foreground 8-connected, background 4-connected
     parent = np.arange(n_runs)
@@ -579,12 +610,16 @@ def outline_points(pix, g):  # pragma: no cover - compiled
                 if rf[b] == rf[r]:
                     _union(parent, r, b)
                 b += 1
-    # group numbers in raster order of the first run; each group's leftmost pixel
+    # each run's root, once; group numbers in raster order of the first run; each group's
+    # leftmost pixel
+    rroot = np.empty(n_runs, np.int64)
+    for r in range(n_runs):
+        rroot[r] = _find(parent, r)
     gnum = np.full(n_runs, -1, np.int64)
     n_groups = 0
     for r in range(n_runs):
         if rf[r]:
-            root = _find(parent, r)
+            root = rroot[r]
             if gnum[root] < 0:
                 gnum[root] = n_groups
                 n_groups += 1
@@ -593,24 +628,24 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     for y in range(H):
         for r in range(row0[y], row0[y + 1]):
             if rf[r]:
-                k = gnum[_find(parent, r)]
+                k = gnum[rroot[r]]
                 key = rs[r] * H + y
                 if key < left[k]:
                     left[k] = key
                     left_run[k] = r
     outer = np.empty(n_groups, np.int64)  # root of the background run left of the leftmost pixel
     for k in range(n_groups):
-        outer[k] = _find(parent, left_run[k] - 1)
+        outer[k] = rroot[left_run[k] - 1]
     lab = np.empty(N, np.int64)
     on = np.zeros(N, np.bool_)
     count = np.zeros(n_groups, np.int64)
     for i in range(N):
         x, y = pix[i, 0] + ox, pix[i, 1] + oy
-        lab[i] = gnum[_find(parent, _run_at(rs, re, row0[y], row0[y + 1], x))]
+        lab[i] = gnum[rroot[_run_at(rs, re, row0[y], row0[y + 1], x)]]
         for dy, dx in ((-g - 1, 0), (g + 1, 0), (0, -g - 1), (0, g + 1)):
             yy, xx = y + dy, x + dx
             r = _run_at(rs, re, row0[yy], row0[yy + 1], xx)
-            if not rf[r] and _find(parent, r) == outer[lab[i]]:
+            if not rf[r] and rroot[r] == outer[lab[i]]:
                 on[i] = True
                 break
         if on[i]:
