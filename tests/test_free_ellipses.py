@@ -368,3 +368,81 @@ def test_compiled_coverage_and_claims_match_the_batched_coverage():
     cov1, rms1, per1 = coverage_rows(conics, xy, hyp, pts, _SIN_T, _COS_T, MAX_PERIMETER_PX)
     assert np.array_equal(cov0, cov1) and np.array_equal(per0, per1)
     assert np.allclose(rms0, rms1, rtol=1e-14) and np.array_equal(np.isinf(rms0), np.isinf(rms1))
+
+
+# -- the chain hypotheses (free_ellipses(..., hypotheses="chains"), opt-in) -------------------
+
+@pytest.fixture
+def chains(monkeypatch):
+    """``rs.features.ellipses`` without a model on the chain hypotheses."""
+    import rangesim.features._arc_ellipses as A
+
+    monkeypatch.setattr(A, "HYPOTHESES", "chains")
+
+
+def test_chains_find_the_exact_ellipses_amid_gaps_lines_and_clutter(scene_mask, chains):
+    found = F.ellipses(scene_mask, remove_explained=False)
+    for center, axes, _ in TRUE:
+        d, da = _match(found, center, axes)
+        assert d <= 0.3 and da <= 0.5, (center, d, da)
+    assert len(found) == len(TRUE), [(np.round(f.center), np.round(f.axes)) for f in found]
+
+
+def test_chains_concentric_ellipses_each_found_once(chains):
+    m = np.zeros((200, 200), bool)
+    draw_ellipse(m, (100, 100), (40, 25), 0.2)
+    draw_ellipse(m, (100, 100), (34, 19), 0.2)
+    found = F.ellipses(m, remove_explained=False)
+    assert sorted(round(f.axes[0]) for f in found) == [34, 40]
+
+
+@pytest.mark.parametrize("axes", [(150.0, 90.0), (180.0, 170.0), (100.0, 30.0), (6.0, 4.5)])
+def test_chains_sizes_from_small_rims_to_large_ellipses(axes, chains):
+    m = np.zeros((420, 420), bool)
+    draw_ellipse(m, (210.3, 209.6), axes, 0.4, gaps=[(1.0, 1.4)])
+    found = F.ellipses(m, remove_explained=False, min_points=12, axes_range=(2.5, 250))
+    assert len(found) == 1
+    d, da = _match(found, (210.3, 209.6), axes)
+    assert d <= 0.3 and da <= 0.3, (d, da)
+
+
+def test_chains_rim_around_thread_crests(chains):
+    m = np.zeros((140, 140), bool)
+    center, axes, angle = (70.0, 68.0), (30.0, 22.0), 0.25
+    draw_ellipse(m, center, axes, angle)
+    for k in range(1, 9):
+        shrink = 2.0 * k
+        draw_ellipse(m, (center[0] + 0.6 * shrink, center[1]), (axes[0] - shrink, axes[1] - shrink), angle,
+                     gaps=[(2.6, 6.3)])
+    d, da = _match(F.ellipses(m, remove_explained=False), center, axes)
+    assert d <= 0.3 and da <= 0.5, (d, da)
+
+
+def test_chains_large_partial_ellipses_amid_clutter(chains):
+    """Partial ellipses of semi-axes 150-195 px (60-90 % drawn, 0.25 px jitter) amid
+    segments and noise pixels: most are found within 1 px."""
+    rng = np.random.default_rng(7)
+    size = 1024
+    m = np.zeros((size, size), bool)
+    truth = []
+    for _ in range(4):
+        a = rng.uniform(150, 195)
+        b, t = a * rng.uniform(0.4, 0.75), rng.uniform(0, np.pi)
+        c = rng.uniform(a * 0.5, size - a * 0.5, 2)
+        frac = rng.uniform(0.6, 0.9)
+        s = rng.uniform(0, 2 * np.pi) + np.linspace(0, frac * 2 * np.pi, int(frac * 2 * np.pi * a * 3))
+        x, y = a * np.cos(s), b * np.sin(s)
+        px = c[0] + x * np.cos(t) - y * np.sin(t) + rng.normal(0, 0.25, len(s))
+        py = c[1] + x * np.sin(t) + y * np.cos(t) + rng.normal(0, 0.25, len(s))
+        ok = (px >= 0) & (px <= size - 1) & (py >= 0) & (py <= size - 1)
+        m[np.rint(py[ok]).astype(int), np.rint(px[ok]).astype(int)] = True
+        truth.append((c, (a, b)))
+    for _ in range(20):
+        p0, L, t = rng.uniform(0, size, 2), rng.uniform(20, 200), rng.uniform(0, np.pi)
+        q = np.clip(p0 + L * np.array([np.cos(t), np.sin(t)]), 0, size - 1)
+        draw_segment(m, np.clip(p0, 0, size - 1), q)
+    m[rng.integers(0, size, 500), rng.integers(0, size, 500)] = True
+    found = F.ellipses(m, remove_explained=False)
+    hits = [f for c, ax in truth for f in found
+            if np.hypot(*np.subtract(f.center, c)) <= 1.0 and abs(f.axes[0] - ax[0]) <= 1.0]
+    assert len(hits) >= 2, [(np.round(f.center), np.round(f.axes)) for f in found]

@@ -1,13 +1,16 @@
 """Model-free ellipses: conics fitted to short arcs of edge pixels, then grown along the edges.
 
-Hypotheses come from the pieces of smooth edge curves inside square tiles of several sizes
-(tiles that shift by half their size, so that every arc lies whole in some tile at some scale);
-each hypothesis that is a good ellipse on its piece is grown over all the edge points near it
-whose edge direction agrees, refitted, and kept when it covers enough of its own perimeter.
-Each edge point is claimed by one ellipse (strongest first): a candidate left with too little
-unclaimed support is dropped. Each stage is one compiled pass (:mod:`._ellipse_kernels`): the
-work follows the edge pixels and the number of hypotheses, with no per-curve loop and no
-tracing.
+Hypotheses come (by default, :data:`HYPOTHESES` "tilings") from the pieces of smooth edge
+curves inside square tiles of several sizes (tiles that shift by half their size, so that
+every arc lies whole in some tile at some scale) and from the outer outlines of the groups of
+edge pixels; or ("chains") from the edge pixels traced into ordered chains and cut into arc
+pieces (:mod:`._ellipse_chains`), with the outlines. Each hypothesis that is a good ellipse
+on its piece is grown over all the edge points near it whose edge direction agrees,
+refitted, and kept when it covers enough of its own perimeter. Each edge point is claimed by
+one ellipse (strongest first): a candidate left with too little unclaimed support is
+dropped. Each stage is one compiled pass (:mod:`._ellipse_kernels`,
+:mod:`._ellipse_chains_kernels`): the work follows the edge pixels and the number of
+hypotheses.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ import numpy as np
 from rangesim.core.conics import ellipse_params
 from rangesim.core.constants import EdgeLabel
 from rangesim.features._conic_kernels import sampson_pairs
+from rangesim.features._ellipse_chains import chain_hypotheses
 from rangesim.features._ellipse_kernels import (
     arc_pieces,
     claim,
@@ -27,6 +31,22 @@ from rangesim.features._ellipse_kernels import (
     outline_points,
 )
 
+#: the hypothesis generator of :func:`free_ellipses` (and so of ``rs.features.ellipses``
+#: without a model): "tilings" (:func:`arc_hypotheses` and :func:`outline_hypotheses`) or
+#: "chains" (:func:`~._ellipse_chains.chain_hypotheses` and :func:`outline_hypotheses`). The
+#: chains are 1.4-1.6x faster on the tilted Green Piece (2.8-3.4x cv2.fitEllipse's time, the
+#: tilings 4.3-4.9x) and find about as many large partial ellipses, but not as many rims on
+#: every map of issue 15's checks, so they are not the default
+HYPOTHESES = "tilings"
+#: the chain hypotheses' claims go by coverage less this times the RMS residual (px): two grown
+#: copies of one rim, one pulled 1-3 px towards a thread's crests, cover alike, and the closer
+#: fit goes first
+CLAIM_RMS_WEIGHT = 1.0
+#: the chain hypotheses are joined by the outlines' (:func:`outline_hypotheses`), which go first
+#: (a threaded hole's rim around its crests: its arcs join the crests' and grow towards them)
+CHAIN_OUTLINES = True
+#: the growth bands of :func:`free_ellipses`, px
+BANDS = (3.0, 2.0, 1.5, 1.0)
 #: tile sizes (px) of the arc pieces; each tiling also shifted by half a tile (diagonally)
 TILES_PX = (16, 32, 64, 128, 256)
 #: neighbouring edge pixels belong to one smooth curve when their edge normals agree within this
@@ -239,11 +259,16 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
 
 def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, min_support: float = 0.5,
                   max_residual: float = 0.8, axes_range: tuple[float, float] = (4.0, 200.0),
-                  min_ratio: float = 0.2, pixels: np.ndarray | None = None, labels: np.ndarray | None = None
+                  min_ratio: float = 0.2, pixels: np.ndarray | None = None, labels: np.ndarray | None = None,
+                  hypotheses: str | None = None, outlines: bool | None = None, bands: tuple | None = None
                   ) -> list[tuple[np.ndarray, np.ndarray, float, float, int]]:
     """Ellipses of edge points without a model: arc hypotheses, grown, one claim per point
     (a candidate whose unclaimed inliers cover less than ``min_support`` is dropped; the
     returned inliers of an accepted ellipse are all of them, claimed before or not).
+
+    ``hypotheses``: "tilings" or "chains" (default :data:`HYPOTHESES`); ``outlines``: add the
+    outline hypotheses (default: always with the tilings, with the chains when
+    :data:`CHAIN_OUTLINES`); ``bands``: the growth bands, px (default :data:`BANDS`).
 
     ``pixels`` (N, 2) int: the points' pixels (default ``xy``), which link the points into
     curves and groups; the conics are fitted to ``xy`` (edge points to a fraction of a pixel).
@@ -254,27 +279,41 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     Returns
     -------
     list of (conic (6,), inlier point indices, coverage, RMS Sampson distance px, n inliers),
-    largest coverage first.
+    in the claims' order (the largest coverage first; with the chains, the largest coverage
+    less :data:`CLAIM_RMS_WEIGHT` times the RMS distance).
     """
     if len(xy) < min_points:
         return []
     xy = np.ascontiguousarray(xy, np.float64)
-    curve = smooth_curves(xy if pixels is None else pixels, theta)
-    conics, n = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
-    c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
-    conics, n = np.concatenate([conics, c2]), np.concatenate([n, n2])
+    hypotheses = HYPOTHESES if hypotheses is None else hypotheses
+    if hypotheses == "chains":
+        conics, n = chain_hypotheses(xy, theta, pixels, axes_range=axes_range, min_ratio=min_ratio)
+    elif hypotheses == "tilings":
+        curve = smooth_curves(xy if pixels is None else pixels, theta)
+        conics, n = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
+    else:
+        raise ValueError(f"hypotheses must be 'chains' or 'tilings', not {hypotheses!r}")
+    if (hypotheses == "tilings" or CHAIN_OUTLINES) if outlines is None else outlines:
+        c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
+        if hypotheses == "chains":  # the outlines first: a rim's outline beats its arcs joined to crests
+            n2 = n2 + (n.max() if len(n) else 0) + 1
+        conics, n = np.concatenate([conics, c2]), np.concatenate([n, n2])
     conics = conics[np.argsort(-n, kind="stable")]
     conics = conics[distinct(conics)]
     if len(conics) == 0:
         return []
-    conics, ok, hyp, pt = grow(conics, xy, theta)
+    conics, ok, hyp, pt = grow(conics, xy, theta, bands=BANDS if bands is None else bands)
     cov, rms, _ = coverage_rows(conics, xy, hyp, pt, _SIN_T, _COS_T, MAX_PERIMETER_PX)
     _, axes, _, real = ellipse_params(conics)
     n_in = np.bincount(hyp, minlength=len(conics))
     good = ok & real & (cov >= min_support) & (rms <= max_residual) & (n_in >= min_points)
     good &= (axes[:, 1] >= axes_range[0]) & (axes[:, 0] <= axes_range[1]) & (axes[:, 1] >= min_ratio * axes[:, 0])
     order = np.nonzero(good)[0]
-    order = order[np.argsort(-cov[order], kind="stable")]
+    # the claims' order: the largest coverage first; with the chains, less the RMS residual
+    # times CLAIM_RMS_WEIGHT (two grown copies of one rim, one pulled 1-3 px towards a crest,
+    # cover alike: the closer fit goes first)
+    key = cov[order] - (CLAIM_RMS_WEIGHT * rms[order] if hypotheses == "chains" else 0.0)
+    order = order[np.argsort(-key, kind="stable")]
     # the claims (one compiled pass): a candidate keeps its own edge's inliers; one left with
     # too little of its perimeter once stronger ellipses took their points (a near-duplicate,
     # a ghost across two rims) is dropped
