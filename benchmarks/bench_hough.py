@@ -7,10 +7,13 @@ timed interleaved in one process (median of the runs), with recall, precision an
   gradient edges with rim creases kept), 12 visible rims from the CAD part, the tapped holes'
   crest outlines (real circles, not scored rims) set aside in a second scoring; and on
   circles nearly tangent inside others (``tangent_pairs``), with ``split_tangent`` on and off;
-- ellipses (model-free path): ``rs.features.ellipses(mask, remove_explained=False)`` against
-  ``cv2.fitEllipse`` on each contour of ``cv2.findContours`` (linked edge pixels) and
-  ``cv2.ximgproc.findEllipses`` (opencv-contrib), on the tilted Green Piece; the model-guided
-  path (``ellipses(edges, scan, scene)``) is printed beside them;
+- ellipses (model-free path): ``rs.features.ellipses(mask, remove_explained=False)`` (the
+  default, and each hypothesis generator: the tilings and the chains,
+  :data:`rangesim.features._arc_ellipses.HYPOTHESES`) against ``cv2.fitEllipse`` on each
+  contour of ``cv2.findContours`` (linked edge pixels) and ``cv2.ximgproc.findEllipses``
+  (opencv-contrib), on the tilted Green Piece, with a second timing in CPU time of this thread
+  (median of 25, which a loaded machine disturbs less); the model-guided path
+  (``ellipses(edges, scan, scene)``) is printed beside them;
 - segments: ``rs.features.lines`` against ``cv2.HoughLinesP`` and scikit-image's
   ``probabilistic_hough_line``, on the same tilted and head-on maps (the part's plate edges).
 
@@ -239,6 +242,19 @@ def crest_outlines(scan, scene) -> list[TrueRound]:
 
 # -- methods -----------------------------------------------------------------------------------
 
+def free_ellipses_with(hypotheses: str, mask: np.ndarray) -> list:
+    """``rs.features.ellipses(mask)`` (no model) with the hypothesis generator ``hypotheses``
+    ("tilings" or "chains", :data:`rangesim.features._arc_ellipses.HYPOTHESES`)."""
+    from rangesim.features import _arc_ellipses
+
+    old = _arc_ellipses.HYPOTHESES
+    _arc_ellipses.HYPOTHESES = hypotheses
+    try:
+        return F.ellipses(mask, remove_explained=False)
+    finally:
+        _arc_ellipses.HYPOTHESES = old
+
+
 def cv_circles(mask: np.ndarray, search, param2: int) -> list:
     """cv2.HoughCircles (HOUGH_GRADIENT, dp 1, minDist 10 px, Canny high 100) on the edge map."""
     res = cv2.HoughCircles(mask.astype(np.uint8) * 255, cv2.HOUGH_GRADIENT, 1, 10, param1=100,
@@ -286,15 +302,17 @@ def sk_segments(mask: np.ndarray) -> list:
 
 # -- measurement -------------------------------------------------------------------------------
 
-def interleaved(fns: dict, repeat: int) -> tuple[dict, dict]:
-    """Median seconds of each callable, run in turn ``repeat`` times after one warm-up each."""
+def interleaved(fns: dict, repeat: int, clock=time.perf_counter) -> tuple[dict, dict]:
+    """Median seconds of each callable, run in turn ``repeat`` times after one warm-up each
+    (``clock``: wall time, or ``time.thread_time`` for the CPU time of this thread, which a
+    loaded machine disturbs less)."""
     out = {k: f() for k, f in fns.items()}
     times = {k: [] for k in fns}
     for _ in range(repeat):
         for k, f in fns.items():
-            t = time.perf_counter()
+            t = clock()
             out[k] = f()
-            times[k].append(time.perf_counter() - t)
+            times[k].append(clock() - t)
     return {k: statistics.median(v) for k, v in times.items()}, out
 
 
@@ -486,15 +504,26 @@ def bench_ellipses(scene, views, repeat: int) -> None:
         scan, edges, truth = views[(label, "tilted")]
         mask = edges.mask
         t, out = interleaved({"ours": lambda m=mask: F.ellipses(m, remove_explained=False),
+                              "tilings": lambda m=mask: free_ellipses_with("tilings", m),
+                              "chains": lambda m=mask: free_ellipses_with("chains", m),
                               "fit": lambda m=mask: cv_fit_ellipses(m),
                               "find": lambda m=mask: cv_find_ellipses(m)}, repeat)
+        t_cpu, _ = interleaved({"ours": lambda m=mask: F.ellipses(m, remove_explained=False),
+                                "tilings": lambda m=mask: free_ellipses_with("tilings", m),
+                                "chains": lambda m=mask: free_ellipses_with("chains", m),
+                                "fit": lambda m=mask: cv_fit_ellipses(m)}, 25, clock=time.thread_time)
         inp = f"Green Piece tilted, {label} ({int(mask.sum())} edge px)"
-        for key, name in (("ours", "rangesim ellipses (no model)"), ("fit", "cv2.findContours + fitEllipse"),
-                          ("find", "cv2.ximgproc.findEllipses")):
+        for key, name in (("ours", "rangesim ellipses (no model, default)"),
+                          ("tilings", "rangesim ellipses (no model, tilings)"),
+                          ("chains", "rangesim ellipses (no model, chains)"),
+                          ("fit", "cv2.findContours + fitEllipse"), ("find", "cv2.ximgproc.findEllipses")):
             s = feature_scores({"ellipses": out[key]}, truth, center_tol_px=2.0)["round"]
             s = {"recall": s["recall"], "precision": s["precision"], "centre": s["center_error_px"],
                  "radius": s["radius_error_px"]}
             _row(inp, name, t[key], t["fit"] if key != "fit" else None, s)
+            if key in t_cpu and key != "fit":
+                print(f"|   | (CPU time, median of 25) | {t_cpu[key] * 1e3:.2f} | {t_cpu[key] / t_cpu['fit']:.2f}x "
+                      f"(fitEllipse {t_cpu['fit'] * 1e3:.2f} ms) | | | | |")
         t_mg, found = interleaved({"mg": lambda e=edges, s=scan: F.ellipses(e, s, scene)}, max(1, repeat // 2))
         s = feature_scores({"ellipses": found["mg"]}, truth, center_tol_px=2.0)["round"]
         s = {"recall": s["recall"], "precision": s["precision"], "centre": s["center_error_px"],
