@@ -110,3 +110,31 @@ def test_empty_and_unknown():
     assert len(order) == 0 and list(start) == [0]
     with pytest.raises(ValueError, match="hypotheses"):
         free_ellipses(np.zeros((30, 2)), np.zeros(30), hypotheses="nope")
+
+
+def test_links_join_the_arcs_of_one_ellipse_across_gaps():
+    """An ellipse drawn with four 3 px gaps (four chains) and a line beside it: the pieces
+    linked end to end make one path holding the four arcs and not the line, and its fit
+    is the ellipse."""
+    from rangesim.features._ellipse_chains_kernels import link_groups
+
+    mask = np.zeros((200, 200), bool)
+    t = np.linspace(0, 2 * np.pi, 4000)
+    keep = np.ones(len(t), bool)
+    for a in (0.3, 1.9, 3.5, 5.1):
+        keep &= ~((t > a) & (t < a + 0.05))
+    _draw(mask, 100 + 60 * np.cos(t[keep]), 100 + 45 * np.sin(t[keep]))
+    x = np.linspace(150, 190, 200)
+    _draw(mask, x, np.full_like(x, 150.0))
+    xy, theta, pix = _mask_points(mask)
+    order, start = chains(pix, theta)
+    p_start, p_cnt, _ = pieces(xy, order, start)
+    pts, lo, n, _ = link_groups(xy, order, p_start, p_cnt, 0.5, 12.0, np.cos(np.deg2rad(30)), 8, np.array([3]))
+    on_ellipse = np.abs(np.hypot((xy[:, 0] - 100) / 60, (xy[:, 1] - 100) / 45) - 1) < 0.05
+    whole = [pts[a:a + m] for a, m in zip(lo, n)]
+    best = max(whole, key=len)
+    arcs = [order[a:a + m] for a, m in zip(p_start, p_cnt) if on_ellipse[order[a:a + m]].all()]
+    assert len(arcs) >= 4 and set(best) == set(np.concatenate(arcs))  # the four arcs, not the line
+    conics, _ = chain_hypotheses(xy, theta, pix)
+    centres = np.array([ellipse_from_conic(q)[0] for q in conics])
+    assert np.hypot(*(centres - 100.0).T).min() <= 0.3

@@ -7,8 +7,8 @@ its nearest neighbours fitted, and each good fit grown over the whole pieces tha
 A point belongs to one piece, so it is fitted a few times (alone, in its piece's pairs and
 triples, in the unions it is grown into) instead of once per tiling
 (:func:`~._arc_ellipses.arc_hypotheses`): about 330 fits per tilted Green Piece map instead
-of about 1,150, and pieces as long as the arcs themselves (a large partial ellipse's arcs are
-fitted whole, not cut at tile borders).
+of about 1,150, and pieces as long as the arcs themselves, joined across gaps (a large partial
+ellipse's arcs are fitted whole, not cut at tile borders).
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from rangesim.features._ellipse_chains_kernels import (
     cut_chains,
     fit_ranges,
     grow_pieces,
+    link_groups,
     piece_fits,
     trace_chains,
 )
@@ -74,6 +75,12 @@ PAIR_NEAREST = 3
 #: each piece with the nearest piece at either end, within PAIR_GAP_PX or this fraction of its
 #: length (points), and with both
 GAP_FRACTION = 0.5
+#: the pieces are linked end to end (their ends facing each other, the step between them within
+#: LINK_TURN_DEG of both ends' directions, within PAIR_GAP_PX or GAP_FRACTION of the shorter
+#: piece's points), and runs of LINK_WINDOWS pieces and whole paths fitted
+LINKS = True
+LINK_TURN_DEG = 30.0
+LINK_WINDOWS = (3,)
 #: only the distinct good fits (centres 2 px apart, or a semi-axis 20 %) are grown over pieces
 SEED_DISTINCT = True
 #: rounds of the pieces' growth (each around the last union's fit)
@@ -158,7 +165,12 @@ def chain_hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray | Non
     :data:`CLUSTER_GAP_PX`, at most :data:`CLUSTER_MAX_POINTS` points) as one cluster: a
     small rim that the links broke into short chains
     (:func:`~._ellipse_chains_kernels.piece_fits`,
-    :func:`~._ellipse_chains_kernels.cluster_groups`). Each fit (direct least squares, one
+    :func:`~._ellipse_chains_kernels.cluster_groups`). With :data:`LINKS` the pieces are
+    also linked end to end where one continues another across a gap (ends facing, the step
+    within :data:`LINK_TURN_DEG` of both ends' directions, mutual nearest), and each run of
+    :data:`LINK_WINDOWS` linked pieces and each whole path is fitted: the arcs of a large
+    ellipse whose chain the links broke in several places, each too short for an unbiased fit
+    (:func:`~._ellipse_chains_kernels.link_groups`). Each fit (direct least squares, one
     trimmed refit) is checked as :func:`~._arc_ellipses.arc_hypotheses` checks its pieces
     (RMS Sampson distance <= ``max_rms``, ``min_inliers`` within 1 px, over ``min_arc_deg``
     of the ellipse, within ``axes_range``); each distinct good one, the most points first, is
@@ -201,6 +213,14 @@ def chain_hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray | Non
                                         float(min_inliers), lo, hi, float(min_ratio), float(min_arc_deg))
     if FRAGMENT_PAIRS:
         first = (np.cumsum(big) - 1)[first]  # the groups' first pieces among the pieces
+    if LINKS:  # the pieces linked end to end across gaps: windows of them, and whole paths
+        l_pts, l_lo, l_n, l_first = link_groups(xy, order, p_start, p_cnt, float(GAP_FRACTION), float(PAIR_GAP_PX),
+                                                float(np.cos(np.deg2rad(LINK_TURN_DEG))), 8,
+                                                np.asarray(LINK_WINDOWS, np.int64))
+        l_conics, l_good = fit_ranges(xy, l_pts, l_lo, l_n, float(max_rms), float(min_inliers), lo, hi,
+                                      float(min_ratio), float(min_arc_deg))
+        conics, good = np.concatenate([conics, l_conics]), np.concatenate([good, l_good])
+        first, n = np.concatenate([first, l_first]), np.concatenate([n, l_n])
     if CLUSTER_GAP_PX > 0:
         c_pts, c_lo, c_n, _ = cluster_groups(xy, order, f_start, f_cnt, float(CLUSTER_GAP_PX),
                                              int(MIN_PIECE_POINTS), int(CLUSTER_MAX_POINTS))

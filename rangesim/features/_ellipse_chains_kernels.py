@@ -677,6 +677,150 @@ def cluster_groups(xy, order, p_start, p_cnt, gap, min_points, max_points):  # p
 
 
 @numba.njit(**_JIT)
+def _end_dir(xy, order, s, m, u, back):  # pragma: no cover - compiled
+    """Unit direction out of end ``u`` of the piece ``order[s:s + m]``: from the point ``back``
+    points inside (or the far end) to the end."""
+    k = min(back, m - 1)
+    if u == 0:
+        a, b = order[s + k], order[s]
+    else:
+        a, b = order[s + m - 1 - k], order[s + m - 1]
+    dx, dy = xy[b, 0] - xy[a, 0], xy[b, 1] - xy[a, 1]
+    L = np.sqrt(dx * dx + dy * dy)
+    if L == 0:
+        return 0.0, 0.0
+    return dx / L, dy / L
+
+
+@numba.njit(**_JIT)
+def link_groups(xy, order, p_start, p_cnt, gap_frac, min_gap, cos_tol, back, windows):  # pragma: no cover
+    """The pieces linked end to end into longer arcs across gaps: each piece end is linked
+    to the end of another that is its nearest one continuing it (within ``gap_frac`` of the
+    shorter piece's points or ``min_gap`` px, the larger; the step between the ends and both
+    ends' outward directions within ``cos_tol`` of one line, the two ends facing each other),
+    when that end chose it back. The links make paths (each end has one at most); each run
+    of ``windows[k]`` consecutive pieces of a path is a group, and each whole path of 2 or
+    more pieces (a large ellipse whose chain the links broke in several places).
+
+    Returns pts, lo, n, first as :func:`cluster_groups`.
+    """
+    P = len(p_start)
+    best = np.full(2 * P, -1, np.int64)
+    dx_ = np.empty(2 * P)
+    dy_ = np.empty(2 * P)
+    ex = np.empty(2 * P)
+    ey = np.empty(2 * P)
+    for p in range(P):
+        for u in range(2):
+            i = order[p_start[p] + (p_cnt[p] - 1 if u else 0)]
+            ex[2 * p + u], ey[2 * p + u] = xy[i, 0], xy[i, 1]
+            dx_[2 * p + u], dy_[2 * p + u] = _end_dir(xy, order, p_start[p], p_cnt[p], u, back)
+    ends = np.argsort(ex)
+    ends_x = ex[ends]
+    for e in range(2 * P):
+        p = e // 2
+        best_d = np.inf
+        reach = max(min_gap, gap_frac * p_cnt[p])
+        at = np.searchsorted(ends_x, ex[e] - reach)
+        while at < 2 * P and ends_x[at] <= ex[e] + reach:
+            f = ends[at]
+            at += 1
+            q = f // 2
+            if q == p:
+                continue
+            g = max(min_gap, gap_frac * min(p_cnt[p], p_cnt[q]))
+            sx, sy = ex[f] - ex[e], ey[f] - ey[e]
+            d = np.sqrt(sx * sx + sy * sy)
+            if d > g or d >= best_d:
+                continue
+            # facing each other, and (across a gap of over 2 px) the step along both
+            if dx_[e] * dx_[f] + dy_[e] * dy_[f] > -cos_tol:
+                continue
+            if d > 2.0 and (sx * dx_[e] + sy * dy_[e] < cos_tol * d or -(sx * dx_[f] + sy * dy_[f]) < cos_tol * d):
+                continue
+            best_d = d
+            best[e] = f
+    link = np.full(2 * P, -1, np.int64)
+    for e in range(2 * P):
+        f = best[e]
+        if f >= 0 and best[f] == e:
+            link[e] = f
+    # the paths: from each piece whose end 0 or end 1 is unlinked (or any piece of a cycle)
+    seen = np.zeros(P, np.bool_)
+    path = np.empty(P, np.int64)
+    gs = np.empty(P + 1, np.int64)  # the paths' pieces, path after path
+    gp = np.empty(P, np.int64)
+    n_paths = 0
+    n_at = 0
+    gs[0] = 0
+    for pass_ in range(2):
+        for p in range(P):
+            if seen[p]:
+                continue
+            if pass_ == 0 and link[2 * p] >= 0 and link[2 * p + 1] >= 0:
+                continue  # not an end of a path (a cycle's pieces wait for the second pass)
+            # walk out through the linked end (end 1 if end 0 is free, else end 0)
+            u = 1 if link[2 * p] < 0 else 0
+            L = 0
+            q = p
+            while q >= 0 and not seen[q]:
+                seen[q] = True
+                path[L] = q
+                L += 1
+                f = link[2 * q + u]
+                if f < 0:
+                    break
+                q = f // 2
+                u = 1 - f % 2  # leave the piece by its other end
+            for k in range(L):
+                gp[n_at + k] = path[k]
+            n_at += L
+            n_paths += 1
+            gs[n_paths] = n_at
+    # the groups: windows of consecutive pieces, and whole paths
+    G = 0
+    R = 0
+    for k in range(n_paths):
+        L = gs[k + 1] - gs[k]
+        if L < 2:
+            continue
+        for w in windows:
+            if w < L:
+                for a in range(L - w + 1):
+                    G += 1
+                    for j in range(a, a + w):
+                        R += p_cnt[gp[gs[k] + j]]
+        G += 1
+        for j in range(L):
+            R += p_cnt[gp[gs[k] + j]]
+    pts = np.empty(R, np.int64)
+    lo = np.zeros(G, np.int64)
+    n = np.zeros(G, np.int64)
+    first = np.zeros(G, np.int64)
+    g = 0
+    at = 0
+    for k in range(n_paths):
+        L = gs[k + 1] - gs[k]
+        if L < 2:
+            continue
+        for wi in range(len(windows) + 1):
+            w = windows[wi] if wi < len(windows) else L
+            if w > L or (wi < len(windows) and w == L):
+                continue
+            for a in range(L - w + 1):
+                lo[g] = at
+                first[g] = gp[gs[k] + a]
+                for j in range(a, a + w):
+                    q = gp[gs[k] + j]
+                    for r in range(p_start[q], p_start[q] + p_cnt[q]):
+                        pts[at] = order[r]
+                        at += 1
+                n[g] = at - lo[g]
+                g += 1
+    return pts[:at], lo[:g], n[:g], first[:g]
+
+
+@numba.njit(**_JIT)
 def _piece_on(q, cx, cy, reach, xy, order, s, m, ct, st, band, cos_tol):  # pragma: no cover - compiled
     """Whether the piece ``order[s:s + m]`` lies on the conic ``q``: at least 4 of 5 points
     spread along it within ``band`` px with agreeing normals (its middle one first)."""
