@@ -94,7 +94,8 @@ def chains(pixels: np.ndarray, theta: np.ndarray, min_len: int = 2) -> tuple[np.
     runs at least :data:`ADJACENT_DEG` off both normals; a diagonal link is dropped where a
     4-neighbour linked to both carries the chain. Walks start at the chains' ends, then at
     the points left (loops), and go on along the straightest link; at a junction the other
-    branches become chains of their own (the chains are cut at branch points). A staircase
+    branches become chains of their own (the walk itself goes on through it: where the
+    straightest branch is not the same curve, the pieces' cuts end the arc there). A staircase
     pixel whose step to its neighbour runs along the normal is not linked, and a walk may
     pass it by: about one pixel in eight of a rasterised ellipse stays out of the chains.
 
