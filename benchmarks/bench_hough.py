@@ -244,15 +244,8 @@ def crest_outlines(scan, scene) -> list[TrueRound]:
 
 def free_ellipses_with(hypotheses: str, mask: np.ndarray) -> list:
     """``rs.features.ellipses(mask)`` (no model) with the hypothesis generator ``hypotheses``
-    ("tilings" or "chains", :data:`rangesim.features._arc_ellipses.HYPOTHESES`)."""
-    from rangesim.features import _arc_ellipses
-
-    old = _arc_ellipses.HYPOTHESES
-    _arc_ellipses.HYPOTHESES = hypotheses
-    try:
-        return F.ellipses(mask, remove_explained=False)
-    finally:
-        _arc_ellipses.HYPOTHESES = old
+    ("tilings" or "chains")."""
+    return F.ellipses(mask, remove_explained=False, hypotheses=hypotheses)
 
 
 def cv_circles(mask: np.ndarray, search, param2: int) -> list:

@@ -446,3 +446,17 @@ def test_chains_large_partial_ellipses_amid_clutter(chains):
     hits = [f for c, ax in truth for f in found
             if np.hypot(*np.subtract(f.center, c)) <= 1.0 and abs(f.axes[0] - ax[0]) <= 1.0]
     assert len(hits) >= 2, [(np.round(f.center), np.round(f.axes)) for f in found]
+
+
+def test_the_public_call_picks_the_hypotheses(scene_mask, chains, monkeypatch):
+    """``ellipses(..., hypotheses=...)`` picks the generator whatever the module default;
+    anything else is refused, naming the argument."""
+    by_default = F.ellipses(scene_mask, remove_explained=False)          # the fixture's "chains"
+    asked = F.ellipses(scene_mask, remove_explained=False, hypotheses="chains")
+    tilings = F.ellipses(scene_mask, remove_explained=False, hypotheses="tilings")
+    assert [e.center for e in asked] == [e.center for e in by_default]
+    import rangesim.features._arc_ellipses as A
+    monkeypatch.setattr(A, "HYPOTHESES", "tilings")
+    assert [e.center for e in F.ellipses(scene_mask, remove_explained=False)] == [e.center for e in tilings]
+    with pytest.raises(ValueError, match="hypotheses"):
+        F.ellipses(scene_mask, hypotheses="contours")
