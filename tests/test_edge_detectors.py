@@ -760,14 +760,30 @@ def _l_corners(mask: np.ndarray) -> int:
     return int((c & corner).sum())
 
 
+def _step_corners(mask: np.ndarray) -> int:
+    """L corners that the line can do without (two 4-neighbours at a right angle set, their
+    diagonal and the three opposite pixels clear) one of whose arms is a single pixel: a
+    staircase's step, not two straight runs meeting."""
+    p = np.pad(mask, 2)
+    h, w = mask.shape
+    at = lambda dr, dc: p[2 + dr:2 + dr + h, 2 + dc:2 + dc + w]
+    c = at(0, 0)
+    total = np.zeros_like(mask)
+    for (r1, c1), (r2, c2) in (((-1, 0), (0, 1)), ((0, 1), (1, 0)), ((1, 0), (0, -1)), ((0, -1), (-1, 0))):
+        l_shape = (at(r1, c1) & at(r2, c2) & ~at(r1 + r2, c1 + c2) & ~at(-r1, -c1) & ~at(-r2, -c2)
+                   & ~at(-r1 - r2, -c1 - c2))        # nothing hangs on it from the other side
+        total |= c & l_shape & ~(at(2 * r1, 2 * c1) & at(2 * r2, 2 * c2))
+    return int(total.sum())
+
+
 @pytest.mark.parametrize("name", ["gradient", "normal", "line_fit", "curvature"])
 def test_jumps_beside_a_ragged_gap_are_8_connected_lines(name, monkeypatch):
     """A plane 20 mm in front of another, its edge at 30 degrees to the rows, and a band of
     dropouts beyond the edge that eats 0-2 px into the near plane at random (a block
     matcher's ragged occluding boundary): every measured pixel beside the band is a jump by
     the rule, which leaves 4-connected staircases; the marked jumps drop their inner corners
-    (``thin_staircases`` in ``discontinuities``) and nothing else: fewer L corners, no pixel
-    added, every raw jump pixel within 1 px of a kept one."""
+    (``thin_staircases`` in ``discontinuities``) and nothing else: no step corner left, no
+    pixel added, every raw jump pixel within 1 px of a kept one."""
     from scipy import ndimage
 
     import rangesim.edges._discontinuities as disc_module
@@ -786,7 +802,32 @@ def test_jumps_beside_a_ragged_gap_are_8_connected_lines(name, monkeypatch):
     thinned = jumps()
     monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
     raw = jumps()
-    assert raw.sum() > 100 and _l_corners(raw) >= 5
-    assert _l_corners(thinned) <= 1
+    assert raw.sum() > 100 and _step_corners(raw) >= 5
+    assert _step_corners(thinned) == 0            # every step's corner gone
+    assert _l_corners(thinned) < _l_corners(raw)  # (corners of two longer runs stay, as the truth's)
     assert not (thinned & ~raw).any() and thinned.sum() < raw.sum()
     assert ndimage.binary_dilation(thinned, np.ones((3, 3), bool))[raw].all()
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal", "line_fit", "curvature"])
+def test_a_square_boxs_jump_outline_keeps_its_corners(name, monkeypatch):
+    """A box seen square on (a 40 x 24 px rectangle 20 mm in front of a plane): its jump
+    outline is four straight runs meeting at right angles, and the truth marks the corner
+    pixels; the staircase thinning leaves them (both arms run on), so the outline is the
+    jump rule's own, corners included."""
+    import rangesim.edges._discontinuities as disc_module
+    size, f = 80, 300.0
+    K, rays = pinhole_rays(size, f)
+    depth = np.full((size, size), 400.0)
+    depth[28:52, 20:60] = 380.0
+    scan = grid_scan(rays * depth[..., None], K, None)
+
+    def jumps():
+        em = DETECTORS[name](scan)
+        return em.mask & (em.labels == EdgeLabel.JUMP)
+    thinned = jumps()
+    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
+    raw = jumps()
+    assert raw.sum() >= 2 * (40 + 24) - 4
+    assert np.array_equal(thinned, raw)
+    assert thinned[[28, 28, 51, 51], [20, 59, 20, 59]].all()
