@@ -331,6 +331,9 @@ def line_fit(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
+    if jump_clearance is not None and not (isinstance(jump_clearance, (int, np.integer))
+                                           and not isinstance(jump_clearance, bool) and jump_clearance >= 0):
+        raise ValueError(f"jump_clearance must be a whole number of pixels >= 0, got {jump_clearance!r}")
     if not hasattr(points_or_scan, "xyz"):
         tol = 15.0 if angle_tol_deg is None else angle_tol_deg
         return line_fit_points(points_or_scan, k, tol, line_sep_deg, workers)
@@ -340,9 +343,6 @@ def line_fit(
         ok = False
     if not ok:
         raise ValueError(f"k must be an integer of at least 2, got {k!r}")
-    if jump_clearance is not None and not (isinstance(jump_clearance, (int, np.integer))
-                                           and not isinstance(jump_clearance, bool) and jump_clearance >= 0):
-        raise ValueError(f"jump_clearance must be a whole number of pixels >= 0, got {jump_clearance!r}")
     scan = points_or_scan
     xyz, z, valid = scan_arrays(scan)
     noise = None
@@ -385,7 +385,8 @@ def line_fit(
         # crease; jumps and rims stay the jump rule's
         edge = (edge & ~fixed) | (cut & fixed)
     if jump_clearance is None:
-        clearance = 0 if window is not None else LINE_FIT_CLEARANCE
+        # block-matched scans (whatever the tolerance): their lines skip gaps and stop at jumps
+        clearance = 0 if matching_window(scan) is not None else LINE_FIT_CLEARANCE
     else:
         clearance = int(jump_clearance)
     if clearance > 0:
