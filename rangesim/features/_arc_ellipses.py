@@ -34,9 +34,12 @@ from rangesim.features._ellipse_kernels import (
 #: the hypothesis generator of :func:`free_ellipses` (and so of ``rs.features.ellipses``
 #: without a model): "tilings" (:func:`arc_hypotheses` and :func:`outline_hypotheses`) or
 #: "chains" (:func:`~._ellipse_chains.chain_hypotheses` and :func:`outline_hypotheses`). The
-#: chains are 1.4-1.6x faster on the tilted Green Piece (2.8-3.4x cv2.fitEllipse's time, the
-#: tilings 4.3-4.9x) and find about as many large partial ellipses, but not as many rims on
-#: every map of issue 15's checks, so they are not the default
+#: chains are 1.4-1.6x faster on the tilted Green Piece (CPU time 2.8-3.5x cv2.fitEllipse's,
+#: the tilings 4.2-4.9x) and find far more large partial ellipses (55 of 80 against 25 on
+#: held-out synthetic maps), but lost a rim and gained a false one on the machined parts' check
+#: seeds, and find ghost ellipses in dense random clutter (half the pixels of a mask set) where
+#: the tilings find none, so they are not the default (``rs.features.ellipses(...,
+#: hypotheses="chains")`` asks for them)
 HYPOTHESES = "tilings"
 #: the chain hypotheses' claims go by coverage less this times the RMS residual (px): two grown
 #: copies of one rim, one pulled 1-3 px towards a thread's crests, cover alike, and the closer

@@ -49,6 +49,12 @@ MIN_LONG_PX = 20.0
 CUT_DIST_PX = 1.5
 #: ... once the piece has turned by this much, degrees
 MIN_TURNED_DEG = 45.0
+#: ... and only once its fit is an ellipse of semi-minor axis this many px or more (and over 0.2
+#: of the major): a flatter piece's fit is ill-determined
+MIN_THICK_PX = 4.0
+#: the growing piece's fit runs in a frame at its first point with this many px per unit (the
+#: moments' monomials stay near 1 for pieces of tens of pixels)
+FIT_SCALE_PX = 16.0
 #: a fit is good when the RMS Sampson distance of its points (after one trimmed refit) is at
 #: most this, px
 MAX_RMS_PX = 0.5
@@ -80,6 +86,8 @@ GAP_FRACTION = 0.5
 #: piece's points), and runs of LINK_WINDOWS pieces and whole paths fitted
 LINKS = True
 LINK_TURN_DEG = 30.0
+#: a piece end's outward direction is taken from the point this many points back along it
+END_DIRECTION_PX = 8
 LINK_WINDOWS = (3,)
 #: only the distinct good fits (centres 2 px apart, or a semi-axis 20 %) are grown over pieces
 SEED_DISTINCT = True
@@ -147,7 +155,7 @@ def pieces(xy: np.ndarray, order: np.ndarray, start: np.ndarray, *, tol_px: floa
     return cut_chains(np.ascontiguousarray(xy, np.float64), np.asarray(order, np.int64), np.asarray(start, np.int64),
                       float(tol_px), float(np.deg2rad(max_turn_deg)), float(np.deg2rad(INFLECTION_DEG)),
                       float(MAX_SEGMENT_RATIO), float(MIN_LONG_PX), float(cut_dist),
-                      float(np.deg2rad(MIN_TURNED_DEG)), 4.0, int(min_points), 16.0)
+                      float(np.deg2rad(MIN_TURNED_DEG)), float(MIN_THICK_PX), int(min_points), float(FIT_SCALE_PX))
 
 
 def chain_hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray | None = None, *,
@@ -216,7 +224,7 @@ def chain_hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray | Non
         first = (np.cumsum(big) - 1)[first]  # the groups' first pieces among the pieces
     if LINKS:  # the pieces linked end to end across gaps: windows of them, and whole paths
         l_pts, l_lo, l_n, l_first = link_groups(xy, order, p_start, p_cnt, float(GAP_FRACTION), float(PAIR_GAP_PX),
-                                                float(np.cos(np.deg2rad(LINK_TURN_DEG))), 8,
+                                                float(np.cos(np.deg2rad(LINK_TURN_DEG))), int(END_DIRECTION_PX),
                                                 np.asarray(LINK_WINDOWS, np.int64))
         l_conics, l_good = fit_ranges(xy, l_pts, l_lo, l_n, float(max_rms), float(min_inliers), lo, hi,
                                       float(min_ratio), float(min_arc_deg))

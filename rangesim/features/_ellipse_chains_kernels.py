@@ -421,24 +421,7 @@ def frame_moments(xy, pts, lo, n, frame, mom):  # pragma: no cover - compiled
     frame[0], frame[1], frame[2] = cx, cy, s
     mom[:] = 0.0
     for r in range(lo, lo + n):
-        x, y = (xy[pts[r], 0] - cx) / s, (xy[pts[r], 1] - cy) / s
-        x2, y2 = x * x, y * y
-        x3, y3 = x2 * x, y2 * y
-        mom[0] += 1.0
-        mom[1] += y
-        mom[2] += y2
-        mom[3] += y3
-        mom[4] += y3 * y
-        mom[5] += x
-        mom[6] += x * y
-        mom[7] += x * y2
-        mom[8] += x * y3
-        mom[9] += x2
-        mom[10] += x2 * y
-        mom[11] += x2 * y2
-        mom[12] += x3
-        mom[13] += x3 * y
-        mom[14] += x3 * x
+        _add_moments(mom, (xy[pts[r], 0] - cx) / s, (xy[pts[r], 1] - cy) / s)
 
 
 @numba.njit(**_JIT)

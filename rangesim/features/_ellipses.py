@@ -218,7 +218,9 @@ def ellipses(
     (:mod:`~._ellipse_chains`): 1.4-1.6x faster on the tilted Green Piece and far better on
     large partial ellipses (55 of 80 found against 25 on held-out synthetic maps, precision 0.98
     against 0.56), not the default: on the machined parts' check seeds it lost one rim of 54 on
-    white_scanner and added a false one on cyberware_3030 (``benchmarks/bench_hough.py``).
+    white_scanner and added a false one on cyberware_3030 (``benchmarks/bench_hough.py``), and
+    on dense random clutter (a mask half set at random) it finds ghost ellipses, tens per
+    100 x 100, where the tilings find none.
 
     Returns
     -------
