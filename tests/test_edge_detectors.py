@@ -776,6 +776,19 @@ def _step_corners(mask: np.ndarray) -> int:
     return int(total.sum())
 
 
+def _jumps_with_and_without_thinning(name: str, scan, monkeypatch) -> tuple[np.ndarray, np.ndarray]:
+    """Detector ``name``'s jump pixels on ``scan``, then the same with the jump thinning of
+    ``discontinuities`` switched off (monkeypatched for the rest of the test)."""
+    import rangesim.edges._discontinuities as disc_module
+
+    def jumps():
+        em = DETECTORS[name](scan)
+        return em.mask & (em.labels == EdgeLabel.JUMP)
+    thinned = jumps()
+    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
+    return thinned, jumps()
+
+
 @pytest.mark.parametrize("name", ["gradient", "normal", "line_fit", "curvature"])
 def test_jumps_beside_a_ragged_gap_are_8_connected_lines(name, monkeypatch):
     """A plane 20 mm in front of another, its edge at 30 degrees to the rows, and a band of
@@ -786,7 +799,6 @@ def test_jumps_beside_a_ragged_gap_are_8_connected_lines(name, monkeypatch):
     pixel added, every raw jump pixel within 1 px of a kept one."""
     from scipy import ndimage
 
-    import rangesim.edges._discontinuities as disc_module
     size, f = 120, 300.0
     K, rays = pinhole_rays(size, f)
     v, u = np.mgrid[0:size, 0:size]
@@ -796,12 +808,7 @@ def test_jumps_beside_a_ragged_gap_are_8_connected_lines(name, monkeypatch):
     depth[gap] = np.nan
     scan = grid_scan(rays * depth[..., None], K, None)
 
-    def jumps():
-        em = DETECTORS[name](scan)
-        return em.mask & (em.labels == EdgeLabel.JUMP)
-    thinned = jumps()
-    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
-    raw = jumps()
+    thinned, raw = _jumps_with_and_without_thinning(name, scan, monkeypatch)
     assert raw.sum() > 100 and _step_corners(raw) >= 5
     assert _step_corners(thinned) == 0            # every step's corner gone
     assert _l_corners(thinned) < _l_corners(raw)  # (corners of two longer runs stay, as the truth's)
@@ -815,19 +822,13 @@ def test_a_square_boxs_jump_outline_keeps_its_corners(name, monkeypatch):
     outline is four straight runs meeting at right angles, and the truth marks the corner
     pixels; the staircase thinning leaves them (both arms run on), so the outline is the
     jump rule's own, corners included."""
-    import rangesim.edges._discontinuities as disc_module
     size, f = 80, 300.0
     K, rays = pinhole_rays(size, f)
     depth = np.full((size, size), 400.0)
     depth[28:52, 20:60] = 380.0
     scan = grid_scan(rays * depth[..., None], K, None)
 
-    def jumps():
-        em = DETECTORS[name](scan)
-        return em.mask & (em.labels == EdgeLabel.JUMP)
-    thinned = jumps()
-    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
-    raw = jumps()
+    thinned, raw = _jumps_with_and_without_thinning(name, scan, monkeypatch)
     assert raw.sum() >= 2 * (40 + 24) - 4
     assert np.array_equal(thinned, raw)
     assert thinned[[28, 28, 51, 51], [20, 59, 20, 59]].all()

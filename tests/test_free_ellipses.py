@@ -132,12 +132,14 @@ def test_hole_rims_of_an_untuned_machined_part():
     assert np.mean(np.array(hits) <= 1.0) >= 0.75, hits
 
 
+@pytest.mark.parametrize("hypotheses", ["tilings", "chains"])
 @pytest.mark.parametrize("axes", [(150.0, 90.0), (180.0, 170.0), (100.0, 30.0), (6.0, 4.5)])
-def test_sizes_from_small_rims_to_large_ellipses(axes):
-    """Large ellipses (arcs longer than the tiles) and small rims (a few pixels) alike."""
+def test_sizes_from_small_rims_to_large_ellipses(axes, hypotheses):
+    """Large ellipses (arcs longer than the tiles) and small rims (a few pixels) alike, with
+    either hypothesis generator."""
     m = np.zeros((420, 420), bool)
     draw_ellipse(m, (210.3, 209.6), axes, 0.4, gaps=[(1.0, 1.4)])
-    found = F.ellipses(m, remove_explained=False, min_points=12, axes_range=(2.5, 250))
+    found = F.ellipses(m, remove_explained=False, min_points=12, axes_range=(2.5, 250), hypotheses=hypotheses)
     assert len(found) == 1
     d, da = _match(found, (210.3, 209.6), axes)
     assert d <= 0.3 and da <= 0.3, (d, da)
@@ -394,16 +396,6 @@ def test_chains_concentric_ellipses_each_found_once(chains):
     draw_ellipse(m, (100, 100), (34, 19), 0.2)
     found = F.ellipses(m, remove_explained=False)
     assert sorted(round(f.axes[0]) for f in found) == [34, 40]
-
-
-@pytest.mark.parametrize("axes", [(150.0, 90.0), (180.0, 170.0), (100.0, 30.0), (6.0, 4.5)])
-def test_chains_sizes_from_small_rims_to_large_ellipses(axes, chains):
-    m = np.zeros((420, 420), bool)
-    draw_ellipse(m, (210.3, 209.6), axes, 0.4, gaps=[(1.0, 1.4)])
-    found = F.ellipses(m, remove_explained=False, min_points=12, axes_range=(2.5, 250))
-    assert len(found) == 1
-    d, da = _match(found, (210.3, 209.6), axes)
-    assert d <= 0.3 and da <= 0.3, (d, da)
 
 
 def test_chains_rim_around_thread_crests(chains):

@@ -604,12 +604,7 @@ def cluster_groups(xy, order, p_start, p_cnt, gap, min_points, max_points):  # p
     parent = np.arange(P)
     if P == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
-    ex = np.empty(2 * P)
-    ey = np.empty(2 * P)
-    for p in range(P):
-        for u in range(2):
-            i = order[p_start[p] + (p_cnt[p] - 1 if u else 0)]
-            ex[2 * p + u], ey[2 * p + u] = xy[i, 0], xy[i, 1]
+    ex, ey = _piece_ends(xy, order, p_start, p_cnt)
     ends = np.argsort(ex)
     g2 = gap * gap
     for a in range(2 * P):
@@ -660,6 +655,20 @@ def cluster_groups(xy, order, p_start, p_cnt, gap, min_points, max_points):  # p
 
 
 @numba.njit(**_JIT)
+def _piece_ends(xy, order, p_start, p_cnt):  # pragma: no cover - compiled
+    """The two end points of every piece ``order[p_start[p]:p_start[p] + p_cnt[p]]``: x and y
+    (2 P,), end ``u`` (0 first, 1 last) of piece p at ``2 p + u``."""
+    P = len(p_start)
+    ex = np.empty(2 * P)
+    ey = np.empty(2 * P)
+    for p in range(P):
+        for u in range(2):
+            i = order[p_start[p] + (p_cnt[p] - 1 if u else 0)]
+            ex[2 * p + u], ey[2 * p + u] = xy[i, 0], xy[i, 1]
+    return ex, ey
+
+
+@numba.njit(**_JIT)
 def _end_dir(xy, order, s, m, u, back):  # pragma: no cover - compiled
     """Unit direction out of end ``u`` of the piece ``order[s:s + m]``: from the point ``back``
     points inside (or the far end) to the end."""
@@ -691,12 +700,9 @@ def link_groups(xy, order, p_start, p_cnt, gap_frac, min_gap, cos_tol, back, win
     best = np.full(2 * P, -1, np.int64)
     dx_ = np.empty(2 * P)
     dy_ = np.empty(2 * P)
-    ex = np.empty(2 * P)
-    ey = np.empty(2 * P)
+    ex, ey = _piece_ends(xy, order, p_start, p_cnt)
     for p in range(P):
         for u in range(2):
-            i = order[p_start[p] + (p_cnt[p] - 1 if u else 0)]
-            ex[2 * p + u], ey[2 * p + u] = xy[i, 0], xy[i, 1]
             dx_[2 * p + u], dy_[2 * p + u] = _end_dir(xy, order, p_start[p], p_cnt[p], u, back)
     ends = np.argsort(ex)
     ends_x = ex[ends]
