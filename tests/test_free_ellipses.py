@@ -467,3 +467,33 @@ def test_the_public_call_picks_the_hypotheses(chains, monkeypatch):
         [e.center for e in asked_chains]
     with pytest.raises(ValueError, match="hypotheses"):
         F.ellipses(m, hypotheses="contours")
+
+
+def test_a_segment_along_a_curve_explains_no_points():
+    """The line finder draws chords along a large ellipse's flatter sides (30-55 px on a
+    120 x 60 px one); their points' normals turn along them, so they are not removed as
+    straight lines and the ellipse is found by the default call. A straight line's normals do
+    not turn: ``_turns`` of a digitised line stays under 2 degrees, while an arc of radius
+    150 px over 60 px (L / R = 23 degrees; the mask's normals read 0.4-0.53 rad) is far over
+    the threshold."""
+    from rangesim.features._ellipses import CURVED_SEGMENT_DEG, _turns
+    for angle in (0.0, 0.2, 0.4):
+        m = np.zeros((280, 280), bool)
+        draw_ellipse(m, (140.0, 140.0), (120.0, 60.0), angle)
+        assert len(F.lines(m)) >= 3                    # chords of the curve
+        d, da = _match(F.ellipses(m), (140.0, 140.0), (120.0, 60.0))
+        assert d <= 0.3 and da <= 0.5, (angle, d, da)
+    line = np.zeros((100, 100), bool)
+    draw_segment(line, (5.0, 20.0), (95.0, 47.0))
+    xy, theta = F._edge_points.edge_points(line)
+    ab = np.array([90.0, 27.0])
+    u = (xy - [5.0, 20.0]) @ ab / np.hypot(*ab)
+    assert _turns(u, theta, ab) < np.radians(2.0)
+    R, L = 150.0, 60.0
+    arc = np.zeros((400, 400), bool)
+    s = np.linspace(-L / (2 * R), L / (2 * R), 400)
+    arc[np.rint(200 + R * np.sin(s)).astype(int), np.rint(50 + R * np.cos(s)).astype(int)] = True
+    xy, theta = F._edge_points.edge_points(arc)
+    ab = np.array([0.0, 1.0])
+    turn = _turns(xy[:, 1] - xy[:, 1].min(), theta, ab)
+    assert 0.8 * L / R <= turn <= 1.4 * L / R and turn > 2 * np.radians(CURVED_SEGMENT_DEG)
