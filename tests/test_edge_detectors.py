@@ -785,7 +785,7 @@ def _jumps_with_and_without_thinning(name: str, scan, monkeypatch) -> tuple[np.n
         em = DETECTORS[name](scan)
         return em.mask & (em.labels == EdgeLabel.JUMP)
     thinned = jumps()
-    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None: mask.copy())
+    monkeypatch.setattr(disc_module, "thin_staircases", lambda mask, droppable=None, keep_corners=False: mask.copy())
     return thinned, jumps()
 
 

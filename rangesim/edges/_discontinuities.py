@@ -151,35 +151,10 @@ def discontinuities(
     # 1 px lines, as the truth's contours: every pixel beside a ragged gap is a jump, and
     # the inner corners of the 4-connected staircases that leaves match no true pixel
     marks = disc.occluding | disc.rim
-    kept = _keep_true_corners(marks, thin_staircases(marks))
+    kept = thin_staircases(marks, keep_corners=True)
     disc.occluding &= kept
     disc.rim &= kept
     return disc, geo
-
-
-#: the four right angles of a pixel's 4-neighbours, as (row, column) steps
-_RIGHT_ANGLES = (((-1, 0), (0, 1)), ((0, 1), (1, 0)), ((1, 0), (0, -1)), ((0, -1), (-1, 0)))
-
-
-def _keep_true_corners(marks: np.ndarray, thinned: np.ndarray) -> np.ndarray:
-    """``thinned`` with the corners of ``marks`` whose two arms both run on put back.
-
-    :func:`~rangesim.edges._thinning.thin_staircases` drops every L corner of a line; a
-    staircase's step has an arm of one pixel, while a true corner (a box seen square on, where
-    two straight contours meet and the truth marks the corner pixel) has two arms of two
-    pixels or more. (H, W) bool in, (H, W) bool out (a new array).
-    """
-    out = thinned.copy()
-    rr, cc = np.nonzero(marks & ~thinned)
-    if rr.size == 0:
-        return out
-    p = np.pad(marks, 2)
-    r, c = rr + 2, cc + 2
-    corner = np.zeros(rr.size, bool)
-    for (r1, c1), (r2, c2) in _RIGHT_ANGLES:
-        corner |= (p[r + r1, c + c1] & p[r + 2 * r1, c + 2 * c1] & p[r + r2, c + c2] & p[r + 2 * r2, c + 2 * c2])
-    out[rr[corner], cc[corner]] = True
-    return out
 
 
 @dataclass

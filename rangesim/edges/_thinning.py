@@ -195,7 +195,7 @@ def ridge_offsets(strength: np.ndarray, direction: np.ndarray, where: np.ndarray
     return out
 
 
-def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np.ndarray:
+def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None, keep_corners: bool = False) -> np.ndarray:
     """Drop the inner corners of 2-px staircases, keeping 8-connectivity (1 px diagonals).
 
     Non-maximum suppression leaves diagonal edges as 4-connected staircases (a corner
@@ -212,6 +212,10 @@ def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np
         Edge pixels (all of them count as neighbours).
     droppable : (H, W) bool, optional
         Only these may be dropped (default: all of ``mask``).
+    keep_corners : bool
+        Drop only a step's corner, one of whose two arms is a single pixel; a corner where
+        two runs of 2 px or more meet (a box's outline seen square on, whose corner pixel an
+        8-connected truth marks too) stays.
 
     Returns
     -------
@@ -219,13 +223,13 @@ def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np
         The thinned mask (a new array).
     """
     h, w = mask.shape
-    stride = w + 2
-    p = np.pad(mask, 1).ravel()
+    stride = w + 4                        # 2 px of padding: the arms' second pixels
+    p = np.pad(mask, 2).ravel()
     cand = mask if droppable is None else (mask & droppable)
     ii, jj = nonzero2(cand)
     if ii.size == 0:
         return mask.copy()
-    base = (ii + 1) * stride + (jj + 1)
+    base = (ii + 2) * stride + (jj + 2)
     n, s, e, wst = -stride, stride, 1, -1
     # (a, b, their diagonal, opposite a, opposite b, opposite diagonal)
     corners = ((n, e, n + e, s, wst, s + wst), (e, s, s + e, wst, n, n + wst),
@@ -235,9 +239,12 @@ def thin_staircases(mask: np.ndarray, droppable: np.ndarray | None = None) -> np
         b = base[parity == ph]
         drop = np.zeros(b.size, bool)
         for a_, b_, d_, oa, ob, od in corners:
-            drop |= p[b + a_] & p[b + b_] & ~p[b + d_] & ~p[b + oa] & ~p[b + ob] & ~p[b + od]
+            corner = p[b + a_] & p[b + b_] & ~p[b + d_] & ~p[b + oa] & ~p[b + ob] & ~p[b + od]
+            if keep_corners:
+                corner &= ~(p[b + 2 * a_] & p[b + 2 * b_])
+            drop |= corner
         p[b[drop]] = False
-    return p.reshape(h + 2, w + 2)[1:-1, 1:-1].copy()
+    return p.reshape(h + 4, w + 4)[2:-2, 2:-2].copy()
 
 
 #: no crease is kept within this many pixels of a jump: the crest beside an occluding edge
