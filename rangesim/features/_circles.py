@@ -205,7 +205,9 @@ def circles(
     min_support : float
         Least fraction of the circumference (bins of about 1 px) with an edge pixel within
         1 px of the circle whose edge normal is radial within 15 degrees; each edge pixel
-        supports one circle (strongest first), so a candidate left below this once the pixels
+        supports one circle (strongest first; but a circle keeps the pixels where a smaller
+        one internally tangent to it meets it, a tapped hole's rim around its crest outline,
+        :func:`~._circle_kernels.claim_pairs`), so a candidate left below this once the pixels
         of stronger circles are taken (a near-duplicate, a ghost across two rims) is dropped;
         so is a circle that is the end of an elongated ellipse (:func:`_ellipse_pieces`).
     threshold : float
