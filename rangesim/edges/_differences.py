@@ -256,6 +256,11 @@ def eno_tangent(xyz: np.ndarray, axis: int, pairs: np.ndarray | None, step: int 
     dr, dc = AXES[axis]
     s = int(step)
     shape = xyz.shape[-2:]
+    # the compiled blend reads components 0-2 and indexes ok_step by xyz's image: unchecked
+    # there (no bounds checks), so a point stack of another shape is refused here
+    if xyz.ndim != 3 or xyz.shape[0] != 3 or (pairs is not None and np.shape(pairs)[-2:] != shape):
+        raise ValueError(f"eno_tangent needs (3, H, W) points and (4, H, W) pairs, got {xyz.shape} and "
+                         f"{None if pairs is None else np.shape(pairs)}")
     if pairs is not None:
         ok_step = np.stack([~segment_broken(pairs, axis, k * s, (k + 1) * s) for k in (-2, -1, 0, 1)])
     else:

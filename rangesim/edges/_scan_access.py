@@ -20,7 +20,7 @@ import numpy as np
 from rangesim.core.errors import RangesimError
 
 __all__ = [
-    "PixelGeometry", "scan_arrays", "scan_depth", "scan_points", "focal_length_px",
+    "PixelGeometry", "check_scan", "scan_arrays", "scan_depth", "scan_points", "focal_length_px",
     "pixel_geometry", "footprint",
 ]
 
@@ -53,14 +53,77 @@ def scan_arrays(scan: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return xyz, z, valid
 
 
-def scan_depth(scan: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Depth (H, W) float32 with NaN at unusable pixels, and validity; see :func:`scan_arrays`."""
+#: the per-pixel fields the detectors read: name -> (trailing shape, dtype kinds accepted, required)
+PIXEL_FIELDS = {
+    "depth": ((), "biuf", True),
+    "valid": ((), "biu", True),
+    "xyz": ((3,), "biuf", False),        # (required where read: scan_points checks it again)
+    "sigma": ((), "biuf", False),
+    "status": ((), "biu", False),
+}
+
+
+def _field_shape(name: str, value: Any, expected: tuple[int, ...], kinds: str) -> None:
+    arr = np.asarray(value)
+    if arr.shape != expected:
+        raise RangesimError(f"has shape {arr.shape}; the scan's {expected[0]} x {expected[1]} depth image needs "
+                            f"{expected}", f"scan.{name}")
+    if arr.dtype.kind not in kinds:
+        want = "bool or integer" if "f" not in kinds else "numeric (bool, integer or float)"
+        raise RangesimError(f"must be {want}, got dtype {arr.dtype}", f"scan.{name}")
+
+
+def check_scan(scan: Any) -> tuple[int, int]:
+    """Refuse a scan whose per-pixel fields do not fit together; return its (H, W).
+
+    Every detector calls this (through :func:`scan_depth`) before any computation: a
+    field of another shape (``xyz`` of (H, W, 2) or (W, H, 3), a ``valid`` one row short,
+    a ``sigma`` or ``status`` of another size) or of a non-numeric dtype raises
+    :class:`~rangesim.core.errors.RangesimError` naming the field and both shapes, and no
+    compiled kernel ever indexes an array by another's shape. ``sigma`` and ``status``
+    may be None (recorded data); ``xyz`` is checked here when present and again where it is
+    read (:func:`scan_points`).
+    """
     if not (hasattr(scan, "depth") and hasattr(scan, "valid")):
         raise RangesimError(f"the edge detectors take a RangeScan (depth, valid, xyz, meta), got {type(scan).__name__}")
+    depth = np.asarray(scan.depth)
+    if depth.ndim != 2 or 0 in depth.shape:
+        raise RangesimError(f"must be a non-empty (H, W) image, got shape {depth.shape}", "scan.depth")
+    h, w = depth.shape
+    for name, (trailing, kinds, required) in PIXEL_FIELDS.items():
+        value = getattr(scan, name, None)
+        if value is None and not required:
+            continue
+        _field_shape(name, value, (h, w) + trailing, kinds)
+    return h, w
+
+
+def scan_depth(scan: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (H, W) float32 with NaN at unusable pixels, and validity; see :func:`scan_arrays`.
+
+    The scan's fields are checked first (:func:`check_scan`). A pixel marked valid must have
+    a finite depth (NaN counts as a hole: an edited scan may punch them without updating
+    ``valid``; +-inf is refused, no measurement is infinitely far), and on a pinhole scan
+    (``meta["K"]``: depth is the camera-frame z) a positive one: z <= 0 is behind the
+    camera. Grids without a camera model may carry any finite depth (a scanner's range axis
+    may be centred on 0: the Cyberware's, see :func:`pixel_geometry`).
+    """
+    check_scan(scan)
     z = np.array(scan.depth, dtype=np.float32)          # a copy: NaN goes in below
-    if z.ndim != 2 or 0 in z.shape:
-        raise RangesimError(f"the scan's depth must be a non-empty (H, W) image, got shape {z.shape}")
-    valid = np.asarray(scan.valid, dtype=bool) & np.isfinite(z)
+    marked = np.asarray(scan.valid, dtype=bool)
+    finite = np.isfinite(z)
+    valid = marked & finite
+    if not finite.all():
+        infinite = int(np.count_nonzero(marked & np.isinf(z)))
+        if infinite:
+            raise RangesimError(f"{infinite} pixels marked valid have an infinite depth: mark them invalid "
+                                "(valid False, depth NaN)", "scan.depth")
+    if focal_length_px(scan) is not None:
+        behind = int(np.count_nonzero(valid & ~(z > 0)))
+        if behind:
+            raise RangesimError(f"{behind} pixels marked valid have a depth <= 0, behind a pinhole camera "
+                                "(meta['K']: depth is the camera-frame z, > 0); mark them invalid, or drop "
+                                "meta['K'] for a grid whose depth axis is not the camera's", "scan.depth")
     np.copyto(z, np.nan, where=~valid)                  # (np.where is ~5x slower)
     return z, valid
 
@@ -71,6 +134,8 @@ def scan_points(scan: Any, valid: np.ndarray, component_major: bool = False) -> 
     (H, W, 3) float32, or (3, H, W) contiguous with ``component_major``.
     """
     xyz = np.asarray(scan.xyz, dtype=np.float32)
+    if xyz.shape != valid.shape + (3,):   # (checked on entry by check_scan; kernels index by it)
+        raise RangesimError(f"has shape {xyz.shape}, the depth image needs {valid.shape + (3,)}", "scan.xyz")
     if component_major:
         xyz = np.ascontiguousarray(xyz.transpose(2, 0, 1))
         xyz[:, ~valid] = np.nan
