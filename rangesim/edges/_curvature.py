@@ -8,6 +8,7 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
+from rangesim.edges import _params as P
 from rangesim.edges._curvature_chords import matched_creases
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import pad_last2, padded_view
@@ -190,15 +191,16 @@ def curvature(
        in range images", Computer Vision, Graphics, and Image Processing 33(1), 33-80 (1986),
        doi:10.1016/0734-189X(86)90220-3.
     """
+    threshold = P.number(threshold, "threshold", 0, lo_open=True, what="curvature", unit="1/mm", none=True)
+    window = P.odd_window(window, "window")
+    jump_threshold, max_search = P.jump_rule(jump_threshold, max_search)
+    rule = P.choice(rule, "rule", RULES)
+    full_block = P.flag(full_block, "full_block")
     matcher = matching_window(scan)
     # block-matched scans, default window, extrema rule: curvature at the matcher's scale
     # from chords (rangesim.edges._curvature_chords) instead of quadric fits on blocks
     sensor_scale = matcher is not None and window is None and rule == "extrema"
     window = int(matching_block(matcher) if window is None else window)
-    if window < 3 or window % 2 == 0:
-        raise ValueError(f"window must be an odd integer >= 3, got {window}")
-    if rule not in RULES:
-        raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     if sensor_scale:

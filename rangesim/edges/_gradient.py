@@ -8,6 +8,7 @@ import numba
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.edges import _params as P
 from rangesim.edges._differences import central_difference
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._gradient_steps import step_smooth, tap5_sum
@@ -1080,14 +1081,19 @@ def gradient(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
+    threshold = P.number(threshold, "threshold", 0, 180, lo_open=True, hi_open=True, what="angle", unit="degrees",
+                         none=True)
+    jump_threshold, max_search = P.jump_rule(jump_threshold, max_search)
+    nms = P.flag(nms, "nms")
+    sigma = P.number(sigma, "sigma", 0, unit="pixels", none=True)
+    jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels")
+    stride = P.whole(stride, "stride", 1, unit="pixels", none=True)
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     window = matching_window(scan)
     if stride is None:
         stride = matching_stride(window)
     stride = int(stride)
-    if stride < 1:
-        raise ValueError(f"stride must be an integer >= 1, got {stride}")
     noise = None
     if sigma is None or threshold is None:
         noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)

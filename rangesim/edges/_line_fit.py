@@ -11,6 +11,8 @@ from scipy.spatial import cKDTree
 from skimage.morphology import thin as skeleton_thin
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
+from rangesim.edges import _params as P
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import NEIGHBOURS
 from rangesim.edges._line_fit_sl import sl_creases
@@ -57,15 +59,23 @@ def line_fit_points(
     (N,) bool
         True at edge points; False at non-finite rows (which are ignored as neighbours).
     """
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"expected an (N, 3) point array, got shape {pts.shape}")
-    k = int(k)
-    if k < 2:
-        raise ValueError(f"k must be at least 2, got {k}")
-    tol = np.asarray(angle_tol_deg, np.float64)
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        pts = np.asarray(points, dtype=object)
+    if pts.ndim != 2 or pts.shape[1] != 3 or pts.dtype == object:
+        raise RangesimError(f"line_fit takes a RangeScan or an (N, 3) point array, got {type(points).__name__} "
+                            f"of shape {pts.shape}")
+    k, line_sep_deg, workers = _line_test_params(k, line_sep_deg, workers)
+    tol = np.asarray(angle_tol_deg)
     if tol.ndim and tol.shape != (len(pts),):
-        raise ValueError(f"angle_tol_deg must be a number or one per point ({len(pts)}), got shape {tol.shape}")
+        raise RangesimError(f"angle_tol_deg must be a number or one per point ({len(pts)}), got shape {tol.shape}")
+    if tol.ndim:
+        if tol.dtype.kind not in "iuf" or not (np.isfinite(tol).all() and (tol > 0).all() and (tol < 90).all()):
+            raise RangesimError("angle_tol_deg must be finite angles in (0, 90) degrees at every point")
+    else:
+        P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, hi_open=True, what="angle", unit="degrees")
+    tol = tol.astype(np.float64)
     out = np.zeros(len(pts), bool)
     finite = np.isfinite(pts).all(axis=1)
     p = pts[finite]
@@ -78,6 +88,14 @@ def line_fit_points(
     cos_opp = np.cos(np.radians(tol if tol.ndim == 0 else tol[finite]))
     out[finite] = _line_edges(p, np.arange(n), k, cos_opp, float(np.cos(np.radians(line_sep_deg))), workers)
     return out
+
+
+def _line_test_params(k: Any, line_sep_deg: Any, workers: Any) -> tuple[int, Any, int]:
+    """The line test's parameters checked (scans and point lists alike)."""
+    k = P.whole(k, "k", 2)
+    line_sep_deg = P.number(line_sep_deg, "line_sep_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
+    workers = P.whole(workers, "workers", 1, also=(-1,), unit="threads; -1: all cores")
+    return k, line_sep_deg, workers
 
 
 def _line_edges(p: np.ndarray, centres: np.ndarray, k: int, cos_opp: float | np.ndarray, cos_sep: float,
@@ -331,18 +349,18 @@ def line_fit(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
-    if jump_clearance is not None and not (isinstance(jump_clearance, (int, np.integer))
-                                           and not isinstance(jump_clearance, bool) and jump_clearance >= 0):
-        raise ValueError(f"jump_clearance must be a whole number of pixels >= 0, got {jump_clearance!r}")
     if not hasattr(points_or_scan, "xyz"):
         tol = 15.0 if angle_tol_deg is None else angle_tol_deg
         return line_fit_points(points_or_scan, k, tol, line_sep_deg, workers)
-    try:
-        ok = int(k) == k and k >= 2
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok:
-        raise ValueError(f"k must be an integer of at least 2, got {k!r}")
+    k, line_sep_deg, workers = _line_test_params(k, line_sep_deg, workers)
+    angle_tol_deg = P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, hi_open=True, what="angle",
+                             unit="degrees", none=True)
+    jump_threshold, max_search = P.jump_rule(jump_threshold, max_search)
+    thin = P.flag(thin, "thin")
+    min_crease_px = P.whole(min_crease_px, "min_crease_px", 1, unit="pixels")
+    label_creases = P.flag(label_creases, "label_creases")
+    max_stride = P.whole(max_stride, "max_stride", 1, unit="pixels")
+    jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels", none=True)
     scan = points_or_scan
     xyz, z, valid = scan_arrays(scan)
     noise = None

@@ -11,6 +11,8 @@ from skimage.draw import line as draw_line
 from skimage.morphology import thin as thin_mask
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
+from rangesim.edges import _params as P
 
 #: how many pixels back from a chain end its outward direction is measured
 _DIRECTION_SPAN = 3
@@ -42,13 +44,28 @@ class EdgeChain:
         return len(self.points)
 
 
+def _image(value: Any, what: str, edge_map: Any) -> np.ndarray:
+    """``value`` as an (H, W) numeric image, else RangesimError (as rangesim.features refuses one)."""
+    arr = np.asarray(value)
+    if arr.ndim != 2 or arr.dtype.kind not in "biuf":
+        raise RangesimError(f"must be an EdgeMap or an (H, W) bool mask or label image, got {type(edge_map).__name__}"
+                            f"{' ' + what if what else ''} of shape {arr.shape}"
+                            + ("" if arr.dtype.kind in "biufO" else f" and dtype {arr.dtype}"), "edge_map")
+    return arr
+
+
 def _mask_labels(edge_map: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Edge pixels and their labels; NaN in a float image is no value, so no edge."""
     if hasattr(edge_map, "mask") and hasattr(edge_map, "labels"):
-        mask = np.asarray(edge_map.mask, dtype=bool)
-        return mask, np.where(mask, np.asarray(edge_map.labels), 0).astype(np.uint8)
-    arr = np.asarray(edge_map)
-    mask = arr != 0
-    return mask, (arr.astype(np.uint8) if arr.dtype != bool else np.zeros(arr.shape, np.uint8))
+        mask = _image(edge_map.mask, "mask", edge_map).astype(bool)
+        labels = np.asarray(edge_map.labels)
+        if labels.shape != mask.shape or labels.dtype.kind not in "biuf":
+            raise RangesimError(f"labels of shape {labels.shape} and dtype {labels.dtype} do not fit its "
+                                f"{mask.shape} mask", "edge_map")
+        return mask, np.where(mask, labels, 0).astype(np.uint8)
+    arr = _image(edge_map, "", edge_map)
+    mask = (arr != 0) & ~np.isnan(arr) if arr.dtype.kind == "f" else arr != 0
+    return mask, (np.where(mask, arr, 0).astype(np.uint8) if arr.dtype != bool else np.zeros(arr.shape, np.uint8))
 
 
 def _thin(mask: np.ndarray) -> np.ndarray:
@@ -215,6 +232,10 @@ def link(
     >>> len(chains) > 0, chains[0].points.shape[1]
     (True, 2)
     """
+    max_gap = P.whole(max_gap, "max_gap", 0, unit="pixels")
+    min_length = P.whole(min_length, "min_length", 0, unit="points")
+    split_labels = P.flag(split_labels, "split_labels")
+    thin = P.flag(thin, "thin")
     mask, labels = _mask_labels(edge_map)
     skel = _thin(mask) if thin else mask
     indptr, indices, rows, cols = _graph(skel, labels, split_labels)

@@ -6,6 +6,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.edges import _params as P
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
@@ -155,8 +156,13 @@ def normal(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
+    threshold_deg = P.number(threshold_deg, "threshold_deg", 0, 180, lo_open=True, hi_open=True, what="angle",
+                             unit="degrees", none=True)
+    window = P.odd_window(window, "window")
+    jump_threshold, max_search = P.jump_rule(jump_threshold, max_search)
+    nms = P.flag(nms, "nms")
+    blocks = P.flag(blocks, "blocks", none=True)
     if window is not None:
-        stencil_window(window, "window", None)  # a bad window is refused before any work
         if blocks:
             raise ValueError("window and blocks=True cannot be combined: the block sizes follow the noise")
     z, valid = scan_depth(scan)

@@ -9,6 +9,7 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
+from rangesim.edges import _params as P
 from rangesim.edges._differences import central_difference, dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, find_discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
@@ -97,13 +98,18 @@ def _depth_threshold(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, geo: Pix
     warning (PCL's rule on such a grid, ``relative * z`` about 0, would flood it).
     """
     if distance_mm is not None:
-        d = np.asarray(distance_mm, dtype=np.float32)
+        try:
+            d = np.asarray(distance_mm, dtype=np.float32)
+        except (TypeError, ValueError):
+            raise RangesimError(f"distance_mm must be a number or an {z.shape} array, got {distance_mm!r:.60}") from None
         if d.ndim == 0:
             d = np.full(z.shape, d, np.float32)
         if d.shape != z.shape:
             raise RangesimError(f"distance_mm must be a number or an {z.shape} array, got shape {d.shape}")
-        if not np.all(d[valid] > 0):
-            raise RangesimError("distance_mm must be positive (mm from the sensor) at every valid pixel")
+        bad = valid & ~((d > 0) & np.isfinite(d))
+        if bad.any():
+            raise RangesimError(f"distance_mm must be finite and positive (mm from the sensor) at every valid pixel, "
+                                f"got {float(d[bad][0]):g} at {int(bad.sum())} of them")
         return np.float32(relative) * d
     zv = z[valid]
     if geo.perspective and zv.size and np.all(zv > 0):
@@ -260,22 +266,31 @@ def pcl_organized(
     .. [2] C. Choi, A. J. B. Trevor, H. I. Christensen, "RGB-D edge detection and edge-based
        registration", IROS 2013 (the organized edge detector PCL implements).
     """
-    if scale not in (None, "3x3", "sensor"):
-        raise ValueError(f"scale must be None, '3x3' or 'sensor', got {scale!r}")
+    if isinstance(scale, np.ndarray) or scale not in (None, "3x3", "sensor"):
+        raise RangesimError(f"scale must be None, '3x3' or 'sensor', got {scale!r:.60}")
+    depth_discontinuity = P.number(depth_discontinuity, "depth_discontinuity", 0, lo_open=True,
+                                   what="fraction of the distance to the sensor")
+    max_search = P.whole(max_search, "max_search", 0, unit="pixels")
     if isinstance(edge_types, str):  # one type named alone
         edge_types = (edge_types,)
+    try:
+        edge_types = tuple(edge_types)
+    except TypeError:
+        raise RangesimError(f"edge_types must be a tuple of names from {EDGE_TYPES}, got {edge_types!r:.60}") from None
+    if not all(isinstance(t, str) for t in edge_types):
+        raise RangesimError(f"edge_types must be a tuple of names from {EDGE_TYPES}, got {edge_types!r:.60}")
     if curvature_threshold is not None:
         try:
             low_high = [float(t) for t in curvature_threshold]
         except (TypeError, ValueError):
             low_high = []
         if len(low_high) != 2 or not all(np.isfinite(low_high)) or not 0 <= low_high[0] <= low_high[1]:
-            raise ValueError(f"curvature_threshold must be two numbers 0 <= low <= high, got {curvature_threshold!r}")
+            raise RangesimError(f"curvature_threshold must be two numbers 0 <= low <= high (finite), "
+                                f"got {curvature_threshold!r:.60}")
     unknown = set(edge_types) - set(EDGE_TYPES)
     if unknown:
-        raise ValueError(f"unknown edge types {sorted(unknown)}; choose from {EDGE_TYPES}")
-    if normal_window is not None:
-        stencil_window(normal_window, "normal_window", None)  # a bad window is refused before any work
+        raise RangesimError(f"unknown edge types {sorted(unknown)}; choose from {EDGE_TYPES}")
+    normal_window = P.odd_window(normal_window, "normal_window")
     z, valid = scan_depth(scan)
     geo = pixel_geometry(scan, z)
     window = matching_window(scan)
