@@ -10,7 +10,10 @@ surface ends against pixels that saw nothing.
 The detectors live in private modules (``_gradient``, ``_normal``, ``_curvature``,
 ``_line_fit``, ``_pcl_organized``; chains in ``_link``), the pieces they share in
 ``_scan_access``, ``_noise``, ``_discontinuities``, ``_differences``, ``_thinning`` and
-``_grid``; the public API is this package's namespace.
+``_grid``; the public API is this package's namespace. A malformed scan (a per-pixel field
+of another shape, valid pixels at infinite depth or behind a pinhole camera) or parameter
+(wrong type, sign or range) is refused up front with a
+:class:`~rangesim.core.errors.RangesimError` naming it (``_scan_access.check_scan``, ``_params``).
 """
 from rangesim.edges._curvature import curvature
 from rangesim.edges._gradient import gradient

@@ -126,7 +126,7 @@ def curvature(
         Uses ``xyz``, ``depth``, ``valid`` (mm, camera frame) and ``meta["K"]`` for the
         footprint (without it, see :func:`~rangesim.edges._scan_access.pixel_geometry`).
     threshold : float, optional
-        Curvature threshold, 1/mm. Default (None): range-adaptive, a multiple of ``1 / R``
+        Curvature threshold, 1/mm (finite, > 0). Default (None): range-adaptive, a multiple of ``1 / R``
         per pixel, with R = ``window // 2 * footprint`` mm the block's half-width
         (``footprint = z / f`` mm per pixel); a fit over the block cannot resolve radii
         below ~R. ``extrema``: :data:`EXTREMA_RELATIVE_THRESHOLD` = 0.25 / R (a crease of
@@ -148,13 +148,13 @@ def curvature(
         scale instead of block fits (above; 0.4 s instead of 4-5 s a 640 x 480 scan); an
         explicit ``window`` keeps the fits.
     jump_threshold : float
-        Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
+        Depth-discontinuity threshold in pixel footprints (finite, > 0): neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
         :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
         truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     max_search : int
-        Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+        Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
     rule : {"extrema", "both"}
         Which rule marks the edge points (above).
     full_block : bool

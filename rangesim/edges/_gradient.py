@@ -1005,7 +1005,7 @@ def gradient(
         footprint is estimated from the points, see
         :func:`~rangesim.edges._scan_access.pixel_geometry`).
     threshold : float, optional
-        Least bend of a crease pixel, degrees (estimated as above). Noise-free default 15:
+        Least bend of a crease pixel, degrees in (0, 180) (estimated as above). Noise-free default 15:
         finds creases of 20 degrees and more (the ground truth's ``crease_deg``) at any
         orientation and sub-pixel position. Default (None) on noisy scans (depth noise
         from :func:`~rangesim.edges._noise.estimate_depth_noise` above
@@ -1014,7 +1014,7 @@ def gradient(
         across responded as much), ``k`` = :data:`~rangesim.edges._noise.NOISE_K_GRADIENT`
         = 3 (~4 sigma of the bend estimate; 20 degrees at the preset noise).
     jump_threshold : float
-        Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
+        Depth-discontinuity threshold in pixel footprints (finite, > 0): neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
         :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
         truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
@@ -1026,7 +1026,7 @@ def gradient(
         Either way no crease is kept within :data:`JUMP_CLEARANCE` (2) px of a jump
         (occluding or occluded side): the crest beside a jump is the jump itself.
     sigma : float, optional
-        Gaussian pre-smoothing of the depth, pixels (0: none). Noisy scans need it: the
+        Gaussian pre-smoothing of the depth, pixels, >= 0 (0: none). Noisy scans need it: the
         response's noise is ~1.4 sigma_z / footprint unsmoothed. Default (None): 0 on
         noise-free scans, else ``clip(4 * noise, 1, 3)`` px for a depth noise of ``noise``
         footprints (1 px at the White Scanner preset's 0.25), or less where the default
@@ -1037,12 +1037,12 @@ def gradient(
         :data:`SMALL_SIGMA` a 5-tap kernel of the same variance, beyond it a Gaussian. 0 on
         block-matched scans (structured light): the matcher has smoothed over its window.
     max_search : int
-        Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+        Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
     jump_clearance : int
-        No crease is kept within this many pixels of a jump (the crest beside an occluding
+        No crease is kept within this many pixels (an integer >= 0) of a jump (the crest beside an occluding
         edge is the jump itself); 0 keeps them, e.g. for fitting circles to whole rims.
     stride : int, optional
-        Half-width of the operators, pixels: 1 is the paper's 3 x 3; ``s`` dilates them (a
+        Half-width of the operators, pixels (an integer >= 1): 1 is the paper's 3 x 3; ``s`` dilates them (a
         trous: second differences between pixels ``s`` apart, parts across a jump or a gap
         dropped, :func:`~rangesim.edges._matching_scale.strided_responses`), so they compare
         the slopes of chords ``s`` pixels long. Default (None): 1, or the block matcher's

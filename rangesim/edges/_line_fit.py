@@ -289,10 +289,10 @@ def line_fit(
     points_or_scan : (N, 3) array or RangeScan
         Points (mm; non-finite rows ignored), or a scan (``xyz``, ``depth``, ``valid``).
     k : int
-        Neighbours per point (8-12; the paper's 8-neighbourhood).
+        Neighbours per point, an integer >= 2 (8-12; the paper's 8-neighbourhood).
     angle_tol_deg : float, optional
         Two neighbours are opposite if the angle between their directions is within this
-        many degrees of 180; hence the least crease bend detected. Default (None): 15;
+        many degrees of 180, in (0, 90); hence the least crease bend detected. Default (None): 15;
         for a scan whose depth noise (:func:`~rangesim.edges._noise.estimate_depth_noise`,
         ``noise`` footprints) is above :data:`~rangesim.edges._noise.NOISE_FLOOR`,
         ``atan(3 sqrt(2) noise)`` clipped to 15..60 degrees (46 at the White Scanner
@@ -301,29 +301,29 @@ def line_fit(
         noise_p)`` with ``noise_p`` the scan's noise times the pixel's predicted noise over
         the median pixel's (:data:`NOISE_K_LINE_LOCAL`).
     line_sep_deg : float
-        Least angle between two lines for them to count as distinct (default 30; lines of
+        Least angle between two lines for them to count as distinct, degrees in (0, 90] (default 30; lines of
         a square grid are 45 degrees apart).
     jump_threshold : float
-        The jump rule for scans, in pixel footprints (default
+        The jump rule for scans, in pixel footprints, > 0 (default
         :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = 3.73, as the ground truth).
     max_search : int
-        Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+        Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
     workers : int
-        Threads for the k-d tree queries (-1: all cores).
+        Threads for the k-d tree queries, >= 1 (-1: all cores).
     thin : bool
         Scans only: thin crease bands to 1 px and drop crease pieces under
         ``min_crease_px`` pixels (above).
     min_crease_px : int
-        Scans only, with ``thin``: least size of a kept crease piece, pixels (8-connected;
+        Scans only, with ``thin``: least size of a kept crease piece, pixels, >= 1 (8-connected;
         1 keeps all).
     label_creases : bool
         Scans only: label creases convex or concave by the depth of their neighbourhood
         (above); False leaves them 0, "type unknown".
     max_stride : int
         Scans only, noisy ones with the default tolerance: the longest stride of the line
-        test, pixels (above; 1 tests only the nearest neighbours).
+        test, pixels, >= 1 (above; 1 tests only the nearest neighbours).
     jump_clearance : int, optional
-        Scans only: no crease is kept within this many pixels (chessboard) of a jump's far
+        Scans only: no crease is kept within this many pixels (chessboard; an integer >= 0) of a jump's far
         side (the step's foot, rounded by the stripe's width), beyond the pixels that touch
         the jump (those never are).
         Default: :data:`LINE_FIT_CLEARANCE` (1), 0 on block-matched scans, whose lines skip

@@ -208,11 +208,13 @@ def link(
     Parameters
     ----------
     edge_map : EdgeMap or (H, W) array
-        Edge pixels (an EdgeMap, a bool mask, or a label image with 0 = no edge).
+        Edge pixels (an EdgeMap, a bool mask, or a label image with 0 = no edge; NaN is no
+        edge). Anything else (not 2-D, not numeric) is refused with a RangesimError.
     max_gap : int
-        Largest number of missing pixels a bridge may fill (0: no bridging).
+        Largest number of missing pixels a bridge may fill, an integer >= 0 (0: no bridging).
     min_length : int
-        Chains with fewer points (bridge pixels included) are dropped.
+        Chains with fewer points (bridge pixels included) are dropped; an integer >= 0 (0 and 1
+        keep every chain).
     split_labels : bool
         Break chains where the label changes (and bridge only equal labels).
     thin : bool

@@ -95,7 +95,7 @@ def normal(
     scan : RangeScan
         Uses ``xyz``, ``depth`` and ``valid`` (mm, camera frame).
     threshold_deg : float, optional
-        Least bend of the normal, degrees, for a crease pixel (noise-free default 20, the
+        Least bend of the normal, degrees in (0, 180), for a crease pixel (noise-free default 20, the
         ground truth's crease angle). Noise: the angle noise of a normal is about
         ``sigma_z / (window // 2 * footprint)`` radians, so noisy scans need a larger window.
         Default (None) on noisy scans (depth noise from
@@ -116,7 +116,7 @@ def normal(
         ``2 ceil(12 noise) + 1`` clipped to 3..9 for a depth noise of ``noise`` footprints
         (7 at the preset's 0.25).
     jump_threshold : float
-        Depth-discontinuity threshold in pixel footprints: neighbours whose depths differ by
+        Depth-discontinuity threshold in pixel footprints (finite, > 0): neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
         :data:`~rangesim.edges._discontinuities.JUMP_THRESHOLD` = cot(15 deg) = 3.73, the ground
         truth's rule (a continuous surface jumps only beyond 75 degrees slant); for a pinhole
@@ -125,7 +125,7 @@ def normal(
         Thin creases to 1 px by non-maximum suppression across the crease (its direction is
         the dominant harmonic of the four axis strengths).
     max_search : int
-        Pixels searched across NaN gaps for the jump rule (0: only direct neighbours).
+        Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
     blocks : bool, optional
         Compare the normals of least-squares planes fitted to blocks on either side of each
         pixel instead of adjacent stencil normals, with a threshold from the predicted

@@ -213,12 +213,12 @@ def pcl_organized(
         Uses ``xyz``, ``depth``, ``valid`` (mm).
     depth_discontinuity : float
         Relative depth-discontinuity threshold (PCL's ``th_depth_discon``, 0.02): a
-        fraction of the distance to the sensor.
+        fraction of the distance to the sensor (finite, > 0).
     max_search : int
-        PCL's ``max_search_neighbors``: pixels searched across NaN gaps (50).
+        PCL's ``max_search_neighbors``: pixels searched across NaN gaps (50), an integer >= 0.
     curvature_threshold : (float, float), optional
         Canny hysteresis (low, high) on the Sobel magnitude of the normal field, raw Sobel
-        units as in PCL (``th_hc_canny_low``/``high``, 0.4 and 1.1, the noise-free
+        units as in PCL, finite, 0 <= low <= high (``th_hc_canny_low``/``high``, 0.4 and 1.1, the noise-free
         default). Default (None) on block-matched and noisy scans (depth noise from
         :func:`~rangesim.edges._noise.estimate_depth_noise` above
         :data:`~rangesim.edges._noise.NOISE_FLOOR` footprints): ``max(0.4, 4 sigma)`` and
