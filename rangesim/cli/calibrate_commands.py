@@ -2,11 +2,15 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
-from rangesim.cli.common import write_json, writing
+from rangesim.cli.common import check_conf, check_writable, write_json, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
+
+#: what ``--name`` may be: a sensor name as the presets spell them (it becomes ``name = "..."`` in TOML)
+_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]*")
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -16,22 +20,53 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".toml":
         raise RangesimError("the calibrated sensor must be written to a .toml file", source=out)
+    if args.evaluations < 1:
+        raise RangesimError(f"--evaluations must be an integer >= 1, got {args.evaluations}")
+    if args.name is not None and not _NAME.fullmatch(args.name):
+        raise RangesimError(f"--name must be a non-empty name of letters, digits, '_', '-' or '.', got {args.name!r}")
+    check_writable(out, "calibrated sensor")
+    report = Path(args.report) if args.report else None
+    if report is not None:
+        if report.suffix.lower() != ".json":
+            raise RangesimError("the fit's report must be written to a .json file", source=report)
+        check_writable(report, "report")
+        if report.resolve() == out.resolve():
+            raise RangesimError("--report and --out name the same file", source=report)
     mesh = Path(args.mesh)
     if not mesh.is_file():
         raise RangesimError("mesh file not found", source=mesh)
+    from rangesim.twin.stage import fit_grid
+
     recordings = []
     for name in args.recorded:
+        check_conf(name, args.conf)
         scan = load_scan(name, conf=args.conf) if args.conf else load_scan(name)
         if not scan.valid.any():
             raise RangesimError("the recorded scan has no valid point", source=name)
+        if scan.xyz_true is not None:
+            raise RangesimError("a synthetic scan (made by rangesim, with its noise-free hits), not a recording: "
+                                "calibrate fits a sensor to recorded range grids (Stanford .ply with --conf, "
+                                "organized .pcd, ...)", source=name)
+        try:
+            fit_grid(scan)
+        except RangesimError as exc:
+            raise RangesimError(f"not a recording this command can use ({exc})", source=name) from exc
         recordings.append(scan)
-    result = calibrate_views(recordings, mesh, args.sensor, names=[Path(r).stem for r in args.recorded],
-                             fit_noise=not args.geometry_only, max_evaluations=args.evaluations)
+    try:
+        result = calibrate_views(recordings, mesh, args.sensor, names=[Path(r).stem for r in args.recorded],
+                                 fit_noise=not args.geometry_only, max_evaluations=args.evaluations)
+    except RangesimError as exc:
+        if exc.source is not None:
+            raise
+        # the fit's refusals (no overlap, a non-finite cost) concern the mesh against the recordings
+        raise RangesimError(str(exc), source=f"{mesh} with {', '.join(args.recorded)}") from exc
     text = result["toml"]
     if args.name:
         text = text.replace(f'name = "{result["sensor"].name}"', f'name = "{args.name}"', 1)
     with writing(out), atomic_path(out) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
+        if report is not None:  # the sensor file lands only once the report is written
+            write_json({k: result[k] for k in ("geometry", "iou", "dropout", "noise", "views")}, report)
     g, d, n = result["geometry"], result["dropout"], result["noise"]
     print(f"geometry: theta {g['theta_deg']:.1f} deg, alpha {g['alpha_deg']:.1f} deg, min_cos {g['min_cos']:.2f}"
           f"  (joint noise-free IoU {result['iou']:.4f})")
@@ -40,8 +75,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if n:
         print("range error: " + ", ".join(f"{k} {v:.4g}" for k, v in n.items() if k not in ("cost", "evaluations"))
               + f"  (cost {n['cost']:.4f}, {n['evaluations']} evaluations)")
-    if args.report:
-        write_json({k: result[k] for k in ("geometry", "iou", "dropout", "noise", "views")}, Path(args.report))
     print(f"wrote {out}")
     return 0
 

@@ -162,3 +162,50 @@ def write_json(data: dict, path: Path) -> None:
     """``data`` as indented JSON at ``path``, written atomically (see :func:`writing`)."""
     with writing(path), atomic_path(path) as tmp:
         Path(tmp).write_text(json.dumps(json_safe(data), indent=2) + "\n", encoding="utf-8")
+
+
+def check_writable(path: Path | str, what: str = "file") -> None:
+    """Refuse an output path that cannot be written, before any work or any other output.
+
+    The path must not be a directory, the nearest existing folder above it must be a folder,
+    and a file must be creatable there (tried with a temporary file that is removed at once:
+    as root, ``os.access`` says yes to ``/proc``). Missing folders below it are fine (they are
+    created when the file is written).
+    """
+    import tempfile
+
+    path = Path(path)
+    if path.is_dir():
+        raise RangesimError(f"cannot write the {what}: a directory of that name exists", source=path)
+    blocker = next((p for p in path.parents if p.exists()), None)
+    if blocker is None:
+        return
+    if not blocker.is_dir():
+        raise RangesimError(f"cannot write the {what} ({blocker} is not a directory)", source=path)
+    try:
+        with tempfile.TemporaryFile(dir=blocker, prefix=".rangesim-probe-"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise RangesimError(f"cannot write the {what} (cannot create files in {blocker}: {reason})",
+                            source=path) from exc
+
+
+def check_out_files(folder: Path, names: Sequence[str]) -> None:
+    """The files a command writes into ``folder``: none may be a directory, the folder must be creatable."""
+    check_writable(folder / (names[0] if names else "probe"))
+    for name in names:
+        target = folder / name
+        if target.is_dir():
+            raise RangesimError("cannot write the file: a directory of that name exists", source=target)
+
+
+def check_conf(scan_path: Path | str, conf: str | None) -> None:
+    """``--conf`` (a Stanford pose file) goes with Stanford ``.ply`` range grids only."""
+    if conf is None:
+        return
+    if Path(scan_path).suffix.lower() != ".ply":
+        raise RangesimError(f"--conf applies to Stanford .ply range grids only (got --conf {conf} with a "
+                            f"{Path(scan_path).suffix or 'suffix-less'} file)", source=scan_path)
+    if not Path(conf).is_file():
+        raise RangesimError("no such --conf file", source=conf)

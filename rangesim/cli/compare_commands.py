@@ -94,6 +94,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise RangesimError(f"--seed must not be negative, got {args.seed}")
     path = Path(args.recorded)
+    from rangesim.cli.common import check_conf
+
+    check_conf(path, args.conf)
     scan, labels = load_scan_with_labels(path, args.conf, sensor=args.recorded_sensor)
     from rangesim.cli.edge_commands import describe_sensor, require_grid
 

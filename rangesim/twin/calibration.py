@@ -174,6 +174,12 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
     fixed.setdefault("camera_views", int(values.get("camera_views", 1)))
     iou, (theta, alpha, cmin, _) = search_geometry([stage], theta_grid=theta_grid, alpha_grid=alpha_grid,
                                                    fixed=fixed, refine=refine)
+    from rangesim.twin.joint import MIN_CALIBRATION_IOU
+
+    if not iou >= MIN_CALIBRATION_IOU:  # NaN included
+        raise RangesimError(
+            f"the mesh and the recording do not overlap: the best twin's valid-mask IoU is {float(iou):.4f} "
+            f"(at least {MIN_CALIBRATION_IOU} needed); check the mesh, the recording's pose and the units")
     values.update(theta_deg=theta, alpha_deg=alpha, min_cos=cmin)
 
     # noise: recorded points against the twin's noise-free hits

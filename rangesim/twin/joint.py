@@ -54,6 +54,15 @@ BAND_LOG = math.log(1.12)
 BAND_WEIGHT = 20.0
 #: seeds of the noise fit's simulated twins (common random numbers)
 FIT_SEED = 12345
+#: the least joint noise-free valid-mask IoU a calibration accepts. A twin of the right mesh in
+#: the recording's pose covers most of what the scanner recorded whatever the angles (shadows and
+#: the grazing cut-off remove a share of the surface, not all of it: good fits reach 0.9 and more);
+#: below 0.1 the mesh and the recordings do not overlap (another object, a wrong pose, wrong units)
+#: and every later stage would fit noise to nothing.
+MIN_CALIBRATION_IOU = 0.1
+#: the fewest measurable cells (recorded and twin both valid) the range-error fit needs: one
+#: incidence bin's worth (:data:`rangesim.twin.realism.MIN_BIN_CELLS`), else its cost is NaN
+MIN_MEASURABLE_CELLS = MIN_BIN_CELLS
 
 
 def _views(stages: Sequence[TwinStage], geometry: dict[str, float]) -> list[dict[str, Any]]:
@@ -228,14 +237,28 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
         stages = [TwinStage(rec, mesh, base_sensor) for rec in recordings]
     names = list(names) if names is not None else [str(r.meta.get("source", f"view {k}")) for k, r in
                                                     enumerate(recordings)]
+    if isinstance(max_evaluations, bool) or not isinstance(max_evaluations, (int, np.integer)) or max_evaluations < 1:
+        raise RangesimError(f"max_evaluations must be an integer >= 1, got {max_evaluations!r}")
     iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
+    if not iou >= MIN_CALIBRATION_IOU:  # NaN included
+        raise RangesimError(
+            f"the mesh and the recording(s) do not overlap: the best twin's valid-mask IoU is {float(iou):.4f} "
+            f"(at least {MIN_CALIBRATION_IOU} needed); check the mesh, the recordings' poses and the units")
     geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos, "camera_views": views}
     views = _views(stages, geometry)
+    measurable = sum(int(np.count_nonzero(v["cells"])) for v in views)
+    if measurable < MIN_MEASURABLE_CELLS:
+        raise RangesimError(
+            f"the mesh and the recording(s) hardly overlap: {measurable} measurable cells (recorded and twin "
+            f"both valid; at least {MIN_MEASURABLE_CELLS} needed); check the mesh, the poses and the units")
     dropout = fit_dropout_curve(views)
     base = replace(stages[0].noise, min_signal=dropout["min_signal"], signal_contrast=dropout["signal_contrast"])
     fitted: dict[str, float] = {}
     if fit_noise:
-        fitted = fit_range_error(views, base, max_evaluations=max_evaluations, registration=registration)
+        fitted = fit_range_error(views, base, max_evaluations=int(max_evaluations), registration=registration)
+        if not all(math.isfinite(v) for v in fitted.values()):
+            raise RangesimError(f"the range-error fit did not converge to finite values (cost {fitted['cost']}); "
+                                "no sensor file is written")
     changes: dict[str, Any] = {f"twin.{k}": (int(v) if k == "camera_views" else float(v)) for k, v in geometry.items()}
     changes.update({"noise.min_signal": dropout["min_signal"], "noise.signal_contrast": dropout["signal_contrast"]})
     for key in NOISE_PARAMS:
