@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import make_out_dir, positive, writing
+from rangesim.cli.common import check_conf, check_out_files, make_out_dir, positive, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -60,9 +60,20 @@ def cmd_detect(args: argparse.Namespace) -> int:
     positive("--tolerance", args.tolerance)
     positive("--crease-deg", args.crease_deg, upper=180)
     path = Path(args.scan)
+    check_conf(path, args.conf)
+    names = [f"{m}_edges.npz" for m in methods] + [f"{m}.png" for m in methods] + ["ground_truth.png", "scores.json"]
+    check_out_files(out, names)
     scan, segment_labels = load_scan_with_labels(path, args.conf, sensor=args.sensor)
     require_grid(scan, path)
-    truth = scan_truth(scan, args.scene, segment_labels, crease_deg=args.crease_deg)
+    scene = args.scene
+    if scene is not None:
+        from rangesim.cli.common import load_scene_arg
+        from rangesim.cli.scene_match import require_matching_scene, require_synthetic
+
+        require_synthetic(scan, path, args.scene)
+        scene = load_scene_arg(args.scene)
+        require_matching_scene(scan, scene, path, args.scene)
+    truth = scan_truth(scan, scene, segment_labels, crease_deg=args.crease_deg)
     results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
 
     make_out_dir(out)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import make_out_dir, positive, writing
+from rangesim.cli.common import check_out_files, make_out_dir, positive, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -40,11 +40,20 @@ def cmd_features(args: argparse.Namespace) -> int:
     positive("--rmax", args.rmax)
     if args.rmin > args.rmax:  # equal: one radius, as the API's radii=(r, r)
         raise RangesimError(f"--rmin ({args.rmin:g}) must not exceed --rmax ({args.rmax:g})")
+    check_out_files(out, ["features.json", "relations.csv", "features.png"])
     scan = load_scan(args.scan)
     from rangesim.cli.edge_commands import require_grid
 
     require_grid(scan, Path(args.scan))
     scene = args.scene
+    given_model = None
+    if scene is not None:
+        from rangesim.cli.common import load_scene_arg
+        from rangesim.cli.scene_match import require_matching_scene, require_synthetic
+
+        require_synthetic(scan, args.scan, scene)
+        given_model = load_scene_arg(scene)
+        require_matching_scene(scan, given_model, args.scan, scene)
     if scene is None and scan.xyz_true is not None:
         source = scan.meta.get("scene")
         scene = str(source) if source and Path(str(source)).is_file() else None
@@ -56,7 +65,7 @@ def cmd_features(args: argparse.Namespace) -> int:
     circ = F.circles(edge_map, radii)
     arc = F.arcs(edge_map, radii)
     # the analysis layer takes a loaded scene (it does not read scene files itself)
-    model = load_scene(scene) if scene else None
+    model = given_model if given_model is not None else (load_scene(scene) if scene else None)
     ell = F.ellipses(edge_map, scan if scene else None, model, explained=(*segs, *circ, *arc))
     feats = {"segments": segs, "circles": circ, "arcs": arc, "ellipses": ell}
     rows = F.relations(segs, circ, ell)
@@ -74,7 +83,8 @@ def cmd_features(args: argparse.Namespace) -> int:
     target = out / "relations.csv"
     with writing(target), atomic_path(target) as tmp:
         Path(tmp).write_text(F.relations_to_csv(rows))
-    save_features_overlay(scan, edge_map, feats, out / "features.png")
+    with writing(out / "features.png"):
+        save_features_overlay(scan, edge_map, feats, out / "features.png")
     print(f"{args.scan}: {len(segs)} segments, {len(circ)} circles, {len(arc)} arcs, {len(ell)} ellipses, "
           f"{len(rows)} relations")
     if "scores" in report:
