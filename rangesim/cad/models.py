@@ -14,6 +14,30 @@ from rangesim.core.memory import check_memory
 #: memory grows with the square of it (about 8 GB at 960) and time faster
 MAX_SEGMENTS = 4096
 MAX_DIVISIONS_PER_TURN = 1024
+#: the largest magnitude a numeric model parameter may have, mm (or degrees, counts): 100 m. No
+#: machined part is larger, and beyond it the float32 meshes the scanner casts rays against lose
+#: their sub-millimetre resolution (and the geometry kernel overflows its integer sizes)
+MAX_PARAM_MAGNITUDE = 1e5
+#: parameters that are not sizes and take any integer
+FREE_PARAMS = ("seed",)
+
+
+def _check_numbers(key: str, value, name: str) -> None:
+    """Every number in a parameter value (nested lists and tables too) finite and of sensible size."""
+    import math
+
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_numbers(f"{key}.{k}", v, name)
+    elif isinstance(value, (list, tuple)):
+        for k, v in enumerate(value):
+            _check_numbers(f"{key}[{k}]", v, name)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not math.isfinite(value):
+            raise RangesimError(f"--param {key} must be a finite number, got {value!r}", source=name)
+        if abs(value) > MAX_PARAM_MAGNITUDE:
+            raise RangesimError(f"--param {key} = {value!r} is out of range (at most {MAX_PARAM_MAGNITUDE:g} "
+                                "in magnitude: mm, degrees or counts)", source=name)
 
 #: name -> builder returning a built part (see ``rangesim.cad.part``); filled by the model modules
 MODELS: dict[str, Callable] = {}
@@ -32,7 +56,14 @@ def model_memory_estimate(params: dict) -> float:
 
 
 def check_model_params(name: str, params: dict) -> None:
-    """Reject tessellation parameters that are not integers in range or would not fit in memory."""
+    """Reject empty names, non-finite or huge numbers, and tessellation parameters that are not integers
+    in range or would not fit in memory."""
+    for key, value in params.items():
+        if not str(key).strip():
+            raise RangesimError(f"--param needs a parameter name before '=' (got an empty name for {value!r})",
+                                source=name)
+        if key not in FREE_PARAMS:
+            _check_numbers(str(key), value, name)
     for key, low, high in (("segments", 3, MAX_SEGMENTS), ("divisions_per_turn", 1, MAX_DIVISIONS_PER_TURN)):
         if key not in params:
             continue

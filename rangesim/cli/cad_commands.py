@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangesim.cli.common import build_model, check_suffix, writing
+from rangesim.cli.common import build_model, check_suffix, check_writable, writing
 from rangesim.io.atomic import atomic_path
 
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb")
@@ -18,13 +18,18 @@ def cmd_model(args: argparse.Namespace) -> int:
     tree_path = Path(args.tree) if args.tree else None
     if tree_path is not None:
         check_suffix(tree_path, (".json",), "a part tree")
+    # every output checked before any is written: both files or neither
+    check_writable(out, "mesh")
+    if tree_path is not None:
+        check_writable(tree_path, "part tree")
     part = build_model(args.name, args.param)
     data = part.mesh.export(file_type=out.suffix.lower().lstrip("."))  # bytes (or str for OBJ)
+    tree_text = json.dumps(part.to_dict(), indent=1) if tree_path is not None else None
     with writing(out), atomic_path(out) as tmp:
         Path(tmp).write_bytes(data if isinstance(data, bytes) else data.encode())
-    if tree_path is not None:
-        with writing(tree_path), atomic_path(tree_path) as tmp:
-            Path(tmp).write_text(json.dumps(part.to_dict(), indent=1))
+        if tree_path is not None:  # the mesh lands only once the tree is written
+            with writing(tree_path), atomic_path(tree_path) as tree_tmp:
+                Path(tree_tmp).write_text(tree_text)
     mesh = part.mesh
     print(f"{args.name}: {len(mesh.faces):,} triangles, volume {mesh.volume:,.1f} mm^3, "
           f"watertight {mesh.is_watertight}, {len(part.labels)} sub-parts, {len(part.features)} analytic "

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangesim.cli.common import build_model, check_suffix, writing
+from rangesim.cli.common import build_model, check_suffix, check_writable, writing
 from rangesim.io.atomic import atomic_path
 
 
@@ -17,15 +17,19 @@ def cmd_volumes(args: argparse.Namespace) -> int:
     picture = Path(args.picture) if args.picture else None
     if picture is not None:
         check_suffix(picture, (".png",), "a picture")
+    # every output checked before any is written: both files or neither
+    check_writable(out, "volumetric model")
+    if picture is not None:
+        check_writable(picture, "picture")
     part = build_model(args.name, args.param)
     model = volumetric_model(part.tree)
     with writing(out), atomic_path(out) as tmp:
         Path(tmp).write_text(json.dumps(model, indent=1))
-    if picture is not None:
-        from rangesim.viz.volumes import save_part_tree
+        if picture is not None:  # the JSON lands only once the picture is drawn
+            from rangesim.viz.volumes import save_part_tree
 
-        with writing(picture):
-            save_part_tree(part.tree, picture)
+            with writing(picture):
+                save_part_tree(part.tree, picture)
     n = sum(1 for _ in part.tree.walk())
     print(f"{args.name}: {n} nodes, {len(part.tree.leaves())} solids; {model['expanded']}; wrote {out}"
           + (f" and {picture}" if picture else ""))
