@@ -15,6 +15,12 @@ def cmd_diff(args: argparse.Namespace) -> int:
     check_suffix(out, (".png",), "difference pictures")
     positive("--limit", args.limit)
     a, b = load_scan(args.scan_a), load_scan(args.scan_b)
+    if a.shape != b.shape:
+        from rangesim.core.errors import RangesimError
+
+        raise RangesimError(f"the scans differ in size: {args.scan_a} is {a.shape[1]:,} x {a.shape[0]:,} px, "
+                            f"{args.scan_b} is {b.shape[1]:,} x {b.shape[0]:,} (W x H); diff compares two scans "
+                            "of one view", source=args.scan_b)
     labels = tuple(args.labels) if args.labels else (Path(args.scan_a).stem, Path(args.scan_b).stem)
     with writing(out):
         stats = save_scan_difference(a, b, out, labels=labels, limit_mm=args.limit)

@@ -71,6 +71,10 @@ def cmd_dataset(args: argparse.Namespace) -> int:
                        cap_deg=args.cap_deg, distance=distance, axis=args.axis, target=args.target,
                        sensor_changes=changes or None, crease_deg=args.crease_deg, workers=args.workers,
                        scheduler=args.scheduler, progress=_progress(args))
+    import sys
+
+    for index, reason in run.empty:  # as `rangesim scan --keep-empty`: kept, and said once per view
+        print(f"rangesim: warning: view {index}: {reason} (kept in the dataset)", file=sys.stderr)
     print(f"{args.scene}: {run.n_views} views ({run.n_run} rendered on {run.executor}, {run.n_reused} reused) "
           f"in {run.seconds:.1f} s; wrote {run.manifest} and {Path(args.out) / 'views'}/")
     return 0

@@ -70,6 +70,8 @@ class DatasetRun:
     seconds: float
     executor: str
     records: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    #: (view index, why it is empty) of the views rendered now with no (or almost no) valid pixel
+    empty: list[tuple[int, str]] = field(default_factory=list)
 
 
 def _json_features(features: dict[str, list]) -> dict[str, list[dict[str, Any]]]:
@@ -108,7 +110,19 @@ def run_dataset_view(payload: dict[str, Any]) -> dict[str, Any]:
     sensor = load_sensor(payload["sensor"])
     resolved = resolve_pose_table(payload["pose"], scene, sensor)
     view = sample_view(resolved, np.random.default_rng(payload["pose_seed"]))
-    scan = make_scan(scene, sensor, pose=view.pose, seed=payload["noise_seed"])
+    import warnings
+
+    from rangesim.sensor._scan import EmptyScanWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", EmptyScanWarning)
+        scan = make_scan(scene, sensor, pose=view.pose, seed=payload["noise_seed"])
+    empty = None
+    for w in caught:  # an empty view is reported once, by make_dataset, not as a raw Python warning
+        if issubclass(w.category, EmptyScanWarning):
+            empty = " ".join(str(w.message).split())
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     edges = ground_truth_edges(scan, scene, crease_deg=payload["crease_deg"])
     truth = {
         "edges": edges.astype(np.uint8),
@@ -124,7 +138,7 @@ def run_dataset_view(payload: dict[str, Any]) -> dict[str, Any]:
         "valid_fraction": float(np.count_nonzero(scan.valid)) / scan.valid.size,
         "features": features,
     }
-    return {"scan": scan, "truth": truth, "record": record}
+    return {"scan": scan, "truth": truth, "record": record, "empty": empty}
 
 
 def _stem(index: int, key: str) -> str:
@@ -202,6 +216,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     pose_table = check_pose_table(table, source="dataset")
     scene_obj = load_task_scene(scene_path)
     cap = resolve_pose_table(pose_table, scene_obj, sensor_obj)
+    _check_distance_in_range(cap, scene_obj, sensor_obj)
 
     sensor_data = sensor_obj.to_dict()
     scene_id = {"file": scene_path.name, "sha1": hashlib.sha1(scene_path.read_bytes()).hexdigest()}
@@ -218,6 +233,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     views_dir = out / VIEWS_DIR
     todo = [p for p in payloads if not (views_dir / f"{_stem(p['index'], p['key'])}.json").is_file()]
     failures: list[tuple[dict, BaseException]] = []
+    empty: list[tuple[int, str]] = []
     executor = Executor(workers, scheduler, max_tasks=len(todo))
     where = executor.describe() if todo else "nowhere (every view was finished)"
     if todo:
@@ -227,6 +243,8 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
                     failures.append((todo[i], error))
                 else:
                     _write_view(views_dir, todo[i], result, fmt)
+                    if result.get("empty"):
+                        empty.append((todo[i]["index"], result["empty"]))
                 bar.update(1)
     if failures:
         payload, error = min(failures, key=lambda f: f[0]["index"])
@@ -255,7 +273,25 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     manifest_path = write_json(out / MANIFEST, manifest)
     _remove_stale_views(views_dir, [_stem(p["index"], p["key"]) for p in payloads], fmt)
     return DatasetRun(out, manifest_path, views, len(todo), views - len(todo), time.perf_counter() - start,
-                      where, records)
+                      where, records, sorted(empty))
+
+
+def _check_distance_in_range(cap: dict[str, Any], scene, sensor) -> None:
+    """Refuse a distance range that puts the whole part outside the working range in every view.
+
+    The part (the first object) reaches ``radius`` mm around the target; at a camera distance
+    ``d`` its depths lie within ``d - radius .. d + radius``. If even the nearest camera sees it
+    only beyond ``range.far``, or the farthest only before ``range.near``, every view is empty.
+    """
+    part = scene.objects[0].mesh
+    target = np.asarray(cap["target"], dtype=np.float64)
+    radius = float(np.linalg.norm(part.vertices - target, axis=1).max())
+    lo, hi = (float(x) for x in cap["distance"])
+    near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
+    if lo - radius > far or hi + radius < near:
+        raise RangesimError(
+            f"distance {lo:g}-{hi:g} mm puts the whole part (radius {radius:.0f} mm around the target) outside "
+            f"{sensor.name}'s working range {near:g}-{far:g} mm: every view would be empty", source="dataset")
 
 
 def _remove_stale_views(views_dir: Path, stems: list[str], fmt: str) -> None:

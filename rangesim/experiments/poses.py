@@ -73,21 +73,32 @@ class ViewSample:
     target: np.ndarray
 
 
+def _plain(value: Any) -> str:
+    """A value as its user wrote it: plain numbers (``nan``, ``1.5``), not ``np.float64(nan)``."""
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_plain(v) for v in value) + "]"
+    if isinstance(value, (np.integer, np.floating)):
+        value = value.item()
+    if isinstance(value, float):
+        return f"{value:g}"
+    return repr(value)
+
+
 def _vec3(value: Any, key: str, source: Any) -> np.ndarray:
     try:
         v = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         v = np.empty(0)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise RangesimError(f"pose.{key} must be 3 finite numbers, got {value!r}", source=source)
+        raise RangesimError(f"pose.{key} must be 3 finite numbers, got {_plain(value)}", source=source)
     return v
 
 
 def _number(value: Any, key: str, source: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise RangesimError(f"pose.{key} must be a number, got {value!r}", source=source)
+        raise RangesimError(f"pose.{key} must be a number, got {_plain(value)}", source=source)
     if not math.isfinite(float(value)):
-        raise RangesimError(f"pose.{key} must be finite, got {value!r}", source=source)
+        raise RangesimError(f"pose.{key} must be finite, got {_plain(value)}", source=source)
     return float(value)
 
 
@@ -127,12 +138,12 @@ def check_pose_table(table: Mapping[str, Any], source: Any = None) -> dict[str, 
         d = table["distance"]
         if isinstance(d, (list, tuple)):
             if len(d) != 2:
-                raise RangesimError(f"pose.distance must be a number or [min, max], got {d!r}", source=source)
+                raise RangesimError(f"pose.distance must be a number or [min, max], got {_plain(d)}", source=source)
             lo, hi = (_number(x, "distance", source) for x in d)
         else:
             lo = hi = _number(d, "distance", source)
         if lo <= 0 or hi < lo:
-            raise RangesimError(f"pose.distance must be positive with min <= max, got {d!r}", source=source)
+            raise RangesimError(f"pose.distance must be positive with min <= max, got {_plain(d)}", source=source)
         out["distance"] = [lo, hi]
     return out
 

@@ -13,7 +13,11 @@ Layout (format version 1)
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -160,6 +164,29 @@ def write_exr(scan: RangeScan, path: str | Path) -> None:
         exr.write(str(path))
 
 
+@contextlib.contextmanager
+def _quiet_c_output():
+    """File descriptors 1 and 2 sent to /dev/null for the block: OpenEXR's C++ library prints its own
+    lines about a broken file (on stdout and stderr) before the bindings raise."""
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+    except (OSError, ValueError, AttributeError):  # no real descriptors (an embedding host): nothing to silence
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 1)
+            os.dup2(null.fileno(), 2)
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            yield
+    finally:
+        for fd, copy in zip((1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
 def read_exr(path: str | Path) -> RangeScan:
     """Read a scan written by :func:`write_exr`; every array comes back bit-exact.
 
@@ -187,11 +214,12 @@ def read_exr(path: str | Path) -> RangeScan:
         if fh.read(len(EXR_MAGIC)) != EXR_MAGIC:
             raise RangesimError("not an OpenEXR file", path)
     try:
-        with OpenEXR.File(str(path), separate_channels=True) as exr:
-            header = dict(exr.header())
-            pixels = {name: ch.pixels for name, ch in exr.channels().items()}
+        with _quiet_c_output():
+            with OpenEXR.File(str(path), separate_channels=True) as exr:
+                header = dict(exr.header())
+                pixels = {name: ch.pixels for name, ch in exr.channels().items()}
     except Exception as exc:  # the bindings raise bare RuntimeError/ValueError for bad files
-        raise RangesimError(f"not a readable OpenEXR file ({exc})", path) from exc
+        raise RangesimError(f"truncated or corrupt OpenEXR file (the library says: {exc})", path) from exc
 
     version = header.get(VERSION_ATTR, FORMAT_VERSION)
     if not isinstance(version, int) or version > FORMAT_VERSION:

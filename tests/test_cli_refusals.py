@@ -1,0 +1,211 @@
+"""Bad input the command line refuses up front: one line naming the file and the problem, exit
+code 2, no traceback, and no output file left behind."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import rangesim as rs
+from rangesim.cli.main import main
+from rangesim.core.errors import RangesimError
+from rangesim.core.rangescan import RangeScan
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+GREEN = str(ROOT / "scenes" / "green_piece.toml")
+
+
+def _refused(capsys, argv, *words):
+    """``main(argv)`` exits 2 with one error line that holds every word."""
+    assert main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rangesim: error:"), err
+    assert "Traceback" not in err
+    for word in words:
+        assert str(word) in lines[0], (word, lines[0])
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def plate(tmp_path_factory):
+    """The small synthetic plate scan as .exr (and .npz)."""
+    folder = tmp_path_factory.mktemp("plate")
+    scan = rs.datasets.plate_scan()
+    scan.save(folder / "plate.exr")
+    return folder / "plate.exr"
+
+
+def _grid_recording(h=60, w=70, dx=0.5, dy=0.7):
+    """A 'recorded' orthographic grid (no ground truth), every cell valid near z = 0."""
+    i, j = np.indices((h, w))
+    xyz = np.stack([-17 + dx * j, -21 + dy * i, np.where((i + j) % 7 == 0, 3.0, 0.0)], axis=-1).astype(np.float32)
+    n = np.full((h, w, 3), np.nan, np.float32)
+    return RangeScan(depth=xyz[..., 2], xyz=xyz, valid=np.ones((h, w), bool), normal=n,
+                     intensity=np.zeros((h, w)), part=np.zeros((h, w)), face=np.zeros((h, w)),
+                     status=np.zeros((h, w)), meta={"frame": "scanner"})
+
+
+# -- 1: calibrate a mesh that does not overlap the recording ---------------------------------
+def test_calibrate_refuses_a_mesh_that_does_not_overlap(tmp_path, capsys):
+    rec = tmp_path / "rec.npz"
+    _grid_recording().save(rec)
+    far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    far.apply_translation((5000.0, 5000.0, 0.0))
+    mesh = tmp_path / "far.stl"
+    far.export(mesh)
+    out = tmp_path / "c.toml"
+    _refused(capsys, ["calibrate", rec, "--mesh", mesh, "--sensor", "cyberware_3030", "--out", out,
+                      "--geometry-only"], "do not overlap", "IoU", "far.stl")
+    assert not out.exists()
+
+
+def test_calibrate_views_refuses_no_overlap_in_the_library(tmp_path):
+    from rangesim.twin.joint import calibrate_views
+
+    far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    far.apply_translation((5000.0, 5000.0, 0.0))
+    with pytest.raises(RangesimError, match="do not overlap"):
+        calibrate_views([_grid_recording()], far, "cyberware_3030", fit_noise=False)
+
+
+# -- 2: calibrate's options ----------------------------------------------------------------------
+@pytest.mark.parametrize("extra, words", [
+    (["--evaluations", "0"], ["--evaluations", ">= 1"]),
+    (["--evaluations", "-5"], ["--evaluations", ">= 1"]),
+    (["--name", ""], ["--name"]),
+    (["--report", "/proc/rangesim-test/r.json"], ["/proc/rangesim-test/r.json"]),
+])
+def test_calibrate_checks_options_up_front(tmp_path, capsys, extra, words):
+    rec = tmp_path / "rec.npz"
+    _grid_recording().save(rec)
+    mesh = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(mesh)
+    out = tmp_path / "c.toml"
+    _refused(capsys, ["calibrate", rec, "--mesh", mesh, "--sensor", "cyberware_3030", "--out", out, *extra], *words)
+    assert not out.exists()
+
+
+# -- 3: a scene that is not the scan's -----------------------------------------------------------
+@pytest.mark.parametrize("command", ["detect", "features"])
+def test_scoring_against_the_wrong_scene_is_refused(plate, tmp_path, capsys, command):
+    out = tmp_path / "o"
+    extra = ["--method", "gradient"] if command == "detect" else []
+    _refused(capsys, [command, plate, "--scene", GREEN, "--out", out, *extra], "plate.exr", "does not match")
+    assert not out.exists()
+
+
+def test_scene_match_share_is_one_for_the_scans_own_scene():
+    from rangesim.cli.scene_match import MIN_SCENE_MATCH, scene_match_share
+
+    scan = rs.datasets.plate_scan(width=64, height=60)
+    assert scene_match_share(scan, rs.datasets.plate_scene()) >= MIN_SCENE_MATCH
+    assert scene_match_share(scan, rs.load_scene(GREEN)) < MIN_SCENE_MATCH
+
+
+# -- 4: every output checked before any is written -------------------------------------------------
+def test_model_writes_no_mesh_when_the_tree_cannot_be_written(tmp_path, capsys):
+    out = tmp_path / "o" / "m.stl"
+    tree = tmp_path / "t.json"
+    tree.mkdir()
+    _refused(capsys, ["model", "green_piece", "--out", out, "--tree", tree], "t.json", "directory")
+    assert not out.exists()
+    _refused(capsys, ["model", "green_piece", "--out", out, "--tree", "/proc/rangesim-test/t.json"], "/proc")
+    assert not out.exists()
+
+
+def test_volumes_writes_no_json_when_the_picture_cannot_be_written(tmp_path, capsys):
+    out = tmp_path / "o" / "v.json"
+    _refused(capsys, ["volumes", "green_piece", "--out", out, "--picture", "/proc/rangesim-test/v.png"], "/proc")
+    assert not out.exists()
+
+
+def test_features_writes_nothing_when_one_output_is_a_directory(plate, tmp_path, capsys):
+    out = tmp_path / "f"
+    (out / "features.png").mkdir(parents=True)
+    line = _refused(capsys, ["features", plate, "--out", out], "features.png", "directory")
+    assert ".tmp-" not in line
+    assert sorted(p.name for p in out.iterdir()) == ["features.png"]
+
+
+# -- 5: --conf with a scan that is not a Stanford .ply ---------------------------------------------
+@pytest.mark.parametrize("command", ["compare", "detect", "calibrate"])
+def test_conf_with_an_exr_is_refused(plate, tmp_path, capsys, command):
+    conf = tmp_path / "bun.conf"
+    conf.write_text("camera 0 0 0 0 0 0 1\nbmesh bun000.ply 0 0 0 0 0 0 1\n")
+    mesh = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(mesh)
+    out = tmp_path / ("c.toml" if command == "calibrate" else "d")
+    extra = {"compare": ["--mesh", mesh], "detect": [], "calibrate": ["--mesh", mesh, "--sensor", "cyberware_3030"]}
+    line = _refused(capsys, [command, plate, "--conf", conf, "--out", out, *extra[command]],
+                    "plate.exr", "--conf applies to Stanford .ply range grids only")
+    assert "TypeError" not in line
+    assert not out.exists()
+
+
+# -- 6: calibrate on a synthetic scan ----------------------------------------------------------------
+def test_calibrate_names_a_synthetic_scan(plate, tmp_path, capsys):
+    mesh = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(mesh)
+    out = tmp_path / "a.toml"
+    _refused(capsys, ["calibrate", plate, "--mesh", mesh, "--sensor", "cyberware_3030", "--out", out],
+             "plate.exr", "synthetic")
+    assert not out.exists()
+
+
+# -- 8: model parameters ------------------------------------------------------------------------
+@pytest.mark.parametrize("param, words", [
+    ("thickness=nan", ["thickness", "finite"]),
+    ("thickness=inf", ["thickness", "finite"]),
+    ("thickness=1e9", ["thickness", "out of range"]),
+    ("=5", ["parameter name"]),
+])
+def test_model_params_are_validated(tmp_path, capsys, param, words):
+    out = tmp_path / "m.stl"
+    line = _refused(capsys, ["model", "green_piece", "--param", param, "--out", out], "green_piece", *words)
+    assert "convert" not in line and "incompatible" not in line
+    assert not out.exists()
+
+
+# -- 7: a dataset whose every view would be empty ----------------------------------------------------
+def test_dataset_refuses_a_distance_outside_the_working_range(tmp_path, capsys):
+    out = tmp_path / "ds"
+    _refused(capsys, ["dataset", "--scene", GREEN, "--views", "2", "--out", out, "--distance", "1e6", "2e6",
+                      "--set", "camera.width=32", "--set", "camera.height=24", "--workers", "0", "--quiet"],
+             "working range", "empty")
+    assert not out.exists()
+
+
+def test_dataset_prints_plain_numbers(tmp_path, capsys):
+    line = _refused(capsys, ["dataset", "--scene", GREEN, "--views", "1", "--out", tmp_path / "ds",
+                             "--target", "nan", "0", "0", "--workers", "0", "--quiet"], "target", "nan")
+    assert "np.float64" not in line
+
+
+# -- 10: smaller ones --------------------------------------------------------------------------------
+def test_diff_names_both_files(plate, tmp_path, capsys):
+    other = tmp_path / "small.npz"
+    rs.datasets.plate_scan(width=32, height=30).save(other)
+    out = tmp_path / "d.png"
+    _refused(capsys, ["diff", plate, other, "--out", out], "plate.exr", "small.npz")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["detect", "features"])
+def test_scene_with_a_recording_is_refused(tmp_path, capsys, command):
+    rec = tmp_path / "rec.npz"
+    _grid_recording().save(rec)
+    out = tmp_path / "o"
+    _refused(capsys, [command, rec, "--scene", GREEN, "--out", out], "rec.npz", "ground truth")
+    assert not out.exists()
+
+
+def test_truncated_exr_is_one_line(plate, tmp_path, capfd):
+    broken = tmp_path / "trunc.exr"
+    data = plate.read_bytes()
+    broken.write_bytes(data[: len(data) // 2])
+    assert main(["detect", str(broken), "--out", str(tmp_path / "d")]) == 2
+    captured = capfd.readouterr()
+    assert captured.out == ""
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and "trunc.exr" in lines[0] and "truncated or corrupt" in lines[0], captured.err
