@@ -6,9 +6,9 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
-from rangesim.edges import _params as P
 from rangesim.edges._curvature_chords import matched_creases
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import pad_last2, padded_view

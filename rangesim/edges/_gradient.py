@@ -7,8 +7,8 @@ from typing import Any
 import numba
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
-from rangesim.edges import _params as P
 from rangesim.edges._differences import central_difference
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._gradient_steps import step_smooth, tap5_sum

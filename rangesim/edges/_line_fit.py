@@ -10,9 +10,9 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.morphology import thin as skeleton_thin
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.edges import _params as P
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import NEIGHBOURS
 from rangesim.edges._line_fit_sl import sl_creases

@@ -10,9 +10,9 @@ from scipy.spatial import cKDTree
 from skimage.draw import line as draw_line
 from skimage.morphology import thin as thin_mask
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.edges import _params as P
 
 #: how many pixels back from a chain end its outward direction is measured
 _DIRECTION_SPAN = 3

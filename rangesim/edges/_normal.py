@@ -5,8 +5,8 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
-from rangesim.edges import _params as P
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view

@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.edges import _params as P
 from rangesim.edges._differences import central_difference, dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, find_discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view

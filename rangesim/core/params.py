@@ -1,5 +1,5 @@
-"""The detectors' parameter checks: one place that refuses a parameter of the wrong type, sign
-or range up front with a :class:`~rangesim.core.errors.RangesimError` naming it, the range it
+"""Parameter checks of the analysis functions (edge detectors, feature finders, scores): one
+place that refuses a parameter of the wrong type, sign or range up front with a :class:`~rangesim.core.errors.RangesimError` naming it, the range it
 must lie in and the value given (instead of garbage edge maps, or an error from deep inside).
 
 Each check returns the value to use: unchanged for numbers (the detectors' arithmetic stays
