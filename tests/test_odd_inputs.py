@@ -109,7 +109,7 @@ def test_lines_with_min_length_zero(plate):
     scan, edges = plate
     assert len(rs.features.lines(edges, min_length=0)) >= len(rs.features.lines(edges)) >= 4
     for name in ("min_length", "max_gap", "band_px"):
-        with pytest.raises(RangesimError, match=f"^{name}: must be a finite number >= 0"):
+        with pytest.raises(RangesimError, match=f"^{name} must be a finite number >= 0"):
             rs.features.lines(edges, **{name: -1})
 
 

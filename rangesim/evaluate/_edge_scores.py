@@ -9,7 +9,9 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
 
+from rangesim.core import params as P
 from rangesim.core.constants import EDGE_LABEL_NAMES, EdgeLabel
+from rangesim.core.errors import RangesimError
 from rangesim.edges.edgemap import RIM
 
 #: Pratt's scaling constant
@@ -23,11 +25,38 @@ def _is_type(labels: np.ndarray, label: EdgeLabel) -> np.ndarray:
     return same | (labels == RIM) if label == EdgeLabel.JUMP else same
 
 
-def _as_mask_labels(x: Any) -> tuple[np.ndarray, np.ndarray | None]:
-    """(mask, labels or None) from an EdgeMap or an array (nonzero = edge)."""
+#: largest matching distance :func:`edge_scores` takes, pixels: the candidate pairs grow with its
+#: square (about 3 t^2 per predicted pixel), and a pixel that far from an edge does not locate
+#: it (the BSDS benchmark matches within about 0.75 % of the image diagonal, 5 px at 512^2)
+MAX_TOLERANCE_PX = 64.0
+
+
+def _as_mask_labels(x: Any, name: str = "edge map") -> tuple[np.ndarray, np.ndarray | None]:
+    """(mask, labels or None) from an EdgeMap or an (H, W) array (nonzero = edge; NaN in a
+    float array is no value, so no edge)."""
     if hasattr(x, "mask") and hasattr(x, "labels"):
-        return np.asarray(x.mask, dtype=bool), np.asarray(x.labels)
-    return np.asarray(x) != 0, None
+        mask, labels = np.asarray(x.mask, dtype=bool), np.asarray(x.labels)
+    else:
+        a = np.asarray(x) if x is not None else np.zeros(0, object)
+        if a.dtype.kind not in "biuf":
+            raise RangesimError(f"{name} must be an EdgeMap or a numeric (H, W) array, got {type(x).__name__}"
+                                f"{'' if a.dtype == object else f' of {a.dtype}'}")
+        mask, labels = (np.nan_to_num(a, nan=0.0) if a.dtype.kind == "f" else a) != 0, None
+    if mask.ndim != 2:
+        raise RangesimError(f"{name} must be an (H, W) image, got shape {mask.shape}")
+    if labels is not None and labels.shape != mask.shape:
+        raise RangesimError(f"{name}: labels {labels.shape} and mask {mask.shape} differ in shape")
+    return mask, labels
+
+
+def check_tolerance(tolerance_px: Any, shape: tuple[int, int]) -> float:
+    """The matching distance as a float: finite, >= 0, at most :data:`MAX_TOLERANCE_PX`;
+    beyond the image's diagonal every pair is in reach, so it is taken as the diagonal."""
+    t = float(P.number(tolerance_px, "tolerance_px", 0, unit="pixels"))
+    if min(t, float(np.hypot(*shape))) > MAX_TOLERANCE_PX:
+        raise RangesimError(f"tolerance_px {t:g} is above {MAX_TOLERANCE_PX:g} px: a pixel that far from an edge "
+                            "does not locate it (score a downsampled map instead)")
+    return min(t, float(np.hypot(*shape)))
 
 
 #: candidate-graph components larger than this (pixels) are matched greedily first
@@ -185,7 +214,8 @@ def edge_scores(
         Predicted and true edge pixels (a ground-truth label image works as ``gt_mask``).
         An EdgeMap also supplies its labels when ``pred_labels`` / ``gt_labels`` is None.
     tolerance_px : float
-        Largest matching distance, pixels.
+        Largest matching distance, pixels: finite, >= 0, at most :data:`MAX_TOLERANCE_PX`
+        (beyond the image diagonal it is the diagonal).
     pred_labels, gt_labels : (H, W) int array, optional
         :class:`~rangesim.core.constants.EdgeLabel` per pixel. With both, ``per_label`` scores
         each type (predicted pixels of that label vs true pixels of that label; predicted
@@ -226,14 +256,16 @@ def edge_scores(
        enhancement/thresholding edge detectors", Proceedings of the IEEE 67(5), 753-763 (1979),
        doi:10.1109/PROC.1979.11325 (Pratt's figure of merit).
     """
-    pred, pl = _as_mask_labels(pred_mask)
-    gt, gl = _as_mask_labels(gt_mask)
+    pred, pl = _as_mask_labels(pred_mask, "pred_mask")
+    gt, gl = _as_mask_labels(gt_mask, "gt_mask")
     if pred.shape != gt.shape:
-        raise ValueError(f"prediction {pred.shape} and ground truth {gt.shape} differ in shape")
-    if tolerance_px < 0:
-        raise ValueError(f"tolerance_px must be >= 0, got {tolerance_px}")
+        raise RangesimError(f"prediction {pred.shape} and ground truth {gt.shape} differ in shape")
+    tolerance_px = check_tolerance(tolerance_px, pred.shape)
     pred_labels = pl if pred_labels is None else np.asarray(pred_labels)
     gt_labels = gl if gt_labels is None else np.asarray(gt_labels)
+    for name, lab in (("pred_labels", pred_labels), ("gt_labels", gt_labels)):
+        if lab is not None and lab.shape != pred.shape:
+            raise RangesimError(f"{name} {lab.shape} and the masks {pred.shape} differ in shape")
     out = _scores(pred, gt, tolerance_px)
     out["tolerance_px"] = float(tolerance_px)
     if pred_labels is None and gt_labels is None:

@@ -6,6 +6,46 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
+from rangesim.core.errors import RangesimError
+
+#: the keys of a ``found`` dict that :func:`feature_scores` scores
+FOUND_KINDS = ("circles", "arcs", "ellipses", "segments")
+
+
+def _check_feature(f: Any, kind: str, k: int) -> None:
+    """A round feature has a centre and a radius or semi-axes; a segment its two end points."""
+    if kind == "segments":
+        ok = hasattr(f, "start") and hasattr(f, "end")
+        what = "start and end points"
+    else:
+        ok = hasattr(f, "center") and (hasattr(f, "radius") or hasattr(f, "axes"))
+        what = "a center and a radius or axes"
+    if not ok:
+        raise RangesimError(f"found {kind}[{k}] is not a feature (needs {what}): {f!r}")
+
+
+def _found_groups(found: Any) -> dict[str, list]:
+    """The found features as ``{"round": [...], "segments": [...]}``, checked."""
+    if isinstance(found, (list, tuple)):
+        groups = {"round": [f for f in found if hasattr(f, "center")],
+                  "segments": [f for f in found if not hasattr(f, "center")]}
+    elif isinstance(found, dict):
+        unknown = sorted(set(found) - set(FOUND_KINDS))
+        if unknown:
+            raise RangesimError(f"found has unknown feature kinds {unknown}; known: {', '.join(FOUND_KINDS)}")
+        for kind in FOUND_KINDS:
+            if not isinstance(found.get(kind, []), (list, tuple)):
+                raise RangesimError(f"found[{kind!r}] must be a list of features, got {type(found[kind]).__name__}")
+        groups = {"round": [*found.get("circles", []), *found.get("arcs", []), *found.get("ellipses", [])],
+                  "segments": list(found.get("segments", []))}
+    else:
+        raise RangesimError(f"found must be a dict of feature lists or one list of features, got {type(found).__name__}")
+    for kind, items in (("round features", groups["round"]), ("segments", groups["segments"])):
+        for k, f in enumerate(items):
+            _check_feature(f, "segments" if kind == "segments" else kind, k)
+    return groups
+
 
 def _size(f: Any) -> np.ndarray:
     """(a, b) semi-axes of a found circle/arc (radius, radius) or ellipse (axes), pixels."""
@@ -65,19 +105,39 @@ def feature_scores(
     scan : RangeScan, optional
         For errors in mm (pixel error times the footprint z / f near the feature).
 
+    center_tol_px, segment_tol_px : float
+        Largest centre / end-point distance of a match, pixels (finite, >= 0).
+    size_tol : float
+        Largest relative difference of the mean semi-axes (finite, >= 0).
+    min_visible : float
+        Least visible share (0..1) of a true feature that is scored.
+
     Returns
     -------
     dict
         ``round`` and ``segments`` sub-dicts: ``recall``, ``precision``, ``matched``,
         ``n_found``, ``n_truth``, ``center_error_px`` / ``radius_error_px`` (mean, max) and
         mm equivalents, ``endpoint_error_px``; ``matches`` lists (found index, truth name, error).
+        ``recall`` is NaN when no true feature is scored and ``precision`` NaN when none was
+        found (undefined: a features list is short, and a 1.0 there would read as a result;
+        :func:`~rangesim.evaluate.edge_scores` counts pixels and calls those cases 1.0).
+
+    Raises
+    ------
+    RangesimError
+        ``found`` or ``truth`` of the wrong kind (unknown feature kinds, items that are not
+        features), a tolerance that is negative or not finite, ``min_visible`` outside 0..1,
+        a ``scan`` that is not a range scan.
     """
-    if isinstance(found, list):
-        groups = {"round": [f for f in found if hasattr(f, "center")],
-                  "segments": [f for f in found if not hasattr(f, "center")]}
-    else:
-        groups = {"round": [*found.get("circles", []), *found.get("arcs", []), *found.get("ellipses", [])],
-                  "segments": list(found.get("segments", []))}
+    groups = _found_groups(found)
+    if not isinstance(truth, dict):
+        raise RangesimError(f"truth must be the dict of ground_truth_features(scan, scene), got {type(truth).__name__}")
+    center_tol_px = P.number(center_tol_px, "center_tol_px", 0, unit="pixels")
+    size_tol = P.number(size_tol, "size_tol", 0)
+    segment_tol_px = P.number(segment_tol_px, "segment_tol_px", 0, unit="pixels")
+    min_visible = P.number(min_visible, "min_visible", 0, 1, what="share")
+    if scan is not None and not (hasattr(scan, "K") and hasattr(scan, "depth") and hasattr(scan, "shape")):
+        raise RangesimError(f"scan must be a RangeScan (for errors in mm) or None, got {type(scan).__name__}")
     out: dict[str, Any] = {}
     # -- round features vs truth ellipses --
     tr = [t for t in truth.get("circles", []) if t.visible >= min_visible]

@@ -14,7 +14,7 @@ from scipy import ndimage
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.evaluate._edge_scores import _as_mask_labels, edge_scores
+from rangesim.evaluate._edge_scores import _as_mask_labels, check_tolerance, edge_scores
 from rangesim.evaluate.ground_truth import ground_truth_edges
 
 __all__ = ["visible_truth", "data_boundary", "score_edges"]
@@ -152,9 +152,10 @@ def score_edges(
             raise RangesimError("score_edges needs the scene behind the scan, or truth=")
         truth = visible_truth(scan, scene, crease_deg)
     truth = np.asarray(truth)
-    pred, labels = _as_mask_labels(edges)
+    pred, labels = _as_mask_labels(edges, "edges")
     if pred.shape != truth.shape:
         raise RangesimError(f"edge map {pred.shape} and scan {truth.shape} differ in shape")
+    tolerance_px = check_tolerance(tolerance_px, pred.shape)
     n_ignored = 0
     if ignore_data_boundary:
         far = ndimage.distance_transform_edt(truth == EdgeLabel.NONE) > tolerance_px

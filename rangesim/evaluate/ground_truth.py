@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.conics import ellipse_from_conic
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
@@ -674,6 +675,9 @@ def ground_truth_edges(
     """
     from rangesim.scene.scene import load_scene
 
+    P.number(crease_deg, "crease_deg", 0, 180, lo_open=True, hi_open=True, what="angle", unit="degrees")
+    P.number(jump_angle_deg, "jump_angle_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
+    P.number(depth_tol_px, "depth_tol_px", 0, unit="pixel footprints")
     scene = load_scene(scene)
     R, t, K = _camera(scan)
     if scan.part.max(initial=-1) >= len(scene.objects):

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.features._circles import _dedupe, _support, circle_hypotheses
 from rangesim.features._edge_points import check_range, edge_points
 
@@ -80,10 +81,17 @@ def arcs(
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
     radii = check_range(radii, "radii")
+    P.number(min_span_deg, "min_span_deg", 0, 360, what="angle", unit="degrees")
+    P.number(max_coverage, "max_coverage", 0, 1, what="share")
+    P.number(threshold, "threshold", 0, lo_open=True)
+    P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
+    P.number(max_residual, "max_residual", 0, lo_open=True, unit="pixels")
     xy, _ = edge_points(edge_map, keep)
     found = []
     for c, r, votes, _ in circle_hypotheses(edge_map, radii, angle_tol_deg=angle_tol_deg,
                                             threshold=threshold, keep=keep):
+        if not radii[0] <= r <= radii[1]:
+            continue  # refined out of the radii searched
         _, cov, s, e, rms = _support(xy, c, r)
         if cov < max_coverage and (e - s) >= np.deg2rad(min_span_deg) and rms <= max_residual:
             found.append(Arc((float(c[0]), float(c[1])), float(r), s, e, cov, votes, rms))

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.conics import ellipse_params
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.memory import check_memory
@@ -201,7 +202,7 @@ def circles(
         Edge pixels; ``direction`` (radians, across the edge) is used when present, else it
         is estimated from the mask.
     radii : (rmin, rmax)
-        Radius range, pixels.
+        Radius range, pixels; every circle returned has its (refined) radius in it.
     min_support : float
         Least fraction of the circumference (bins of about 1 px) with an edge pixel within
         1 px of the circle whose edge normal is radial within 15 degrees; each edge pixel
@@ -254,6 +255,10 @@ def circles(
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
     radii = check_range(radii, "radii")
+    P.number(min_support, "min_support", 0, 1, what="share")
+    P.number(threshold, "threshold", 0, lo_open=True)
+    P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
+    P.number(max_residual, "max_residual", 0, lo_open=True, unit="pixels")
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     labels = point_labels(edge_map, pixels)
@@ -267,7 +272,9 @@ def circles(
     c, r, votes, ph, pp, sibling = h
     cov, rms = _coverage(xy, c, r, ph, pp)
     order = np.argsort(-cov, kind="stable")
-    order = order[(cov[order] >= min_support) & (rms[order] <= max_residual)]
+    # refinement may move a hypothesis out of the radii searched: those are not returned
+    inside = (r[order] >= radii[0]) & (r[order] <= radii[1])
+    order = order[(cov[order] >= min_support) & (rms[order] <= max_residual) & inside]
     # each edge point supports one circle: a candidate that is left with too little support
     # once the points of stronger circles are taken (a ghost made of two rims, a crescent
     # inside a rim) is dropped; this also removes near-duplicates

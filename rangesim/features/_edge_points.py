@@ -19,9 +19,12 @@ def edge_mask(edge_map: Any, keep: np.ndarray | None = None) -> np.ndarray:
     of another shape.
     """
     mask = np.asarray(getattr(edge_map, "mask", edge_map))
-    if mask.ndim != 2 or mask.dtype == object:
+    if mask.ndim != 2 or mask.dtype.kind not in "biuf":
         raise RangesimError(f"must be an EdgeMap or an (H, W) bool mask, got {type(edge_map).__name__} of shape "
-                            f"{mask.shape}", "edge_map")
+                            f"{mask.shape}" + ("" if mask.dtype.kind in "biufO" else f" and dtype {mask.dtype}"),
+                            "edge_map")
+    if mask.dtype.kind == "f":
+        mask = np.nan_to_num(mask, nan=0.0)  # NaN is no value, so no edge
     mask = mask.astype(bool, copy=False)
     if keep is not None:
         keep = np.asarray(keep)
@@ -84,7 +87,7 @@ def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
         theta = np.full(len(rows), np.nan)
     bad = ~np.isfinite(theta)
     if bad.any():
-        full = np.asarray(getattr(edge_map, "mask", edge_map), bool)
+        full = mask if keep is None else edge_mask(edge_map)
         theta[bad] = mask_normals(full, rows[bad], cols[bad])
     pixels = np.column_stack([cols, rows])
     xy = pixels.astype(np.float64)

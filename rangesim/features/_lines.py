@@ -8,7 +8,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.transform import hough_line
 
-from rangesim.core.errors import RangesimError
+from rangesim.core import params as P
 from rangesim.features._edge_points import check_scan_shape, edge_mask, edge_points
 from rangesim.features._line_kernels import suppress_near, window_maxima
 
@@ -108,8 +108,10 @@ def lines(
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
     for name, value in (("min_length", min_length), ("max_gap", max_gap), ("band_px", band_px)):
-        if not (np.isfinite(value) and value >= 0):
-            raise RangesimError(f"must be a finite number >= 0, got {value!r}", name)
+        P.number(value, name, 0, unit="pixels")
+    P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
+    P.whole(max_lines, "max_lines", 1)
+    P.whole(threshold, "threshold", 1, none=True)
     mask = edge_mask(edge_map, keep)
     if scan is not None:
         check_scan_shape(scan, mask)
@@ -151,8 +153,8 @@ def lines(
     ends = np.array([[*a, *b] for a, b, _, _ in out]).reshape(-1, 4)
     mm = None
     if scan is not None and len(out):
-        P = back_project(scan, ends.reshape(-1, 2)).reshape(-1, 2, 3)
-        mm = np.linalg.norm(P[:, 1] - P[:, 0], axis=1)
+        ends3d = back_project(scan, ends.reshape(-1, 2)).reshape(-1, 2, 3)
+        mm = np.linalg.norm(ends3d[:, 1] - ends3d[:, 0], axis=1)
     segs = [
         Segment((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), float(np.hypot(*(b - a))),
                 None if mm is None or not np.isfinite(mm[k]) else float(mm[k]), n, rms)

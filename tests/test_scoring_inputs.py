@@ -1,0 +1,116 @@
+"""Bad input to the scores and the feature finders: a clear RangesimError naming the argument,
+never a hang, a raw numpy error or a result built on garbage (a new user's probe, sixth
+session of 2026-12-03)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.core.errors import RangesimError
+from rangesim.evaluate import edge_scores, feature_scores
+
+
+@pytest.fixture(scope="module")
+def plate():
+    scan, scene = rs.datasets.plate_scan(), rs.datasets.plate_scene()
+    return scan, scene, rs.edges.gradient(scan), rs.evaluate.visible_truth(scan, scene)
+
+
+@pytest.mark.parametrize("tolerance", [np.inf, np.nan, -1.0, "2", None, 1e6])
+def test_edge_scores_refuses_tolerances_that_are_no_distance(plate, tolerance):
+    # 1e6 px once ran for minutes (the candidate offsets grow with the tolerance's square)
+    _, _, edges, truth = plate
+    with pytest.raises(RangesimError, match="tolerance_px"):
+        edge_scores(edges.mask, truth, tolerance_px=tolerance)
+
+
+def test_edge_scores_takes_a_tolerance_beyond_a_small_image_as_its_diagonal():
+    pred = np.zeros((6, 6), bool)
+    gt = np.zeros((6, 6), bool)
+    pred[0, 0] = gt[5, 5] = True
+    s = edge_scores(pred, gt, tolerance_px=1000)     # every pair is in reach: one match
+    assert s["matched"] == 1 and s["tolerance_px"] == pytest.approx(np.hypot(6, 6))
+
+
+@pytest.mark.parametrize("bad", [np.zeros(5), np.zeros((3, 3, 3)), None, "edges", np.array([["a"]])])
+def test_edge_scores_refuses_what_is_no_image(bad):
+    with pytest.raises(RangesimError, match="pred_mask"):
+        edge_scores(bad, np.zeros((3, 3)))
+
+
+def test_nan_in_a_float_map_is_no_edge(plate):
+    _, _, edges, truth = plate
+    as_float = np.where(edges.mask, 1.0, np.nan)
+    assert edge_scores(as_float, truth)["n_pred"] == int(edges.mask.sum())
+    assert len(rs.features.lines(as_float)) == len(rs.features.lines(edges.mask)) > 0
+
+
+def test_edge_scores_refuses_labels_of_another_shape(plate):
+    _, _, edges, truth = plate
+    with pytest.raises(RangesimError, match="pred_labels"):
+        edge_scores(edges.mask, truth, pred_labels=np.zeros((3, 3), np.uint8))
+
+
+@pytest.mark.parametrize("crease_deg", [0, -5, np.nan, 200, "20"])
+def test_truth_refuses_crease_angles_that_are_no_angle(plate, crease_deg):
+    scan, scene, edges, _ = plate
+    with pytest.raises(RangesimError, match="crease_deg"):
+        rs.evaluate.score_edges(edges, scan, scene, crease_deg=crease_deg)
+    with pytest.raises(RangesimError, match="crease_deg"):
+        rs.evaluate.visible_truth(scan, scene, crease_deg=crease_deg)
+
+
+@pytest.mark.parametrize("found, match", [
+    ("circles", "found must be"),
+    ({"blobs": []}, "unknown feature kinds"),
+    ({"circles": [1, 2, 3]}, "is not a feature"),
+    ({"segments": ["a"]}, "is not a feature"),
+    ({"circles": 5}, "must be a list"),
+])
+def test_feature_scores_refuses_found_that_is_no_features(found, match):
+    with pytest.raises(RangesimError, match=match):
+        feature_scores(found, {"circles": [], "segments": []})
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"center_tol_px": -1}, "center_tol_px"), ({"size_tol": np.nan}, "size_tol"),
+    ({"segment_tol_px": np.inf}, "segment_tol_px"), ({"min_visible": 2}, "min_visible"),
+])
+def test_feature_scores_refuses_bad_tolerances(kwargs, match):
+    with pytest.raises(RangesimError, match=match):
+        feature_scores({}, {"circles": []}, **kwargs)
+
+
+def test_feature_scores_refuses_truth_and_scan_of_the_wrong_kind():
+    with pytest.raises(RangesimError, match="truth"):
+        feature_scores({}, None)
+    with pytest.raises(RangesimError, match="scan"):
+        feature_scores({}, {}, "scan.exr")
+
+
+def test_circles_and_arcs_stay_in_the_radii_asked_for(plate):
+    # the refinement moved hypotheses out of narrow ranges: (8, 8.3) gave a circle of 8.6 px,
+    # (2, 3) an arc of 4.1 px
+    _, _, edges, _ = plate
+    for lo, hi in [(8, 8.3), (2, 3), (5, 9), (9.5, 10), (3, 40)]:
+        for f in [*rs.features.circles(edges, radii=(lo, hi)), *rs.features.arcs(edges, radii=(lo, hi))]:
+            assert lo <= f.radius <= hi
+    assert rs.features.circles(edges, radii=(3, 40))      # the plate's hole is still found
+
+
+@pytest.mark.parametrize("finder, kwargs, name", [
+    (rs.features.lines, {"min_length": "5"}, "min_length"),
+    (rs.features.lines, {"angle_tol_deg": 0}, "angle_tol_deg"),
+    (rs.features.lines, {"max_lines": 0}, "max_lines"),
+    (rs.features.lines, {"threshold": 0.5}, "threshold"),
+    (rs.features.circles, {"min_support": 2}, "min_support"),
+    (rs.features.circles, {"threshold": -1}, "threshold"),
+    (rs.features.circles, {"angle_tol_deg": "4"}, "angle_tol_deg"),
+    (rs.features.arcs, {"max_coverage": np.nan}, "max_coverage"),
+    (rs.features.arcs, {"max_residual": 0}, "max_residual"),
+])
+def test_feature_finders_refuse_bad_parameters(plate, finder, kwargs, name):
+    _, _, edges, _ = plate
+    with pytest.raises(RangesimError, match=name):
+        finder(edges, **kwargs)
