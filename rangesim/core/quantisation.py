@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["depth_quantum", "disparity_lattice", "DEFAULT_MATCHER_PRESET", "DEFAULT_MATCHER_WINDOW"]
+__all__ = ["depth_quantum", "looks_continuous", "disparity_lattice", "DEFAULT_MATCHER_PRESET", "DEFAULT_MATCHER_WINDOW"]
 
 #: the sensor preset whose block matcher stands for a block-matched recording of unknown make,
 #: and its matching window (px; the core reads no sensor files: tests/test_recorded_matching.py
@@ -49,6 +49,20 @@ def _levels_close(z: np.ndarray, levels: np.ndarray) -> bool:
     return bool(apart.size >= 100 and np.median(apart) <= _QUANTUM_MAX_LEVELS)
 
 
+def looks_continuous(z: np.ndarray, valid: np.ndarray | None = None) -> bool:
+    """The cheap first test of :func:`depth_quantum`: True (not quantised) when the first 4000
+    finite depths of a strided sample of about 20 000 pixels are more than half distinct,
+    or fewer than 200. ``valid`` (optional, (H, W) bool): pixels outside it count as NaN, so
+    that ``looks_continuous(depth, valid)`` decides as ``depth_quantum`` on the depth with NaN
+    off ``valid``, without that copy of the image (a scan's noise model asks per call)."""
+    sub = np.asarray(_strided(np.asarray(z), _QUANTUM_SAMPLES), np.float32)
+    ok = np.isfinite(sub)
+    if valid is not None:
+        ok &= np.asarray(_strided(np.asarray(valid), _QUANTUM_SAMPLES), bool)
+    head = sub[ok][:4000]
+    return bool(head.size < 200 or np.unique(head).size > 0.5 * head.size)
+
+
 def depth_quantum(z: np.ndarray) -> np.ndarray | None:
     """Quantisation step of a depth image at every pixel (mm), or None if it is not quantised.
 
@@ -76,11 +90,8 @@ def depth_quantum(z: np.ndarray) -> np.ndarray | None:
         The quantum at every pixel (NaN where ``z`` is), mm; None for unquantised depth.
     """
     z = np.asarray(z, np.float32)
-    sub = _strided(z, _QUANTUM_SAMPLES)
-    vals = sub[np.isfinite(sub)]
     # cheap rejection: continuous depths are (nearly) all distinct
-    head = vals[:4000]
-    if head.size < 200 or np.unique(head).size > 0.5 * head.size:
+    if looks_continuous(z):
         return None
     # the test: neighbours that differ are a level or two apart. First on the levels of
     # every 2nd row and column, a subset of the image's: neighbours lie at most as many

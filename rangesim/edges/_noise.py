@@ -11,7 +11,10 @@ Planes, smooth surfaces and the few percent of pixels on edges barely move the m
 a noise-free scan measures ~0 and the White Scanner preset (0.25 footprints) its true
 noise within a few percent. Quantised depth (a Kinect's disparity steps) is recognised by
 :func:`depth_quantum` and measured as what it is, a rounding error (see
-:func:`estimate_depth_noise`). Below :data:`NOISE_FLOOR` a scan counts as noise-free and the
+:func:`estimate_depth_noise`); depth rounded to a fixed unit ``q`` (a sensor's uint16
+millimetres, float16 storage) is too, and a noise model's predicted ``sigma`` that was made
+for the depth before the rounding takes the rounding's variance ``q^2 / 12`` on top
+(:func:`quantised_sigma`). Below :data:`NOISE_FLOOR` a scan counts as noise-free and the
 detectors use their noise-free defaults unchanged; above it they smooth / widen their
 stencils (each documents how) and raise their threshold to
 ``max(noise-free default, k * median of the strength over valid pixels)``
@@ -26,11 +29,11 @@ from typing import Any
 import numba
 import numpy as np
 
-from rangesim.core.quantisation import depth_quantum  # noqa: F401  (re-exported: the detectors' name)
+from rangesim.core.quantisation import depth_quantum, looks_continuous
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
-    "depth_quantum", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
+    "depth_quantum", "quantised_sigma", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
     "predicted_noise", "raised_threshold", "stride_gain",
     "NOISE_FLOOR",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_NORMAL_LOCAL", "NOISE_K_PCL",
@@ -55,6 +58,114 @@ NOISE_K_PCL = 4.0
 NOISE_K_NORMAL_LOCAL = 3.5
 
 
+def quantised_sigma(sigma: np.ndarray, quantum: np.ndarray | None, counted: bool = False) -> np.ndarray:
+    """A noise model's predicted depth std ``sigma`` (mm, per pixel) on depth quantised to
+    ``quantum`` (mm, per pixel, :func:`depth_quantum`; None: not quantised).
+
+    The model (units mm): a depth rounded to steps of ``q`` carries a rounding error uniform
+    over one step, variance ``q^2 / 12``, independent of the sensor's own error of variance
+    ``sigma^2`` (Sheppard's correction), so the depth's error has std
+    ``sqrt(sigma^2 + q^2 / 12)``; two neighbours differ by up to ``q`` from the rounding alone
+    and a second difference has variance ``6 q^2 / 12`` from it where the rounding errors are
+    independent (a face that moves by a quantum or more every few pixels). A scan rounded to a
+    fixed unit after it was simulated (what a Kinect v2, a RealSense or an Azure Kinect
+    writes: uint16 millimetres; float16 storage) keeps the ``sigma`` the model predicted for
+    the depth before the rounding, a few hundredths of a millimetre on a laser scan, and its
+    detectors would otherwise take the rounding steps for creases (the noise-free plate
+    rounded to 1 mm: 0.29 mm of rounding against a predicted 0.035 mm, 3000-5000 edge pixels
+    for 250).
+
+    Where the data do not show the rounding the caller leaves ``sigma`` as it is
+    (:func:`_rounded_sigma`): rounding is noise only where the surface crosses levels, and a
+    noise-free ramp whose columns each hold one exact depth shows evenly spaced levels with
+    no rounding at all.
+
+    ``counted``: the model already counts the quantisation (a block matcher's predicted
+    sigma includes its disparity steps, which are its quantum: the kinect_v1 preset's is 1.8-3
+    times ``q / sqrt(12)`` at every pixel); the depth's error is then only known to be at least
+    the rounding's, ``max(sigma, q / sqrt(12))`` (on such a scan ``sigma`` itself, to the
+    bit). Where the quantum is NaN (invalid depth) ``sigma`` stays.
+
+    Returns
+    -------
+    (H, W) float32
+        ``sigma`` itself (not a copy) when ``quantum`` is None.
+    """
+    if quantum is None:
+        return sigma
+    s = np.asarray(sigma, np.float32)
+    rounding = np.asarray(quantum, np.float32) / np.float32(np.sqrt(12.0))
+    if counted:
+        return np.fmax(s, rounding)
+    with np.errstate(invalid="ignore"):
+        total = np.sqrt(s * s + rounding * rounding)
+    return np.where(np.isfinite(rounding), total, s).astype(np.float32)
+
+
+#: least share of the rounding's variance ``q^2 / 12`` the data's second differences must show
+#: (beyond the model's own noise) for a quantised scan's ``sigma`` to take the rounding
+#: (:func:`_rounded_sigma`): at least half its std
+ROUNDING_SHOWN = 0.25
+
+
+def _rounded_sigma(scan: Any, sigma: np.ndarray, z: np.ndarray, fp: np.ndarray,
+                   quantum: np.ndarray) -> np.ndarray:
+    """:func:`quantised_sigma` of a scan's predicted ``sigma`` on its quantised depth ``z``
+    (footprints ``fp``, mm), where the data show the rounding.
+
+    The data show it when their second differences hold at least :data:`ROUNDING_SHOWN` of
+    the rounding's variance beyond the model's own noise: ``(m^2 - n^2) / r^2 >= 0.25``, with
+    ``m`` the measured noise of the quantised depth (:func:`_measured_noise`: the RMS of
+    second differences within 4 quanta, at most 4 median quanta, over sqrt(6)), ``n`` the
+    median predicted ``sigma`` and ``r`` the median ``q / sqrt(12)``, all in pixel footprints
+    (every 4th row and column). Then
+    the whole ``q^2 / 12`` is added: the second differences see less of it than a detector's
+    wider stencils do, as a rounding's errors along a slanted face are a sawtooth correlated
+    over each terrace (the noise-free plate rounded to 1 mm: m = 0.22, n = 0.04, r = 0.31
+    footprints, share 0.51; with the preset's noise m = 0.37, n = 0.21: share 0.95).
+    Otherwise the prediction stays: a noise-free synthetic ramp whose columns each hold one
+    exact depth shows evenly spaced levels that pass :func:`depth_quantum` but no rounding
+    (share ~0.04).
+    """
+    sub = (slice(None, None, 4), slice(None, None, 4))
+    ok = np.isfinite(z[sub])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = np.asarray(sigma, np.float32)[sub][ok] / fp[sub][ok]
+        r = quantum[sub][ok] / fp[sub][ok] / np.float32(np.sqrt(12.0))
+    n, r = n[np.isfinite(n)], r[np.isfinite(r)]
+    if n.size < 100 or r.size < 100 or not np.median(r) > 0:
+        return sigma
+    # the cut at 4 quanta with no quantum above the median one: the running median of the
+    # level gaps (depth_quantum) takes a wide last gap for the quantum of the deepest or
+    # nearest levels (a step 20 quanta deep at the end of a synthetic ramp), whose steps would
+    # otherwise count as rounding
+    m = _measured_noise(z, fp, np.fmin(quantum, np.float32(np.nanmedian(quantum))))
+    share = (m * m - float(np.median(n)) ** 2) / float(np.median(r)) ** 2
+    if share < ROUNDING_SHOWN:
+        return sigma
+    return quantised_sigma(sigma, quantum, _quantisation_counted(scan))
+
+
+def _scan_quantum(scan: Any) -> np.ndarray | None:
+    """:func:`depth_quantum` of a scan's depth (NaN off ``valid``, as the detectors see it), or
+    None when the object carries no depth image (a bare ``sigma``)."""
+    depth, valid = getattr(scan, "depth", None), getattr(scan, "valid", None)
+    if depth is None or valid is None or np.shape(depth) != np.shape(valid):
+        return None
+    if looks_continuous(depth, valid):     # (most scans: no copy of the depth)
+        return None
+    return depth_quantum(scan_depth(scan)[0])
+
+
+def _quantisation_counted(scan: Any) -> bool:
+    """Whether ``scan``'s noise model counts its depth quantisation in ``sigma``: a block
+    matcher's (structured light: its disparity steps are the quantum), by the scan's
+    ``meta["sensor"]`` (:func:`~rangesim.edges._matching_scale.matching_window`)."""
+    from rangesim.edges._matching_scale import matching_window  # (it imports this module's users)
+
+    return matching_window(scan) is not None
+
+
 def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
                          fp: np.ndarray | None = None) -> float:
     """Depth noise of a scan, in pixel footprints (sigma_z / (z / f)).
@@ -62,7 +173,11 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     A scan that carries its noise model's prediction (``scan.sigma``, mm, as simulated
     scans do) gives the median of ``sigma / footprint`` over its valid pixels
     (every 4th row and column): the model knows its noise, correlated or not, which the
-    data's second differences underestimate when neighbouring errors are correlated.
+    data's second differences underestimate when neighbouring errors are correlated. On
+    quantised depth the prediction first takes the rounding's variance ``q^2 / 12`` where
+    the data's second differences show it (:func:`quantised_sigma`, :func:`_rounded_sigma`:
+    a scan rounded after it was simulated; a block matcher's prediction, which counts its
+    disparity steps, is only kept at least ``q / sqrt(12)``).
     Otherwise, from the data itself: the robust estimator of the module docstring:
     ``1.4826 * MAD / sqrt(6)`` of the second differences of depth along rows and columns
     over valid triples, each divided by the pixel footprint at its centre (median taken
@@ -106,16 +221,24 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
         z, _ = scan_depth(scan)
     if fp is None:
         fp = pixel_geometry(scan, z).footprint
+    z = np.asarray(z, np.float32)
+    quantum = depth_quantum(z)
     predicted = getattr(scan, "sigma", None) if scan is not None else None
     if predicted is not None:
         sub = (slice(None, None, 4), slice(None, None, 4))
+        if quantum is not None:     # with the rounding's share of the noise (quantised_sigma)
+            predicted = _rounded_sigma(scan, predicted, z, fp, quantum)
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = np.asarray(predicted, np.float32)[sub] / fp[sub]
         ratio = ratio[np.isfinite(ratio) & np.isfinite(z[sub])]
         if ratio.size >= 100:
             return float(np.median(ratio))
-    z = np.asarray(z, np.float32)
-    quantum = depth_quantum(z)
+    return _measured_noise(z, fp, quantum)
+
+
+def _measured_noise(z: np.ndarray, fp: np.ndarray, quantum: np.ndarray | None) -> float:
+    """The data's own depth noise, footprints (:func:`estimate_depth_noise` without ``sigma``):
+    the robust second-difference estimate, or on quantised depth the RMS one within 4 quanta."""
     # every 4th column / row is plenty for a median (and 4x cheaper)
     zc, fc = z[:, ::4], fp[:, ::4]
     zr, fr = z[::4], fp[::4]
@@ -153,22 +276,45 @@ def stride_gain(z: np.ndarray, fp: np.ndarray, max_stride: int) -> np.ndarray:
         is over the differences within 4 robust sigmas (1.4826 MAD about 0) of each lag's
         own (beyond are edges), along rows and columns, every 4th line. A lag with fewer
         than 100 differences, or a depth without spread at lag 1, gets gain 1 (no gain).
+
+    Depth rounded to a fixed unit ``q`` mm (:func:`depth_quantum`; uint16 millimetres, float16)
+    finer than its slopes leaves most lag-1 second differences exactly 0 (a terrace of equal
+    values spans several pixels), so the robust sigma is 0 and would keep nothing. There
+    (a quantum, and a median of 0 at lag 1) every lag keeps, as :func:`estimate_depth_noise`
+    does, the differences within 4 quanta (the rounding alone moves a second difference by
+    at most ``2 q``; steps beyond are edges) over the centre's footprint, and the gain is
+    what the rounding's terraces give (their errors are a sawtooth along a slanted face,
+    correlated over a terrace, not ``1 / s``). Elsewhere (continuous depth; a block
+    matcher's quantised depth, whose noise spreads its lag-1 differences) the rule above,
+    to the bit.
     """
     z = np.asarray(z, np.float32)
     gain = np.ones(int(max_stride) + 1)
     rms = np.full(int(max_stride) + 1, np.nan)
     zc, fc = z[:, ::4], fp[:, ::4]
     zr, fr = z[::4], fp[::4]
+    quantum = depth_quantum(z)
+    by_quanta = False                    # set at lag 1: rounded terraces (see above)
     for lag in range(1, int(max_stride) + 1):
         if 2 * lag >= min(z.shape):
             break
         with np.errstate(invalid="ignore", divide="ignore"):
             d0 = (zc[:-2 * lag] - 2 * zc[lag:-lag] + zc[2 * lag:]) / fc[lag:-lag]
             d1 = (zr[:, :-2 * lag] - 2 * zr[:, lag:-lag] + zr[:, 2 * lag:]) / fr[:, lag:-lag]
-        d = np.abs(np.concatenate([d0[np.isfinite(d0)], d1[np.isfinite(d1)]]).astype(np.float64))
+        ok0, ok1 = np.isfinite(d0), np.isfinite(d1)
+        d = np.abs(np.concatenate([d0[ok0], d1[ok1]]).astype(np.float64))
         if d.size < 100:
             break
-        d = d[d <= 4 * 1.4826 * np.median(d)]
+        if lag == 1:
+            by_quanta = quantum is not None and np.median(d) == 0
+        if by_quanta:
+            # 4 quanta at the centre pixel, in its footprints
+            with np.errstate(invalid="ignore", divide="ignore"):
+                q0 = quantum[:, ::4][lag:-lag] / fc[lag:-lag]
+                q1 = quantum[::4][:, lag:-lag] / fr[:, lag:-lag]
+            d = d[d <= 4 * np.concatenate([q0[ok0], q1[ok1]]).astype(np.float64)]
+        else:
+            d = d[d <= 4 * 1.4826 * np.median(d)]
         rms[lag] = np.sqrt(np.mean(d * d)) if d.size else np.nan
     if not rms[1] > 0:
         return gain
@@ -227,10 +373,18 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     and a threshold raised there would hide the edge; a face that is noisy as a whole (seen
     near grazing, far away) stays noisy under the minimum. NaN (invalid) counts as no
     information; 0 where nothing around is valid. None when the scan carries no sigma.
+    On quantised depth (:func:`depth_quantum`) each pixel's sigma first takes the rounding's
+    variance ``q^2 / 12`` where the data show it (:func:`quantised_sigma`,
+    :func:`_rounded_sigma`; a block matcher's, which counts it, is only kept at least
+    ``q / sqrt(12)``).
     """
     sigma = getattr(scan, "sigma", None)
     if sigma is None:
         return None
+    quantum = _scan_quantum(scan)
+    if quantum is not None:
+        z = scan_depth(scan)[0]
+        sigma = _rounded_sigma(scan, sigma, z, pixel_geometry(scan, z).footprint, quantum)
     least = _window_min(np.ascontiguousarray(sigma, np.float32), int(window or NOISE_WINDOW) // 2)
     least[~np.isfinite(least)] = 0
     return least
