@@ -236,3 +236,15 @@ def test_cli_compare_kinect_frame_without_mesh(data_dir, tmp_path):
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["iou"] > 0.9 and len(metrics["shapes"]) == 3
     assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_an_empty_structured_light_scan_blames_the_block_matcher():
+    # 16 x 12 px: the 9 px matching window holds too few dots anywhere; the warning used to
+    # say the return signal was below noise.min_signal (0 for this preset)
+    from rangesim.core.geometry import look_at
+    from rangesim.sensor._scan import EmptyScanWarning
+
+    sensor = rs.load_sensor("kinect_v1").with_params({"camera.width": 16, "camera.height": 12})
+    with pytest.warns(EmptyScanWarning, match="block matcher found no reliable match") as caught:
+        rs.scan(rs.load_scene("scenes/green_piece.toml"), sensor, pose=look_at((0, 0, 800), (0, 0, 0), up=(0, 1, 0)))
+    assert not any("min_signal" in str(w.message) for w in caught)

@@ -87,7 +87,8 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
 
     Examples of the reasons: hits outside the working range (with their depths), a scene
     smaller than a pixel (a bare mesh in metres), a camera inside a part, no surface in view,
-    the laser shadowed, the signal below ``noise.min_signal``.
+    the laser (or projector) shadowed, the signal below ``noise.min_signal``, no block match
+    (structured light).
     """
     total = int(result.status.size)
     n_valid = int(np.count_nonzero(result.status == Status.VALID))
@@ -133,8 +134,16 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
                     f"{sensor.name}'s working range {near:g}-{far:g} mm")
     if worst == Status.OUT_OF_RANGE:
         return f"{head}: {counts[worst]:,} of the {n_hits:,} hits lie outside the working range {near:g}-{far:g} mm"
+    structured = sensor.mode == "structured_light"
     if worst == Status.SHADOW:
-        return f"{head}: the laser cannot reach {counts[worst]:,} of the {n_hits:,} surface points the camera sees"
+        source = "the projector" if structured else "the laser"
+        return f"{head}: {source} cannot reach {counts[worst]:,} of the {n_hits:,} surface points the camera sees"
+    if structured:
+        # a structured-light dropout is a pixel the block matcher found no reliable match for
+        sl = sensor.params["structured_light"]
+        return (f"{head}: the block matcher found no reliable match at {counts[worst]:,} of the {n_hits:,} hits "
+                f"(too few projected dots in its {sl['window']:g} px window, or below structured_light.min_score "
+                f"{sl['min_score']:g} / the uniqueness and left-right checks: a small image or a dim pattern)")
     return (f"{head}: the return signal of {counts[worst]:,} of the {n_hits:,} hits is below noise.min_signal "
             f"({sensor.params['noise']['min_signal']:g}; grazing or dark surfaces)")
 
