@@ -124,3 +124,15 @@ def test_stride_gain_falls_on_rounded_depth(plates, unit):
     gain = stride_gain(z, pixel_geometry(rounded, z).footprint, 8)
     assert gain[1] == 1.0
     assert gain[2] < 0.8 and gain[4] < 0.4 and gain[8] < 0.3
+
+
+def test_scan_sigma_takes_the_rounding_and_leaves_unrounded_scans_alone():
+    # scan_sigma is what the block-plane normals (normal's noisy path) weight their fits by
+    from rangesim.edges._noise import scan_sigma
+
+    plate = rs.datasets.plate_scan(QUIET)
+    assert scan_sigma(plate) is plate.sigma
+    rounded = _rounded(plate, 1.0)
+    s = scan_sigma(rounded)[rounded.valid]
+    expected = np.sqrt(plate.sigma[rounded.valid].astype(np.float64) ** 2 + 1.0 / 12)
+    assert np.allclose(s, expected, rtol=0.02)

@@ -34,7 +34,7 @@ from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
     "depth_quantum", "quantised_sigma", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
-    "predicted_noise", "raised_threshold", "stride_gain",
+    "predicted_noise", "scan_sigma", "raised_threshold", "stride_gain",
     "NOISE_FLOOR",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_NORMAL_LOCAL", "NOISE_K_PCL",
 ]
@@ -364,6 +364,20 @@ def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: 
 NOISE_WINDOW = 5
 
 
+def scan_sigma(scan: Any) -> np.ndarray | None:
+    """The noise model's depth std at each pixel, mm (``scan.sigma``), with the rounding's
+    variance ``q^2 / 12`` added on quantised depth where the data show it
+    (:func:`_rounded_sigma`); None when the scan carries no sigma."""
+    sigma = getattr(scan, "sigma", None)
+    if sigma is None:
+        return None
+    quantum = _scan_quantum(scan)
+    if quantum is not None:
+        z = scan_depth(scan)[0]
+        sigma = _rounded_sigma(scan, sigma, z, pixel_geometry(scan, z).footprint, quantum)
+    return sigma
+
+
 def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     """The noise model's depth std of the surface around each pixel, mm, (H, W) float32.
 
@@ -378,13 +392,9 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     :func:`_rounded_sigma`; a block matcher's, which counts it, is only kept at least
     ``q / sqrt(12)``).
     """
-    sigma = getattr(scan, "sigma", None)
+    sigma = scan_sigma(scan)
     if sigma is None:
         return None
-    quantum = _scan_quantum(scan)
-    if quantum is not None:
-        z = scan_depth(scan)[0]
-        sigma = _rounded_sigma(scan, sigma, z, pixel_geometry(scan, z).footprint, quantum)
     least = _window_min(np.ascontiguousarray(sigma, np.float32), int(window or NOISE_WINDOW) // 2)
     least[~np.isfinite(least)] = 0
     return least

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.edges._noise import scan_sigma
 from rangesim.edges._normal_planes import block_pair_bends, block_planes, noise_gain
 
 __all__ = ["block_bends", "BlockBends", "BLOCK_SIZES", "BLOCK_FLOOR_DEG", "BLOCK_K", "BLOCK_FILL", "BLOCK_STOP"]
@@ -50,7 +51,7 @@ def block_bends(scan: Any, valid: np.ndarray, xyz: np.ndarray, disc: Any,
     side of each pixel, tested against the predicted noise of the fitted normals.
 
     The predicted depth variance of each point is ``scan.sigma ** 2`` (0 where the scan
-    carries none); each size's variances are multiplied by the scan's measured
+    carries none; on quantised depth with the rounding's ``q^2 / 12``, :func:`~rangesim.edges._noise.scan_sigma`); each size's variances are multiplied by the scan's measured
     :func:`~rangesim.edges._normal_planes.noise_gain` (correlated noise). A block cut by a
     depth jump or a gap is fitted on its centre's own side only (issue 14: inria_laser
     tuning seeds 20-29 F1 0.868 -> 0.872, cyberware_3030 0-7 0.904 -> 0.908, white_scanner
@@ -59,7 +60,7 @@ def block_bends(scan: Any, valid: np.ndarray, xyz: np.ndarray, disc: Any,
     """
     floor_deg = BLOCK_FLOOR_DEG if threshold_deg is None else float(threshold_deg)
     floor = np.radians(floor_deg)
-    sigma = getattr(scan, "sigma", None)
+    sigma = scan_sigma(scan)  # with the rounding of quantised depth, where the data show it
     h, w = valid.shape
     if sigma is None:
         s2 = np.zeros((h, w), np.float32)
