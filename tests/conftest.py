@@ -139,3 +139,18 @@ def pinhole_scan(depth: np.ndarray, f: float, sigma_mm: float | None = None):
         status=np.zeros(shape, np.uint8), meta={"K": K.tolist()},
         sigma=None if sigma_mm is None else np.full(shape, sigma_mm, np.float32),
     )
+
+
+def grid_recording(h: int = 120, w: int = 140, dx: float = 0.5, dy: float = 0.7, x0: float = -35.0,
+                   y0: float = -42.0):
+    """A 'recorded' orthographic grid in the scanner's frame (no ground truth): every cell
+    valid near z = 0 (3 mm bumps on every 7th diagonal), columns ``dx`` and rows ``dy`` mm
+    apart from (``x0``, ``y0``)."""
+    from rangesim.core.rangescan import RangeScan
+
+    i, j = np.indices((h, w))
+    xyz = np.stack([x0 + dx * j, y0 + dy * i, np.where((i + j) % 7 == 0, 3.0, 0.0)], axis=-1).astype(np.float32)
+    n = np.full((h, w, 3), np.nan, np.float32)
+    return RangeScan(depth=xyz[..., 2], xyz=xyz, valid=np.ones((h, w), bool), normal=n,
+                     intensity=np.zeros((h, w)), part=np.zeros((h, w)), face=np.zeros((h, w)),
+                     status=np.zeros((h, w)), meta={"frame": "scanner"})

@@ -2,14 +2,13 @@
 code 2, no traceback, and no output file left behind."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import trimesh
 
 import rangesim as rs
 from rangesim.cli.main import main
 from rangesim.core.errors import RangesimError
-from rangesim.core.rangescan import RangeScan
+from tests.conftest import grid_recording
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 GREEN = str(ROOT / "scenes" / "green_piece.toml")
@@ -36,20 +35,10 @@ def plate(tmp_path_factory):
     return folder / "plate.exr"
 
 
-def _grid_recording(h=60, w=70, dx=0.5, dy=0.7):
-    """A 'recorded' orthographic grid (no ground truth), every cell valid near z = 0."""
-    i, j = np.indices((h, w))
-    xyz = np.stack([-17 + dx * j, -21 + dy * i, np.where((i + j) % 7 == 0, 3.0, 0.0)], axis=-1).astype(np.float32)
-    n = np.full((h, w, 3), np.nan, np.float32)
-    return RangeScan(depth=xyz[..., 2], xyz=xyz, valid=np.ones((h, w), bool), normal=n,
-                     intensity=np.zeros((h, w)), part=np.zeros((h, w)), face=np.zeros((h, w)),
-                     status=np.zeros((h, w)), meta={"frame": "scanner"})
-
-
 # -- 1: calibrate a mesh that does not overlap the recording ---------------------------------
 def test_calibrate_refuses_a_mesh_that_does_not_overlap(tmp_path, capsys):
     rec = tmp_path / "rec.npz"
-    _grid_recording().save(rec)
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
     far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
     far.apply_translation((5000.0, 5000.0, 0.0))
     mesh = tmp_path / "far.stl"
@@ -66,7 +55,7 @@ def test_calibrate_views_refuses_no_overlap_in_the_library(tmp_path):
     far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
     far.apply_translation((5000.0, 5000.0, 0.0))
     with pytest.raises(RangesimError, match="do not overlap"):
-        calibrate_views([_grid_recording()], far, "cyberware_3030", fit_noise=False)
+        calibrate_views([grid_recording(60, 70, x0=-17.0, y0=-21.0)], far, "cyberware_3030", fit_noise=False)
 
 
 # -- 2: calibrate's options ----------------------------------------------------------------------
@@ -78,7 +67,7 @@ def test_calibrate_views_refuses_no_overlap_in_the_library(tmp_path):
 ])
 def test_calibrate_checks_options_up_front(tmp_path, capsys, extra, words):
     rec = tmp_path / "rec.npz"
-    _grid_recording().save(rec)
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
     mesh = tmp_path / "box.stl"
     trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(mesh)
     out = tmp_path / "c.toml"
@@ -194,7 +183,7 @@ def test_diff_names_both_files(plate, tmp_path, capsys):
 @pytest.mark.parametrize("command", ["detect", "features"])
 def test_scene_with_a_recording_is_refused(tmp_path, capsys, command):
     rec = tmp_path / "rec.npz"
-    _grid_recording().save(rec)
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
     out = tmp_path / "o"
     _refused(capsys, [command, rec, "--scene", GREEN, "--out", out], "rec.npz", "ground truth")
     assert not out.exists()

@@ -9,10 +9,10 @@ import pytest
 import trimesh
 
 from rangesim.core.constants import Status
-from rangesim.core.rangescan import RangeScan
 from rangesim.twin import twin
 from rangesim.twin.calibration import calibrate
 from rangesim.twin.comparison import compare
+from tests.conftest import grid_recording
 
 METRIC_KEYS = {"iou", "iou_no_physics", "realism", "hole_recall", "residuals", "noise_std_ratio", "edges", "params"}
 
@@ -46,20 +46,10 @@ def _box_on_plane():
     return trimesh.util.concatenate([plane, box])
 
 
-def _grid_scan(h=120, w=140, dx=0.5, dy=0.7):
-    """A 'recorded' orthographic grid, every cell valid at z = 0 (a template for the twin)."""
-    i, j = np.indices((h, w))
-    xyz = np.stack([-35 + dx * j, -42 + dy * i, np.where((i + j) % 7 == 0, 3.0, 0.0)], axis=-1).astype(np.float32)
-    n = np.full((h, w, 3), np.nan, np.float32)
-    return RangeScan(depth=xyz[..., 2], xyz=xyz, valid=np.ones((h, w), bool), normal=n,
-                     intensity=np.zeros((h, w)), part=np.zeros((h, w)), face=np.zeros((h, w)),
-                     status=np.zeros((h, w)), meta={"frame": "scanner"})
-
-
 @pytest.mark.parametrize("theta", [-25.0, 20.0])
 def test_calibrate_recovers_theta_on_a_box(theta):
     mesh = _box_on_plane()
-    template = _grid_scan()
+    template = grid_recording()
     truth = twin(template, mesh, theta_deg=theta, alpha_deg=10.0, sigma_mm=0.05, min_cos=0.05, seed=1)
     assert truth.count(Status.SHADOW) > 200  # the box casts shadows
     assert truth.valid.sum() > 0.5 * truth.valid.size
@@ -73,7 +63,7 @@ def test_calibrate_recovers_theta_on_a_box(theta):
 
 def test_twin_of_box_is_on_the_grid():
     mesh = _box_on_plane()
-    template = _grid_scan()
+    template = grid_recording()
     scan = twin(template, mesh, theta_deg=15.0, alpha_deg=0.0, sigma_mm=0.0, min_cos=0.0)
     assert scan.shape == template.shape
     top = scan.valid & (np.abs(scan.xyz[..., 0]) < 10) & (np.abs(scan.xyz[..., 1]) < 10)
@@ -216,7 +206,7 @@ def test_cli_calibrate_geometry_only(data_dir, tmp_path):
 
 def test_two_camera_views_see_what_either_sees():
     mesh = _box_on_plane()
-    template = _grid_scan()
+    template = grid_recording()
     one = twin(template, mesh, theta_deg=25.0, alpha_deg=0.0, min_cos=0.0, quiet=True)
     other = twin(template, mesh, theta_deg=-25.0, alpha_deg=0.0, min_cos=0.0, quiet=True)
     both = twin(template, mesh, theta_deg=25.0, alpha_deg=0.0, min_cos=0.0, quiet=True, camera_views=2)
@@ -235,7 +225,7 @@ def test_registration_error_grows_as_tan_incidence():
                              np.array([[0, 1, 2], [0, 2, 3]]), process=False)
     stds = {}
     for name, mesh in (("flat", _box_on_plane()), ("tilted", tilted)):
-        stage = TwinStage(_grid_scan(), mesh, side=1)
+        stage = TwinStage(grid_recording(), mesh, side=1)
         stage.registration = Registration(std_mm=0.2, length_mm=1.0)
         stage.defaults["sigma_mm"] = None  # no legacy white noise: the (all-zero) stripe model and the registration
         tw = stage.scan(theta_deg=0.0, alpha_deg=0.0, min_cos=0.0, seed=3)
