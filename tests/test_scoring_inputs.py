@@ -3,10 +3,13 @@ never a hang, a raw numpy error or a result built on garbage (a new user's probe
 session of 2026-12-03)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import rangesim as rs
+from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate import edge_scores, feature_scores
 
@@ -25,12 +28,30 @@ def test_edge_scores_refuses_tolerances_that_are_no_distance(plate, tolerance):
         edge_scores(edges.mask, truth, tolerance_px=tolerance)
 
 
-def test_edge_scores_takes_a_tolerance_beyond_a_small_image_as_its_diagonal():
+def test_edge_scores_takes_tolerances_up_to_its_bound():
     pred = np.zeros((6, 6), bool)
     gt = np.zeros((6, 6), bool)
     pred[0, 0] = gt[5, 5] = True
-    s = edge_scores(pred, gt, tolerance_px=1000)     # every pair is in reach: one match
-    assert s["matched"] == 1 and s["tolerance_px"] == pytest.approx(np.hypot(6, 6))
+    assert edge_scores(pred, gt, tolerance_px=10)["matched"] == 1   # 7.1 px apart
+    assert edge_scores(pred, gt, tolerance_px=MAX_TOLERANCE_PX)["matched"] == 1
+    with pytest.raises(RangesimError, match="tolerance_px"):
+        edge_scores(pred, gt, tolerance_px=MAX_TOLERANCE_PX + 1)
+
+
+def test_cli_and_sweep_files_check_the_tolerance_before_any_work(tmp_path, capsys):
+    from rangesim.cli.main import main
+    from rangesim.experiments.sweep_file import load_sweep
+
+    scan = rs.datasets.plate_scan()
+    scan.save(tmp_path / "plate.exr")
+    assert main(["detect", str(tmp_path / "plate.exr"), "--tolerance", "100", "--out", str(tmp_path / "d")]) != 0
+    assert "--tolerance must be at most 64" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+    sweep = tmp_path / "s.toml"
+    scene = Path(rs.__file__).resolve().parents[1] / "scenes" / "green_piece.toml"
+    sweep.write_text(f'name = "t"\nscenes = ["{scene.as_posix()}"]\ntolerance_px = 80.0\n')
+    with pytest.raises(RangesimError, match="tolerance_px must be at most 64"):
+        load_sweep(sweep)
 
 
 @pytest.mark.parametrize("bad", [np.zeros(5), np.zeros((3, 3, 3)), None, "edges", np.array([["a"]])])
@@ -103,7 +124,7 @@ def test_circles_and_arcs_stay_in_the_radii_asked_for(plate):
     (rs.features.lines, {"min_length": "5"}, "min_length"),
     (rs.features.lines, {"angle_tol_deg": 0}, "angle_tol_deg"),
     (rs.features.lines, {"max_lines": 0}, "max_lines"),
-    (rs.features.lines, {"threshold": 0.5}, "threshold"),
+    (rs.features.lines, {"threshold": -1}, "threshold"),
     (rs.features.circles, {"min_support": 2}, "min_support"),
     (rs.features.circles, {"threshold": -1}, "threshold"),
     (rs.features.circles, {"angle_tol_deg": "4"}, "angle_tol_deg"),

@@ -92,8 +92,10 @@ def make_out_dir(path: Path, option: str = "--out") -> None:
         raise RangesimError("output must be a directory", source=path)
 
 
-def positive(name: str, value: float | None, *, allow_zero: bool = False, upper: float | None = None) -> None:
-    """Reject a non-finite, negative (or zero) or too large numeric option, naming it."""
+def positive(name: str, value: float | None, *, allow_zero: bool = False, upper: float | None = None,
+             at_most: float | None = None) -> None:
+    """Reject a non-finite, negative (or zero) or too large (``>= upper``, ``> at_most``)
+    numeric option, naming it."""
     import math
 
     if value is None:
@@ -103,6 +105,8 @@ def positive(name: str, value: float | None, *, allow_zero: bool = False, upper:
         raise RangesimError(f"{name} must be {need} number, got {value:g}")
     if upper is not None and value >= upper:
         raise RangesimError(f"{name} must be below {upper:g}, got {value:g}")
+    if at_most is not None and value > at_most:
+        raise RangesimError(f"{name} must be at most {at_most:g}, got {value:g}")
 
 
 def build_model(name: str, param_texts: Sequence[str]):

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from rangesim.cli.common import make_out_dir, positive, write_json
+from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate.runs import load_scan_with_labels
 
@@ -82,7 +83,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
     positive("--sigma-mm", args.sigma_mm, allow_zero=True)
-    positive("--tolerance", args.tolerance)
+    positive("--tolerance", args.tolerance, at_most=MAX_TOLERANCE_PX)
     if args.min_cos is not None and not 0 <= args.min_cos < 1:
         raise RangesimError(f"--min-cos must lie in [0, 1), got {args.min_cos:g}")
     for name in ("theta_deg", "alpha_deg"):

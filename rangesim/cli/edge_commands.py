@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from rangesim.cli.common import check_conf, check_out_files, make_out_dir, positive, writing
+from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -57,7 +58,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
-    positive("--tolerance", args.tolerance)
+    positive("--tolerance", args.tolerance, at_most=MAX_TOLERANCE_PX)
     positive("--crease-deg", args.crease_deg, upper=180)
     path = Path(args.scan)
     check_conf(path, args.conf)

@@ -10,7 +10,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
 
 from rangesim.core import params as P
-from rangesim.core.constants import EDGE_LABEL_NAMES, EdgeLabel
+from rangesim.core.constants import EDGE_LABEL_NAMES, MAX_TOLERANCE_PX, EdgeLabel
 from rangesim.core.errors import RangesimError
 from rangesim.edges.edgemap import RIM
 
@@ -23,12 +23,6 @@ def _is_type(labels: np.ndarray, label: EdgeLabel) -> np.ndarray:
     where the neighbour returned nothing) is an occluding boundary, so it scores as a jump."""
     same = labels == int(label)
     return same | (labels == RIM) if label == EdgeLabel.JUMP else same
-
-
-#: largest matching distance :func:`edge_scores` takes, pixels: the candidate pairs grow with its
-#: square (about 3 t^2 per predicted pixel), and a pixel that far from an edge does not locate
-#: it (the BSDS benchmark matches within about 0.75 % of the image diagonal, 5 px at 512^2)
-MAX_TOLERANCE_PX = 64.0
 
 
 def _as_mask_labels(x: Any, name: str = "edge map") -> tuple[np.ndarray, np.ndarray | None]:
@@ -49,14 +43,9 @@ def _as_mask_labels(x: Any, name: str = "edge map") -> tuple[np.ndarray, np.ndar
     return mask, labels
 
 
-def check_tolerance(tolerance_px: Any, shape: tuple[int, int]) -> float:
-    """The matching distance as a float: finite, >= 0, at most :data:`MAX_TOLERANCE_PX`;
-    beyond the image's diagonal every pair is in reach, so it is taken as the diagonal."""
-    t = float(P.number(tolerance_px, "tolerance_px", 0, unit="pixels"))
-    if min(t, float(np.hypot(*shape))) > MAX_TOLERANCE_PX:
-        raise RangesimError(f"tolerance_px {t:g} is above {MAX_TOLERANCE_PX:g} px: a pixel that far from an edge "
-                            "does not locate it (score a downsampled map instead)")
-    return min(t, float(np.hypot(*shape)))
+def check_tolerance(tolerance_px: Any) -> float:
+    """The matching distance as a float: finite, in [0, :data:`MAX_TOLERANCE_PX`] pixels."""
+    return float(P.number(tolerance_px, "tolerance_px", 0, MAX_TOLERANCE_PX, unit="pixels"))
 
 
 #: candidate-graph components larger than this (pixels) are matched greedily first
@@ -214,8 +203,7 @@ def edge_scores(
         Predicted and true edge pixels (a ground-truth label image works as ``gt_mask``).
         An EdgeMap also supplies its labels when ``pred_labels`` / ``gt_labels`` is None.
     tolerance_px : float
-        Largest matching distance, pixels: finite, >= 0, at most :data:`MAX_TOLERANCE_PX`
-        (beyond the image diagonal it is the diagonal).
+        Largest matching distance, pixels: finite, in [0, :data:`MAX_TOLERANCE_PX`] (64).
     pred_labels, gt_labels : (H, W) int array, optional
         :class:`~rangesim.core.constants.EdgeLabel` per pixel. With both, ``per_label`` scores
         each type (predicted pixels of that label vs true pixels of that label; predicted
@@ -260,7 +248,7 @@ def edge_scores(
     gt, gl = _as_mask_labels(gt_mask, "gt_mask")
     if pred.shape != gt.shape:
         raise RangesimError(f"prediction {pred.shape} and ground truth {gt.shape} differ in shape")
-    tolerance_px = check_tolerance(tolerance_px, pred.shape)
+    tolerance_px = check_tolerance(tolerance_px)
     pred_labels = pl if pred_labels is None else np.asarray(pred_labels)
     gt_labels = gl if gt_labels is None else np.asarray(gt_labels)
     for name, lab in (("pred_labels", pred_labels), ("gt_labels", gt_labels)):

@@ -155,7 +155,7 @@ def score_edges(
     pred, labels = _as_mask_labels(edges, "edges")
     if pred.shape != truth.shape:
         raise RangesimError(f"edge map {pred.shape} and scan {truth.shape} differ in shape")
-    tolerance_px = check_tolerance(tolerance_px, pred.shape)
+    tolerance_px = check_tolerance(tolerance_px)
     n_ignored = 0
     if ignore_data_boundary:
         far = ndimage.distance_transform_edt(truth == EdgeLabel.NONE) > tolerance_px

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.core.tomlfile import check_keys, read_toml
 from rangesim.experiments.poses import POSE_KEYS, check_pose_table
@@ -148,12 +149,15 @@ def _int(data: dict, key: str, default: int, source: Path, minimum: int) -> int:
     return value
 
 
-def _float(data: dict, key: str, default: float, source: Path, *, positive: bool = False) -> float:
+def _float(data: dict, key: str, default: float, source: Path, *, positive: bool = False,
+           at_most: float = math.inf) -> float:
     value = data.get(key, default)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise RangesimError(f"{key} must be a number, got {value!r}", source=source)
     if value < 0 or (positive and value == 0):
         raise RangesimError(f"{key} must be {'positive' if positive else '>= 0'}, got {value!r}", source=source)
+    if value > at_most:
+        raise RangesimError(f"{key} must be at most {at_most:g}, got {value!r}", source=source)
     return float(value)
 
 
@@ -278,8 +282,8 @@ def load_sweep(path: str | Path) -> SweepSpec:
     repeats = _int(data, "repeats", 1, path, 1)
     seed = _int(data, "seed", 0, path, 0)
     window = _int(data, "snr_window", 3, path, 2)
-    tolerance = _float(data, "tolerance_px", 2.0, path)
-    crease = _float(data, "crease_deg", 20.0, path, positive=True)
+    tolerance = _float(data, "tolerance_px", 2.0, path, at_most=MAX_TOLERANCE_PX)
+    crease = _float(data, "crease_deg", 20.0, path, positive=True, at_most=180.0)
     detectors = _detectors(data.get("detectors"), path)
 
     grid = data.get("grid", {})

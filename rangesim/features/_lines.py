@@ -111,7 +111,7 @@ def lines(
         P.number(value, name, 0, unit="pixels")
     P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
     P.whole(max_lines, "max_lines", 1)
-    P.whole(threshold, "threshold", 1, none=True)
+    P.number(threshold, "threshold", 0, none=True)  # 0 or None: min_length / 2
     mask = edge_mask(edge_map, keep)
     if scan is not None:
         check_scan_shape(scan, mask)
