@@ -75,3 +75,16 @@ def test_duplicates_and_crossing_circles_still_lose_the_shared_points():
     ghost = (c + [12.0, 0.0], r + 2.0)
     xy2 = np.vstack([xy, _ring(ghost[0], ghost[1], 0.5 * np.pi, 1.5 * np.pi)])
     assert _claim([(c, r), ghost], [_inliers(xy2, c, r), _inliers(xy2, *ghost)], xy2) == [0]
+
+
+def test_one_ring_is_not_two_tangent_circles():
+    # a review's probe: a circle 0.9 px off a one-pixel ring with 1.2 px more radius passes the
+    # tangency test (nearest gap 0.3 px, farthest 2.1 px), and every point it covers is the
+    # ring's: it has no edge of its own where the two are apart, so it is no second circle
+    c = np.array([60.0, 60.0])
+    rng = np.random.default_rng(0)     # a ring one pixel wide: radii 19.5-20.5 px
+    a, rr = rng.uniform(0, 2 * np.pi, 3000), 20.0 + rng.uniform(-0.5, 0.5, 3000)
+    xy = np.column_stack([c[0] + rr * np.cos(a), c[1] + rr * np.sin(a)])
+    for d, dr in [(0.9, 1.2), (1.0, 1.5), (0.9, 1.5)]:
+        other = (c + [d, 0.0], 20.0 + dr)
+        assert _claim([(c, 20.0), other], [_inliers(xy, c, 20.0), _inliers(xy, *other)], xy) == [0]

@@ -605,6 +605,13 @@ TANGENT_MEET_PX = 1.0
 TANGENT_APART_PX = 2.0
 
 
+#: ... and the larger circle keeps the shared points only when the points no tangent circle
+#: took cover at least this share of ``min_support`` of its perimeter: a circle of one ring
+#: drawn 0.9 px off it with 1.2 px more radius passes the tangency test and was covered by
+#: the ring's own pixels alone (a review's probe)
+TANGENT_OWN_SHARE = 0.25
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _tangent_inside(ax, ay, ar, bx, by, br):  # pragma: no cover - compiled
     """Whether two circles are internally nearly tangent: one inside the other, meeting within
@@ -643,23 +650,36 @@ def claim_pairs(order, starts, points, labels, x, y, cx, cy, r, min_support, con
             drop_concave, drop_other = _kind_flags(labels, points[a:b], concave, none)
         n_bins = max(int(np.rint(two_pi * r[j])), 8)
         occ = np.zeros(n_bins, np.bool_)
+        own = np.zeros(n_bins, np.bool_)  # bins covered by points no tangent circle took
         all_free = True
+        tangent_shared = False
         for k in range(a, b):
             p = points[k]
             if len(labels) > 0 and _dropped(labels[p], drop_concave, drop_other, concave, none):
                 all_free = False  # one_edge dropped it: the candidate lost points
                 continue
+            mine = True
             if owner[p] >= 0:
                 all_free = False
                 o = owner[p]
-                shared = (o == sibling[j] and sibling[j] >= 0) or (
-                    r[j] > r[o] and _tangent_inside(cx[j], cy[j], r[j], cx[o], cy[o], r[o]))
-                if not shared:
+                if o == sibling[j] and sibling[j] >= 0:
+                    pass
+                elif r[j] > r[o] and _tangent_inside(cx[j], cy[j], r[j], cx[o], cy[o], r[o]):
+                    mine = False
+                    tangent_shared = True
+                else:
                     continue
             ang = np.arctan2(y[p] - cy[j], x[p] - cx[j]) % two_pi
-            occ[int(np.floor(ang / two_pi * n_bins)) % n_bins] = True
+            bin_ = int(np.floor(ang / two_pi * n_bins)) % n_bins
+            occ[bin_] = True
+            if mine:
+                own[bin_] = True
         if not all_free:
             if np.count_nonzero(occ) / n_bins < min_support:
+                continue
+            # a second edge, not one edge found twice: where the two circles are apart it
+            # has points of its own
+            if tangent_shared and np.count_nonzero(own) / n_bins < TANGENT_OWN_SHARE * min_support:
                 continue
         for k in range(a, b):
             p = points[k]
