@@ -29,6 +29,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.quantisation import depth_quantum, looks_continuous
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
@@ -336,10 +337,7 @@ def stencil_window(window: int | None, name: str, noise: float | None) -> int:
     (7, 3, 5)
     """
     if window is not None:
-        window = int(window)
-        if window < 3 or window % 2 == 0:
-            raise ValueError(f"{name} must be an odd integer >= 3, got {window}")
-        return window
+        return P.odd_window(window, name)
     if noise is None or noise < NOISE_FLOOR:
         return 3
     return int(np.clip(2 * np.ceil(12 * noise) + 1, 3, 9))

@@ -7,6 +7,7 @@ import numpy as np
 
 from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
 from rangesim.edges._grid import AXES, pad_last2, padded_view
@@ -164,7 +165,7 @@ def normal(
     blocks = P.flag(blocks, "blocks", none=True)
     if window is not None:
         if blocks:
-            raise ValueError("window and blocks=True cannot be combined: the block sizes follow the noise")
+            raise RangesimError("window and blocks=True cannot be combined: the block sizes follow the noise")
     z, valid = scan_depth(scan)
     xyz = scan_points(scan, valid, component_major=True)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)

@@ -56,7 +56,7 @@ def scan_arrays(scan: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 #: the per-pixel fields the detectors read: name -> (trailing shape, dtype kinds accepted, required)
 PIXEL_FIELDS = {
     "depth": ((), "biuf", True),
-    "valid": ((), "biu", True),
+    "valid": ((), "biuf", True),         # (a float 0 / 1 mask is read as bool)
     "xyz": ((3,), "biuf", False),        # (required where read: scan_points checks it again)
     "sigma": ((), "biuf", False),
     "status": ((), "biu", False),
@@ -111,15 +111,18 @@ def scan_depth(scan: Any) -> tuple[np.ndarray, np.ndarray]:
     check_scan(scan)
     z = np.array(scan.depth, dtype=np.float32)          # a copy: NaN goes in below
     marked = np.asarray(scan.valid, dtype=bool)
-    finite = np.isfinite(z)
-    valid = marked & finite
-    if not finite.all():
-        infinite = int(np.count_nonzero(marked & np.isinf(z)))
+    valid = marked & np.isfinite(z)
+    # the rare bad pixels are looked at only where the cheap tests say there are any (marked
+    # but not finite: NaN or inf; for a pinhole, finite but not in front of the camera)
+    odd = marked & ~valid
+    if odd.any():
+        infinite = int(np.count_nonzero(np.isinf(z[odd])))
         if infinite:
             raise RangesimError(f"{infinite} pixels marked valid have an infinite depth: mark them invalid "
                                 "(valid False, depth NaN)", "scan.depth")
     if focal_length_px(scan) is not None:
-        behind = int(np.count_nonzero(valid & ~(z > 0)))
+        with np.errstate(invalid="ignore"):
+            behind = int(np.count_nonzero(z[valid] <= 0)) if not (np.fmin.reduce(z, axis=None) > 0) else 0
         if behind:
             raise RangesimError(f"{behind} pixels marked valid have a depth <= 0, behind a pinhole camera "
                                 "(meta['K']: depth is the camera-frame z, > 0); mark them invalid, or drop "

@@ -36,6 +36,7 @@ from typing import Any, Sequence
 import numpy as np
 from scipy import optimize
 
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.stripe_noise import StripeNoise, detection_probability, partial_stripe_fraction
@@ -237,8 +238,7 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
         stages = [TwinStage(rec, mesh, base_sensor) for rec in recordings]
     names = list(names) if names is not None else [str(r.meta.get("source", f"view {k}")) for k, r in
                                                     enumerate(recordings)]
-    if isinstance(max_evaluations, bool) or not isinstance(max_evaluations, (int, np.integer)) or max_evaluations < 1:
-        raise RangesimError(f"max_evaluations must be an integer >= 1, got {max_evaluations!r}")
+    max_evaluations = P.whole(max_evaluations, "max_evaluations", 1)
     iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
     if not iou >= MIN_CALIBRATION_IOU:  # NaN included
         raise RangesimError(
