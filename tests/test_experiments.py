@@ -450,3 +450,21 @@ def test_cli_sweep_logs_progress_lines_when_stderr_is_not_a_terminal(sweep_dir, 
     code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(tmp_path / "quiet"), "--workers", "0",
                  "--no-plots", "--quiet"])
     assert code == 0 and not [x for x in capsys.readouterr().err.splitlines() if x.startswith("rangesim: sweep")]
+
+
+def test_another_sweep_into_the_same_folder_is_said(serial_run, sweep_dir, tmp_path, capsys):
+    # the folder's finished tasks are a cache (reused by parameters), but the table now follows
+    # the new sweep: the CLI says so in one line instead of silently replacing sweep.json
+    import shutil
+
+    from rangesim.cli.main import main
+
+    out = tmp_path / "out"
+    shutil.copytree(serial_run.out, out)
+    (sweep_dir / "renamed.toml").write_text(SWEEP_TOML.replace('name = "tiny_sweep"', 'name = "renamed"'))
+    same = run_sweep(sweep_dir / "sweep.toml", out, workers=0, progress=False, plots=False)
+    assert same.replaced is None
+    assert main(["sweep", str(sweep_dir / "renamed.toml"), "--out", str(out), "--workers", "0", "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "'tiny_sweep'" in err and err.count("\n") == 1
+    assert run_sweep(sweep_dir / "renamed.toml", out, workers=0, progress=False, plots=False).replaced is None

@@ -11,6 +11,7 @@ Examples
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from rangesim.core.errors import RangesimError
@@ -37,6 +38,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     run = run_sweep(args.sweep, args.out, keep_scans=args.keep_scans, workers=args.workers,
                     scheduler=args.scheduler, progress=_progress(args), plots=not args.no_plots)
     table = run.table
+    if run.replaced:
+        print(f"rangesim: warning: {args.out} held the results of sweep {run.replaced}: their task files stay "
+              f"as a cache, the table and plots now follow {args.sweep}", file=sys.stderr)
     print(f"{args.sweep}: {run.n_tasks} scans ({run.n_run} run on {run.executor}, {run.n_reused} reused), "
           f"{len(table)} rows in {run.seconds:.1f} s")
     if len(table):
@@ -71,8 +75,6 @@ def cmd_dataset(args: argparse.Namespace) -> int:
                        cap_deg=args.cap_deg, distance=distance, axis=args.axis, target=args.target,
                        sensor_changes=changes or None, crease_deg=args.crease_deg, workers=args.workers,
                        scheduler=args.scheduler, progress=_progress(args))
-    import sys
-
     for index, reason in run.empty:  # as `rangesim scan --keep-empty`: kept, and said once per view
         print(f"rangesim: warning: view {index}: {reason} (kept in the dataset)", file=sys.stderr)
     print(f"{args.scene}: {run.n_views} views ({run.n_run} rendered on {run.executor}, {run.n_reused} reused) "

@@ -1,6 +1,7 @@
 """``run_sweep``: every task of a sweep file, resumably, then the table and the plots."""
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +42,10 @@ class SweepRun:
         Where the tasks ran.
     files : list of Path
         Table and plot files written.
+    replaced : str or None
+        The other sweep (name and file) whose results the folder held before this run, if
+        any: its task files stay (a cache: a task of the same parameters is reused), the
+        table and the plots follow this sweep.
     """
 
     out: Path
@@ -51,6 +56,7 @@ class SweepRun:
     seconds: float
     executor: str
     files: list[Path] = field(default_factory=list)
+    replaced: str | None = None
 
 
 def _todo(tasks: list[SweepTask], out: Path, keep_scans: bool) -> list[SweepTask]:
@@ -106,6 +112,7 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
     tasks = plan_sweep(spec, keep_scans=keep_scans)
     todo = _todo(tasks, out, keep_scans)
     executor = Executor(workers, scheduler, max_tasks=len(todo))  # checks the options before any file
+    replaced = _other_sweep(out / "sweep.json", spec)
     write_json(out / "sweep.json", _provenance(spec, len(tasks)))
     failures: list[tuple[SweepTask, BaseException]] = []
     where = executor.describe() if todo else "nowhere (every task was finished)"
@@ -142,7 +149,19 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
             if stale.resolve() not in current:
                 stale.unlink(missing_ok=True)
     return SweepRun(out, table, len(tasks), len(todo) - len(failures), len(tasks) - len(todo),
-                    time.perf_counter() - start, where, files)
+                    time.perf_counter() - start, where, files, replaced)
+
+
+def _other_sweep(provenance: Path, spec: SweepSpec) -> str | None:
+    """``name (file)`` of the sweep an output folder's ``sweep.json`` describes when it is
+    not ``spec`` (another name or sweep file); None for a new folder or the same sweep."""
+    try:
+        old = json.loads(provenance.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(old, dict) or (old.get("name"), old.get("sweep")) == (spec.name, str(spec.path)):
+        return None
+    return f"{old.get('name')!r} ({old.get('sweep')})"
 
 
 def _provenance(spec: SweepSpec, n_tasks: int) -> dict[str, Any]:
