@@ -134,3 +134,19 @@ def test_sampled_operators_are_the_dense_ones_at_the_samples():
             for dense, sampled in zip(second_differences(z, pairs, skip=sk),
                                       sampled_second_differences(z, pairs, sk, 4)):
                 np.testing.assert_array_equal(dense[::4, ::4], sampled)
+
+
+def test_curvature_fits_wider_blocks_on_noisier_scans():
+    """The default quadric block grows from 5 to 7 px at a depth noise of 0.5 footprints (the
+    curvature noise falls as the block's half-width squared, the threshold as its first
+    power), on scans that carry their noise model; a recording's measured noise keeps 5."""
+    import dataclasses
+
+    from rangesim.edges._curvature import DEFAULT_WINDOW, NOISY_BLOCK_NOISE, NOISY_BLOCK_WINDOW
+
+    assert (DEFAULT_WINDOW, NOISY_BLOCK_WINDOW, NOISY_BLOCK_NOISE) == (5, 7, 0.5)
+    noisy, quiet = _bent_strip(0.8, 0), _bent_strip(0.25, 0)
+    assert rs.edges.curvature(noisy).params["window"] == 7
+    assert rs.edges.curvature(quiet).params["window"] == 5
+    assert rs.edges.curvature(dataclasses.replace(noisy, sigma=None)).params["window"] == 5
+    assert rs.edges.curvature(noisy, window=5).params["window"] == 5

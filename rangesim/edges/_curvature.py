@@ -44,6 +44,17 @@ NOISE_K_CURVATURE = 6.0
 RULES = ("extrema", "both")
 #: fit-block size without a block matcher, pixels
 DEFAULT_WINDOW = 5
+#: ... and on scans noisier than :data:`NOISY_BLOCK_NOISE` pixel footprints (depth noise,
+#: :func:`~rangesim.edges._noise.estimate_depth_noise`): a quadric's curvature noise falls as
+#: the square of the block's half-width while the threshold (a multiple of 1 / (h fp)) falls
+#: as its first power, so a noisier scan needs a wider block for the same false-alarm rate.
+#: Chosen on the machined parts' tuning seeds 0-7 (noisy, laser-stripe presets; curvature F1
+#: with 5 / 7 / 9 px blocks): inria_laser (noise 0.73-0.77 footprints) 0.713 / 0.836 / 0.816,
+#: cyberware_3030 (0.24-0.46) 0.807 / 0.845 / 0.820, white_scanner (0.24-0.26) 0.911 / 0.899 /
+#: 0.830; the step sits at 0.5 footprints, far from both groups, so the White Scanner and the
+#: Cyberware presets keep 5 px and the INRIA preset takes 7
+NOISY_BLOCK_WINDOW = 7
+NOISY_BLOCK_NOISE = 0.5
 #: pixels of face the fit block reaches beyond a block matcher's rounding on either side
 #: (:func:`matching_block`)
 FACE_MARGIN_PX = 2
@@ -139,7 +150,9 @@ def curvature(
         :data:`DEFAULT_RELATIVE_THRESHOLD` = 0.5 / R (a 90 degree corner responds with
         ~1 / R in both directions, a crease leaks ~0.3 / R).
     window : int, optional
-        Odd fit-block size, pixels (>= 3). Default (None): 5, or on block-matched scans
+        Odd fit-block size, pixels (>= 3). Default (None): 5 (7 on scans that carry their noise
+        model's ``sigma`` and whose depth noise is :data:`NOISY_BLOCK_NOISE` = 0.5 pixel
+        footprints or more), or on block-matched scans
         (``meta["sensor"]`` with ``mode = "structured_light"``) :func:`matching_block` of
         the matcher's window (13 for its 9 px): the matcher rounds every crease over its
         window, and a 5 x 5 quadric fitted inside the rounding sees a gentle blend under
@@ -200,9 +213,14 @@ def curvature(
     # block-matched scans, default window, extrema rule: curvature at the matcher's scale
     # from chords (rangesim.edges._curvature_chords) instead of quadric fits on blocks
     sensor_scale = matcher is not None and window is None and rule == "extrema"
-    window = int(matching_block(matcher) if window is None else window)
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
+    if window is None and matcher is None and getattr(scan, "sigma", None) is not None:
+        # (scans with a noise model; a recording's noise measured from its depth alone is left
+        # at 5 px: the mOSD Kinect frames measure 0.46-0.54 footprints, across the step)
+        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
+        window = NOISY_BLOCK_WINDOW if noise is not None and noise >= NOISY_BLOCK_NOISE else DEFAULT_WINDOW
+    window = int(matching_block(matcher) if window is None else window)
     if sensor_scale:
         points, curv, info = matched_creases(scan, valid, disc, matcher, threshold)
         strength = np.abs(curv["k"])
