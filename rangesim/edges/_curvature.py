@@ -215,11 +215,11 @@ def curvature(
     sensor_scale = matcher is not None and window is None and rule == "extrema"
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
+    noise = estimate_depth_noise(scan, z=z, fp=geo.footprint, quantum=disc.quantum) if not sensor_scale else None
     if window is None and matcher is None and getattr(scan, "sigma", None) is not None:
         # (scans with a noise model; a recording's noise measured from its depth alone is left
         # at 5 px: the mOSD Kinect frames measure 0.46-0.54 footprints, across the step)
-        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
-        window = NOISY_BLOCK_WINDOW if noise is not None and noise >= NOISY_BLOCK_NOISE else DEFAULT_WINDOW
+        window = NOISY_BLOCK_WINDOW if noise >= NOISY_BLOCK_NOISE else DEFAULT_WINDOW
     window = int(matching_block(matcher) if window is None else window)
     if sensor_scale:
         points, curv, info = matched_creases(scan, valid, disc, matcher, threshold)
@@ -229,7 +229,7 @@ def curvature(
         relative = None
     else:
         points, strength, direction, mean, relative = _block_points(
-            scan, z, valid, disc, geo, window, threshold, rule, full_block)
+            scan, z, valid, disc, geo, window, threshold, rule, full_block, noise)
         info = {}
     jump = disc.occluding
     if rule == "extrema":
@@ -253,10 +253,11 @@ def curvature(
 
 
 def _block_points(scan: Any, z: np.ndarray, valid: np.ndarray, disc: Any, geo: Any, window: int,
-                  threshold: float | None, rule: str, full_block: bool) -> tuple[Any, ...]:
+                  threshold: float | None, rule: str, full_block: bool, noise: float) -> tuple[Any, ...]:
     """Edge points of quadric fits on ``window`` x ``window`` blocks (the path of every scan
     but a block-matched one's default ``extrema``): points, strength, direction, mean
-    curvature and the relative threshold (or None)."""
+    curvature and the relative threshold (or None); ``noise``: the scan's depth noise,
+    footprints (:func:`~rangesim.edges._noise.estimate_depth_noise`)."""
     r = window // 2
     curv = curvature_scan(scan, window=window)
     k1, k2, mean = curv["k1"], curv["k2"], curv["H"]
@@ -278,7 +279,6 @@ def _block_points(scan: Any, z: np.ndarray, valid: np.ndarray, disc: Any, geo: A
         if threshold is None:
             relative_strength = strength * half_width
             relative = EXTREMA_RELATIVE_THRESHOLD
-            noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
             pixel_relative: float | np.ndarray = relative
             if noise >= NOISE_FLOOR:
                 relative = noise_threshold(relative_strength, valid, relative, NOISE_K_CURVATURE)

@@ -139,7 +139,7 @@ def discontinuities(
     quantum = depth_quantum(z)
     if quantum is not None:
         thr = thr + np.float32(QUANTUM_STEPS) * quantum
-    sigma = predicted_noise(scan)
+    sigma = predicted_noise(scan, z=z, quantum=quantum)
     if sigma is not None:
         thr = thr + np.float32(SIGMA_STEPS * np.sqrt(2.0)) * sigma
     empty, certain = empty_pixels(scan, np.isfinite(z))
@@ -147,7 +147,7 @@ def discontinuities(
     unlit, caster_test = shadows if shadows is not None else (None, None)
     disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
                                 empty=empty, empty_certain=certain, unlit=unlit, caster_test=caster_test)
-    disc.noise = sigma
+    disc.noise, disc.quantum = sigma, quantum
     # 1 px lines, as the truth's contours: every pixel beside a ragged gap is a jump, and
     # the inner corners of the 4-connected staircases that leaves match no true pixel
     marks = disc.occluding | disc.rim
@@ -184,6 +184,9 @@ class Discontinuities:
         certain, occluded): the measured
         surface ends there against nothing measured (a through-hole's rim over an absent
         floor, a part's silhouette against empty space). All False when ``empty`` is None.
+    quantum : (H, W) float32 or None
+        The depth's quantisation step, mm (:func:`~rangesim.edges._noise.depth_quantum`; None
+        for continuous depth; set by :func:`discontinuities`, for the detectors' noise rules).
     noise : (H, W) float32 or None
         The predicted depth noise (mm) the jump threshold allowed for
         (:func:`~rangesim.edges._noise.predicted_noise`; set by :func:`discontinuities`),
@@ -203,6 +206,7 @@ class Discontinuities:
     rim: np.ndarray | None = None
     noise: np.ndarray | None = None
     contour: np.ndarray | None = None
+    quantum: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.rim is None:

@@ -1096,7 +1096,7 @@ def gradient(
     stride = int(stride)
     noise = None
     if sigma is None or threshold is None:
-        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
+        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint, quantum=disc.quantum)
     noisy = noise is not None and noise >= NOISE_FLOOR
     auto_threshold = threshold is None
     if sigma is None:

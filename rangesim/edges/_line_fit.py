@@ -376,7 +376,7 @@ def line_fit(
         stride = np.where(valid, sl_info["stride"], 0).astype(np.int64)
         tolerance = sl_info["tolerance_deg"]
     elif angle_tol_deg is None:
-        noise = estimate_depth_noise(scan, z, fp=geo.footprint)
+        noise = estimate_depth_noise(scan, z, fp=geo.footprint, quantum=disc.quantum)
         if noise >= NOISE_FLOOR:
             k_noise, noise_p = _pixel_noise(scan, valid, geo.footprint, noise, disc.noise)
             gain: np.ndarray | float = 1.0

@@ -58,6 +58,10 @@ NOISE_K_PCL = 4.0
 #: noisy F1 0.72 -> 0.79, white_scanner's 0.93 -> 0.92)
 NOISE_K_NORMAL_LOCAL = 3.5
 
+#: default of the ``quantum`` arguments: not given, so :func:`depth_quantum` of the depth is
+#: computed (None means continuous depth; the detectors pass ``Discontinuities.quantum``)
+UNKNOWN: Any = object()
+
 
 def quantised_sigma(sigma: np.ndarray, quantum: np.ndarray | None, counted: bool = False) -> np.ndarray:
     """A noise model's predicted depth std ``sigma`` (mm, per pixel) on depth quantised to
@@ -168,7 +172,7 @@ def _quantisation_counted(scan: Any) -> bool:
 
 
 def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
-                         fp: np.ndarray | None = None) -> float:
+                         fp: np.ndarray | None = None, quantum: Any = UNKNOWN) -> float:
     """Depth noise of a scan, in pixel footprints (sigma_z / (z / f)).
 
     A scan that carries its noise model's prediction (``scan.sigma``, mm, as simulated
@@ -223,7 +227,7 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     if fp is None:
         fp = pixel_geometry(scan, z).footprint
     z = np.asarray(z, np.float32)
-    quantum = depth_quantum(z)
+    quantum = depth_quantum(z) if quantum is UNKNOWN else quantum
     predicted = getattr(scan, "sigma", None) if scan is not None else None
     if predicted is not None:
         sub = (slice(None, None, 4), slice(None, None, 4))
@@ -362,21 +366,25 @@ def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: 
 NOISE_WINDOW = 5
 
 
-def scan_sigma(scan: Any) -> np.ndarray | None:
+def scan_sigma(scan: Any, z: np.ndarray | None = None, quantum: Any = UNKNOWN) -> np.ndarray | None:
     """The noise model's depth std at each pixel, mm (``scan.sigma``), with the rounding's
     variance ``q^2 / 12`` added on quantised depth where the data show it
-    (:func:`_rounded_sigma`); None when the scan carries no sigma."""
+    (:func:`_rounded_sigma`); None when the scan carries no sigma. ``z`` (the scan's
+    :func:`~rangesim.edges._scan_access.scan_depth`) and ``quantum`` (its
+    :func:`depth_quantum`, None for continuous depth) when the caller has them already."""
     sigma = getattr(scan, "sigma", None)
     if sigma is None:
         return None
-    quantum = _scan_quantum(scan)
+    if quantum is UNKNOWN:
+        quantum = _scan_quantum(scan)
     if quantum is not None:
-        z = scan_depth(scan)[0]
+        z = scan_depth(scan)[0] if z is None else z
         sigma = _rounded_sigma(scan, sigma, z, pixel_geometry(scan, z).footprint, quantum)
     return sigma
 
 
-def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
+def predicted_noise(scan: Any, window: int | None = None, *, z: np.ndarray | None = None,
+                    quantum: Any = UNKNOWN) -> np.ndarray | None:
     """The noise model's depth std of the surface around each pixel, mm, (H, W) float32.
 
     ``scan.sigma`` (the predicted std per pixel; simulated scans carry it), its
@@ -390,7 +398,7 @@ def predicted_noise(scan: Any, window: int | None = None) -> np.ndarray | None:
     :func:`_rounded_sigma`; a block matcher's, which counts it, is only kept at least
     ``q / sqrt(12)``).
     """
-    sigma = scan_sigma(scan)
+    sigma = scan_sigma(scan, z, quantum)
     if sigma is None:
         return None
     least = _window_min(np.ascontiguousarray(sigma, np.float32), int(window or NOISE_WINDOW) // 2)

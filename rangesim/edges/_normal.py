@@ -171,7 +171,7 @@ def normal(
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     noise = None
     if window is None or threshold_deg is None:
-        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint)
+        noise = estimate_depth_noise(scan, z=z, fp=geo.footprint, quantum=disc.quantum)
     noisy = noise is not None and noise >= NOISE_FLOOR
     matcher = matching_window(scan)
     if matcher is not None and window is None and blocks is None:
