@@ -13,7 +13,7 @@ import numba
 import numpy as np
 
 from rangesim.core._conic_kernels import direct_fit, ellipse_row
-from rangesim.features._ellipse_kernels import _find, _sampson, _union, fit_groups
+from rangesim.features._ellipse_kernels import _find, _sampson, _union, fit_groups, pixel_index
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 #: fits whose residual estimate from the moments exceeds this (px) are not checked further (the
@@ -47,14 +47,7 @@ def chain_links(x, y, ct, st, cos_link, cos_adjacent):  # pragma: no cover - com
     index image (the point at each pixel, -1 elsewhere; pixel (x, y) at [y + 1, x + 1]).
     """
     n = len(x)
-    W = 0
-    H = 0
-    for i in range(n):
-        W = max(W, x[i])
-        H = max(H, y[i])
-    index = np.full((H + 3, W + 3), -1, np.int32)
-    for i in range(n):
-        index[y[i] + 1, x[i] + 1] = i
+    index = pixel_index(x, y, 1)
     # the links as bits (bit d: the neighbour at step d), each pair tested once
     bits = np.zeros(n, np.uint8)
     inv_sqrt2 = 1.0 / np.sqrt(2.0)

@@ -75,6 +75,22 @@ def _stable_argsort(key):  # pragma: no cover - compiled
     return np.argsort(key, kind="mergesort")
 
 
+@numba.njit(**_JIT)
+def pixel_index(x, y, margin):  # pragma: no cover - compiled
+    """The index image of points at int pixels ``x, y`` (N,) (distinct, >= 0): the point at
+    pixel (x, y) is at ``[y + margin, x + margin]``, -1 elsewhere, with ``margin`` pixels of
+    -1 around the points' box (so neighbour lookups up to ``margin`` away need no bounds test)."""
+    W = 0
+    H = 0
+    for i in range(len(x)):
+        W = max(W, x[i])
+        H = max(H, y[i])
+    index = np.full((H + 2 * margin + 1, W + 2 * margin + 1), -1, np.int32)
+    for i in range(len(x)):
+        index[y[i] + margin, x[i] + margin] = i
+    return index
+
+
 # -- curves -------------------------------------------------------------------------------------
 
 @numba.njit(**_JIT)
@@ -93,16 +109,7 @@ def curve_labels(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: n
     number of curves).
     """
     n = len(x)
-    W = 0
-    H = 0
-    for i in range(n):
-        W = max(W, x[i])
-        H = max(H, y[i])
-    W += 2 * R + 1
-    H += 2 * R + 1
-    index = np.full((H, W), -1, np.int32)
-    for i in range(n):
-        index[y[i] + R, x[i] + R] = i
+    index = pixel_index(x, y, R)
     ct, st = np.empty(n), np.empty(n)
     for i in range(n):
         ct[i], st[i] = np.cos(theta[i]), np.sin(theta[i])
