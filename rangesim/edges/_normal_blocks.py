@@ -60,7 +60,7 @@ def block_bends(scan: Any, valid: np.ndarray, xyz: np.ndarray, disc: Any,
     """
     floor_deg = BLOCK_FLOOR_DEG if threshold_deg is None else float(threshold_deg)
     floor = np.radians(floor_deg)
-    sigma = scan_sigma(scan)  # with the rounding of quantised depth, where the data show it
+    sigma = scan_sigma(scan, quantum=disc.quantum)  # with the rounding of quantised depth, where the data show it
     h, w = valid.shape
     if sigma is None:
         s2 = np.zeros((h, w), np.float32)
