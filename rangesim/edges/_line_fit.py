@@ -381,7 +381,7 @@ def line_fit(
             k_noise, noise_p = _pixel_noise(scan, valid, geo.footprint, noise, disc.noise)
             gain: np.ndarray | float = 1.0
             if int(max_stride) > 1:
-                gains = stride_gain(z, geo.footprint, int(max_stride))
+                gains = stride_gain(z, geo.footprint, int(max_stride), quantum=disc.quantum)
                 stride = ring_strides(np.broadcast_to(noise_p, z.shape), k_noise, ~valid | disc.touching,
                                       RING_TOL_DEG, gains)
                 gain = gains[np.maximum(stride, 1)]

@@ -263,7 +263,7 @@ def _measured_noise(z: np.ndarray, fp: np.ndarray, quantum: np.ndarray | None) -
     return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
 
 
-def stride_gain(z: np.ndarray, fp: np.ndarray, max_stride: int) -> np.ndarray:
+def stride_gain(z: np.ndarray, fp: np.ndarray, max_stride: int, quantum: Any = UNKNOWN) -> np.ndarray:
     """How the bend noise of a line through a pixel falls as its halves grow, measured.
 
     The second difference of depth at lag ``s``, ``z[i + s] - 2 z[i] + z[i - s]`` over the
@@ -291,14 +291,14 @@ def stride_gain(z: np.ndarray, fp: np.ndarray, max_stride: int) -> np.ndarray:
     what the rounding's terraces give (their errors are a sawtooth along a slanted face,
     correlated over a terrace, not ``1 / s``). Elsewhere (continuous depth; a block
     matcher's quantised depth, whose noise spreads its lag-1 differences) the rule above,
-    to the bit.
+    to the bit. ``quantum``: :func:`depth_quantum` of ``z`` when the caller has it already.
     """
     z = np.asarray(z, np.float32)
     gain = np.ones(int(max_stride) + 1)
     rms = np.full(int(max_stride) + 1, np.nan)
     zc, fc = z[:, ::4], fp[:, ::4]
     zr, fr = z[::4], fp[::4]
-    quantum = depth_quantum(z)
+    quantum = depth_quantum(z) if quantum is UNKNOWN else quantum  # (the caller's Discontinuities.quantum)
     by_quanta = False                    # set at lag 1: rounded terraces (see above)
     for lag in range(1, int(max_stride) + 1):
         if 2 * lag >= min(z.shape):
