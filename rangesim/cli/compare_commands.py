@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from rangesim.cli.common import make_out_dir, positive, write_json
+from rangesim.cli.common import check_conf, make_out_dir, positive, write_json
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate.runs import load_scan_with_labels
@@ -95,8 +95,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise RangesimError(f"--seed must not be negative, got {args.seed}")
     path = Path(args.recorded)
-    from rangesim.cli.common import check_conf
-
     check_conf(path, args.conf)
     scan, labels = load_scan_with_labels(path, args.conf, sensor=args.recorded_sensor)
     from rangesim.cli.edge_commands import describe_sensor, require_grid
