@@ -22,6 +22,7 @@ import rangesim as rs
 import rangesim.cli.main as cli
 from rangesim.cli.main import main
 from rangesim.core.constants import STATUS_NAMES, Status
+from rangesim.core.errors import RangesimError
 
 REPO = Path(__file__).resolve().parents[1]
 W, H = 64, 48
@@ -89,6 +90,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     (d / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     (d / "pose_3x3.json").write_text(json.dumps(np.eye(3).tolist()))
     (d / "a_file").write_text("not a directory")
+    (d / "a_dir.exr").mkdir()
     return {p.name: p for p in d.iterdir()}
 
 
@@ -220,11 +222,15 @@ ERRORS = [
                  ["scan.txt", "'.txt'", ".exr"], id="bad-scan-suffix"),
     pytest.param(["--preview", "{out}/scan.jpg"], "scene.toml",
                  ["scan.jpg", "'.jpg'", ".png"], id="bad-preview-suffix"),
-    # these two fail after the scan: the OSError is reported, and neither file is left
+    # outputs that cannot be written are refused before the scan, so no other output is left
     pytest.param(["--out", "{inputs}/a_file/scan.exr"], "scene.toml",
                  ["a_file/scan.exr", "a_file is not a directory"], id="out-under-a-file"),
     pytest.param(["--preview", "{inputs}/a_file/scan.png"], "scene.toml",
                  ["a_file/scan.png", "a_file is not a directory"], id="preview-under-a-file"),
+    pytest.param(["--out", "{inputs}/a_dir.exr", "--intensity-image", "{out}/intensity.png"], "scene.toml",
+                 ["a_dir.exr", "a directory of that name exists"], id="out-is-a-directory"),
+    pytest.param(["--intensity-image", "{inputs}/a_file/i.png"], "scene.toml",
+                 ["a_file/i.png", "a_file is not a directory"], id="intensity-under-a-file"),
 ]
 
 
@@ -246,6 +252,24 @@ def test_errors_are_one_line_without_traceback_or_outputs(inputs, tmp_path, caps
         assert word in lines[0]
     assert _files_under(out) == []
     assert not list(Path(folder).glob(".*tmp-*"))  # no temporaries beside the inputs either
+
+
+def test_outputs_written_together_all_or_none(tmp_path):
+    from rangesim.cli.common import write_together
+
+    first, second = tmp_path / "a.txt", tmp_path / "sub" / "b.txt"
+    first.write_text("old")
+
+    def fail(tmp):
+        Path(tmp).write_text("half")
+        raise RangesimError("the drawing failed")
+
+    with pytest.raises(RangesimError, match="the drawing failed"):
+        write_together([(first, lambda tmp: Path(tmp).write_text("new")), (second, fail)])
+    assert first.read_text() == "old" and not second.exists()
+    assert sorted(p.name for p in _files_under(tmp_path)) == ["a.txt"]  # no temporaries left
+    write_together([(first, lambda tmp: Path(tmp).write_text("new")), (second, lambda tmp: Path(tmp).write_text("b"))])
+    assert first.read_text() == "new" and second.read_text() == "b"
 
 
 def test_info_of_a_missing_file_is_a_user_error(tmp_path, capsys):

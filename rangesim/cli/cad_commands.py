@@ -5,8 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangesim.cli.common import build_model, check_suffix, check_writable, writing
-from rangesim.io.atomic import atomic_path
+from rangesim.cli.common import build_model, check_suffix, check_writable, write_together
 
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb")
 
@@ -25,11 +24,10 @@ def cmd_model(args: argparse.Namespace) -> int:
     part = build_model(args.name, args.param)
     data = part.mesh.export(file_type=out.suffix.lower().lstrip("."))  # bytes (or str for OBJ)
     tree_text = json.dumps(part.to_dict(), indent=1) if tree_path is not None else None
-    with writing(out), atomic_path(out) as tmp:
-        Path(tmp).write_bytes(data if isinstance(data, bytes) else data.encode())
-        if tree_path is not None:  # the mesh lands only once the tree is written
-            with writing(tree_path), atomic_path(tree_path) as tree_tmp:
-                Path(tree_tmp).write_text(tree_text)
+    writes = [(out, lambda tmp: Path(tmp).write_bytes(data if isinstance(data, bytes) else data.encode()))]
+    if tree_path is not None:
+        writes.append((tree_path, lambda tmp: Path(tmp).write_text(tree_text)))
+    write_together(writes)
     mesh = part.mesh
     print(f"{args.name}: {len(mesh.faces):,} triangles, volume {mesh.volume:,.1f} mm^3, "
           f"watertight {mesh.is_watertight}, {len(part.labels)} sub-parts, {len(part.features)} analytic "

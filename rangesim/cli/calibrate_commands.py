@@ -5,9 +5,8 @@ import argparse
 import re
 from pathlib import Path
 
-from rangesim.cli.common import check_conf, check_writable, write_json, writing
+from rangesim.cli.common import check_conf, check_writable, write_json, write_together
 from rangesim.core.errors import RangesimError
-from rangesim.io.atomic import atomic_path
 
 #: what ``--name`` may be: a sensor name as the presets spell them (it becomes ``name = "..."`` in TOML)
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]*")
@@ -63,10 +62,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     text = result["toml"]
     if args.name:
         text = text.replace(f'name = "{result["sensor"].name}"', f'name = "{args.name}"', 1)
-    with writing(out), atomic_path(out) as tmp:
-        Path(tmp).write_text(text, encoding="utf-8")
-        if report is not None:  # the sensor file lands only once the report is written
-            write_json({k: result[k] for k in ("geometry", "iou", "dropout", "noise", "views")}, report)
+    writes = [(out, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))]
+    if report is not None:
+        writes.append((report, lambda tmp: write_json({k: result[k] for k in ("geometry", "iou", "dropout", "noise",
+                                                                              "views")}, tmp)))
+    write_together(writes)
     g, d, n = result["geometry"], result["dropout"], result["noise"]
     print(f"geometry: theta {g['theta_deg']:.1f} deg, alpha {g['alpha_deg']:.1f} deg, min_cos {g['min_cos']:.2f}"
           f"  (joint noise-free IoU {result['iou']:.4f})")

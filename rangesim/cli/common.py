@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -147,6 +147,28 @@ def build_model(name: str, param_texts: Sequence[str]):
         given = ", ".join(f"{k}={v!r}" for k, v in params.items())
         raise RangesimError(f"cannot build the model with --param {given} ({type(exc).__name__}: {exc})",
                             source=name) from exc
+
+
+def write_together(writes: Sequence[tuple[Path, Callable[[Path], Any]]]) -> None:
+    """Write several files: all of them, or none (old files stay as they were).
+
+    Each ``write(tmp)`` fills a temporary name beside its ``path``; the renames onto the
+    targets happen only once every file is written (the first file last), so a failed write
+    or drawing leaves no new file behind. Check the targets first (:func:`check_writable`):
+    a rename refused then would leave the files renamed before it.
+
+    Parameters
+    ----------
+    writes : sequence of (path, write)
+        Target and the function that writes the file to the path it is given.
+    """
+    with ExitStack() as stack:
+        for path, write in writes:
+            path = Path(path)
+            stack.enter_context(writing(path))
+            tmp = stack.enter_context(atomic_path(path))
+            with writing(path, tmp):
+                write(tmp)
 
 
 def json_safe(value: Any) -> Any:

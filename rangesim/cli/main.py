@@ -35,12 +35,12 @@ from typing import Any, NoReturn
 import numpy as np
 
 from rangesim import __version__
-from rangesim.cli.common import MESH_UNITS, check_suffix, load_scene_arg, writing
+from rangesim.cli.common import MESH_UNITS, check_suffix, check_writable, load_scene_arg, write_together
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.memory import check_memory
 from rangesim.core.rangescan import RangeScan
-from rangesim.io import atomic_path, load_scan, save_scan
+from rangesim.io import load_scan, save_scan
 from rangesim.sensor import intensity_image, load_sensor, preset_names, scan
 from rangesim.sensor._scan import BASE_BYTES, EmptyScanWarning
 from rangesim.sensor.bands import RESULT_BYTES_PER_PIXEL
@@ -152,20 +152,6 @@ def _load_pose(path: Path) -> np.ndarray:
 WRITE_BYTES_PER_PIXEL = 56
 
 
-def _save_outputs(result: RangeScan, out: Path, preview: Path | None) -> None:
-    """Write the scan and its preview: both, or neither (an old file stays as it was)."""
-    if preview is None:
-        with writing(out):
-            save_scan(result, out)
-        return
-    # the scan goes to a temporary name that replaces `out` only once the preview is written
-    with writing(out), atomic_path(out) as tmp:
-        with writing(out, tmp):
-            save_scan(result, tmp)
-        with writing(preview):
-            save_preview(result, preview)
-
-
 def _status_counts(result: RangeScan) -> list[tuple[str, int]]:
     """(name, pixel count) per status: every known code, then any unknown code present."""
     rows = [(STATUS_NAMES[code], result.count(code)) for code in Status]
@@ -192,6 +178,12 @@ def cmd_scan(args: argparse.Namespace) -> int:
     intensity = Path(args.intensity_image) if args.intensity_image else None
     if intensity is not None:
         check_suffix(intensity, PREVIEW_SUFFIXES + (".npy",), "intensity images")
+    frames_path = out.with_name(out.stem + ".frames.npz") if args.keep_frames else None
+    # every output checked before any work: all of them are written, or none
+    for path, what in ((out, "scan"), (preview, "preview"), (intensity, "intensity image"),
+                       (frames_path, "frames")):
+        if path is not None:
+            check_writable(path, what)
     changes = dict(_parse_setting(text) for text in args.set)
     pose = _load_pose(Path(args.pose)) if args.pose else None
 
@@ -221,25 +213,22 @@ def cmd_scan(args: argparse.Namespace) -> int:
             print(f"{PROG}: warning: {_one_line(str(w.message))}", file=sys.stderr)
         else:
             raise RangesimError(f"{w.message}; nothing written (--keep-empty writes it anyway)", source=args.scene)
-    extras = []
+    writes = [(out, lambda tmp: save_scan(result, tmp))]
+    if preview is not None:
+        writes.append((preview, lambda tmp: save_preview(result, tmp)))
     if intensity is not None:
         image = intensity_image(scene, sensor, pose=result.pose, seed=args.seed)
-        with writing(intensity):
-            save_intensity_image(image, intensity)
-        extras.append(str(intensity))
-    if args.keep_frames:
-        frames_path = out.with_name(out.stem + ".frames.npz")
-        with writing(frames_path):
-            stack.save(frames_path)
-        extras.append(str(frames_path))
-    _save_outputs(result, out, preview)
+        writes.append((intensity, lambda tmp: save_intensity_image(image, tmp)))
+    if frames_path is not None:
+        writes.append((frames_path, stack.save))
+    write_together(writes)
     elapsed = time.perf_counter() - start
 
     h, w = result.shape
     total = h * w
     n_valid = int(np.count_nonzero(result.valid))
     invalid = ", ".join(f"{name} {n:,}" for name, n in _status_counts(result)[1:])
-    written = ", ".join([str(out)] + ([str(preview)] if preview else []) + extras)
+    written = ", ".join(str(path) for path, _ in writes)
     print(
         f"Scanned {args.scene} with {sensor.name} (seed {args.seed}): {w} x {h} px (W x H), "
         f"{n_valid:,} valid ({_percent(n_valid, total)}); {invalid}. "

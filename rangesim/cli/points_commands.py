@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rangesim.cad.sampling import ENDS, surface_points
-from rangesim.cli.common import check_suffix, writing
+from rangesim.cli.common import check_suffix, check_writable, write_together
 from rangesim.core.errors import RangesimError
 from rangesim.core.units import parse_length
 
@@ -36,7 +36,6 @@ def parse_viewpoint(text: str) -> np.ndarray:
 def cmd_points(args: argparse.Namespace) -> int:
     """Sample the model's surface, write the points (and a preview), print a summary."""
     from rangesim.cad.models import load_model
-    from rangesim.io.atomic import atomic_path
     from rangesim.scene.visibility import visible_surface_points
 
     out = Path(args.out)
@@ -45,6 +44,10 @@ def cmd_points(args: argparse.Namespace) -> int:
     check_suffix(out, POINTS_SUFFIXES, "surface points")
     if preview is not None:
         check_suffix(preview, PREVIEW_SUFFIXES, "previews")
+    # every output checked before any work: both files are written, or neither
+    check_writable(out, "surface points")
+    if preview is not None:
+        check_writable(preview, "preview")
     h = parse_length(args.resolution, positive=True, what="--resolution")
     view = parse_viewpoint(args.view) if args.view else None
 
@@ -54,19 +57,13 @@ def cmd_points(args: argparse.Namespace) -> int:
         samples = surface_points(mesh, h, smooth=not args.flat, ends=args.ends)
     else:
         samples = visible_surface_points(mesh, h, view, smooth=not args.flat, ends=args.ends)
-    if preview is None:
-        with writing(out):
-            samples.save(out)
-    else:
+    writes = [(out, samples.save)]
+    if preview is not None:
         from rangesim.viz.points import save_points_preview
 
-        # both files or neither: the points replace `out` only once the preview is written
-        with writing(out), atomic_path(out) as tmp:
-            with writing(out, tmp):
-                samples.save(tmp)
-            with writing(preview):
-                save_points_preview(samples.points, samples.normals, preview,
-                                    normal_length=h)
+        writes.append((preview, lambda tmp: save_points_preview(samples.points, samples.normals, tmp,
+                                                                normal_length=h)))
+    write_together(writes)
     elapsed = time.perf_counter() - start
     seen = "" if view is None else f" seen from ({', '.join(f'{c:g}' for c in view)}) mm"
     written = str(out) if preview is None else f"{out} and {preview}"

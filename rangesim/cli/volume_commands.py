@@ -5,8 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangesim.cli.common import build_model, check_suffix, check_writable, writing
-from rangesim.io.atomic import atomic_path
+from rangesim.cli.common import build_model, check_suffix, check_writable, write_together
 
 
 def cmd_volumes(args: argparse.Namespace) -> int:
@@ -23,13 +22,12 @@ def cmd_volumes(args: argparse.Namespace) -> int:
         check_writable(picture, "picture")
     part = build_model(args.name, args.param)
     model = volumetric_model(part.tree)
-    with writing(out), atomic_path(out) as tmp:
-        Path(tmp).write_text(json.dumps(model, indent=1))
-        if picture is not None:  # the JSON lands only once the picture is drawn
-            from rangesim.viz.volumes import save_part_tree
+    writes = [(out, lambda tmp: Path(tmp).write_text(json.dumps(model, indent=1)))]
+    if picture is not None:
+        from rangesim.viz.volumes import save_part_tree
 
-            with writing(picture):
-                save_part_tree(part.tree, picture)
+        writes.append((picture, lambda tmp: save_part_tree(part.tree, tmp)))
+    write_together(writes)
     n = sum(1 for _ in part.tree.walk())
     print(f"{args.name}: {n} nodes, {len(part.tree.leaves())} solids; {model['expanded']}; wrote {out}"
           + (f" and {picture}" if picture else ""))
