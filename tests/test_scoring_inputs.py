@@ -67,6 +67,20 @@ def test_nan_in_a_float_map_is_no_edge(plate):
     assert len(rs.features.lines(as_float)) == len(rs.features.lines(edges.mask)) > 0
 
 
+def test_score_edges_truth_as_float_map_and_wrong_shapes(plate):
+    scan, _, edges, truth = plate
+    as_float = np.where(truth > 0, truth.astype(float), np.nan)  # NaN in a float map is no edge
+    assert rs.evaluate.score_edges(edges, scan, truth=as_float) == rs.evaluate.score_edges(edges, scan, truth=truth)
+    assert rs.evaluate.score_edges(edges, scan, truth=np.full(truth.shape, np.nan))["n_gt"] == 0
+    with pytest.raises(RangesimError, match=r"truth \(3, 3\) and scan"):
+        rs.evaluate.score_edges(edges, scan, truth=np.zeros((3, 3), np.uint8))
+    with pytest.raises(RangesimError, match=r"edge map \(3, 3\) and scan"):  # was numpy's broadcast error
+        rs.evaluate.score_edges(np.ones((3, 3), bool), scan, truth=np.zeros((3, 3), np.uint8))
+    for bad in (np.full(truth.shape, 7), np.full(truth.shape, 0.5), np.full(truth.shape, -1)):
+        with pytest.raises(RangesimError, match="truth labels must be whole numbers 0-3"):
+            rs.evaluate.score_edges(edges, scan, truth=bad)
+
+
 def test_edge_scores_refuses_labels_of_another_shape(plate):
     _, _, edges, truth = plate
     with pytest.raises(RangesimError, match="pred_labels"):

@@ -97,6 +97,21 @@ def data_boundary(valid: np.ndarray) -> np.ndarray:
     return valid & missing
 
 
+def _truth_labels(truth: Any) -> np.ndarray:
+    """``truth`` as a (H, W) uint8 label map (:class:`EdgeLabel` values; NaN in a float map is
+    no edge), refused with a one-line message when it is not one."""
+    a = np.asarray(truth)
+    if a.dtype.kind not in "biuf" or a.ndim != 2:
+        raise RangesimError(f"truth must be an (H, W) label map, got {a.dtype} of shape {a.shape}")
+    if a.dtype.kind == "f":
+        a = np.nan_to_num(a, nan=0.0)
+    labels = np.asarray(a, np.int64)
+    if np.any(labels != a) or labels.min(initial=0) < 0 or labels.max(initial=0) > max(EdgeLabel):
+        raise RangesimError(f"truth labels must be whole numbers 0-{int(max(EdgeLabel))} "
+                            f"({', '.join(k.name.lower() for k in EdgeLabel)})")
+    return labels.astype(np.uint8)
+
+
 def score_edges(
     edges: Any,
     scan: Any,
@@ -151,10 +166,13 @@ def score_edges(
         if scene is None:
             raise RangesimError("score_edges needs the scene behind the scan, or truth=")
         truth = visible_truth(scan, scene, crease_deg)
-    truth = np.asarray(truth)
+    truth = _truth_labels(truth)
     pred, labels = _as_mask_labels(edges, "edges")
-    if pred.shape != truth.shape:
-        raise RangesimError(f"edge map {pred.shape} and scan {truth.shape} differ in shape")
+    shape = np.shape(scan.valid)
+    if pred.shape != shape:
+        raise RangesimError(f"edge map {pred.shape} and scan {shape} differ in shape")
+    if truth.shape != shape:
+        raise RangesimError(f"truth {truth.shape} and scan {shape} differ in shape")
     tolerance_px = check_tolerance(tolerance_px)
     n_ignored = 0
     if ignore_data_boundary:
