@@ -89,6 +89,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     (d / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")  # vertices, no faces
     (d / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     (d / "pose_3x3.json").write_text(json.dumps(np.eye(3).tolist()))
+    (d / "pose_bottom_row.json").write_text(json.dumps([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 300], [5, 5, 5, 5]]))
     (d / "a_file").write_text("not a directory")
     (d / "a_dir.exr").mkdir()
     return {p.name: p for p in d.iterdir()}
@@ -218,6 +219,8 @@ ERRORS = [
     pytest.param(["--seed", "-1"], "scene.toml", ["seed must be a non-negative integer"], id="negative-seed"),
     pytest.param(["--pose", "{inputs}/pose_3x3.json"], "scene.toml",
                  ["pose_3x3.json", "4x4"], id="pose-wrong-shape"),
+    pytest.param(["--pose", "{inputs}/pose_bottom_row.json"], "scene.toml",
+                 ["pose_bottom_row.json", "bottom row 0 0 0 1"], id="pose-not-rigid"),
     pytest.param(["--out", "{out}/scan.txt"], "scene.toml",
                  ["scan.txt", "'.txt'", ".exr"], id="bad-scan-suffix"),
     pytest.param(["--preview", "{out}/scan.jpg"], "scene.toml",

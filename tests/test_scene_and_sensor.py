@@ -9,6 +9,8 @@ import trimesh
 
 import rangesim as rs
 from rangesim.core.constants import Status
+from rangesim.core.errors import RangesimError
+from rangesim.core.geometry import look_at
 from tests.conftest import make_sensor
 
 REPO = Path(__file__).resolve().parents[1]
@@ -158,3 +160,21 @@ def test_scene_mesh_paths_can_name_the_shared_data(data_dir, monkeypatch, tmp_pa
     monkeypatch.setenv("RANGESIM_DATA", str(tmp_path / "nowhere"))
     with pytest.raises(rs.RangesimError, match="no such mesh file"):
         rs.load_scene(REPO / "scenes" / "flat_target.toml")
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ((3, slice(None), [5.0, 5.0, 5.0, 5.0]), "bottom row 0 0 0 1"),  # once scanned with 280 dropouts
+    ((3, 2, 1e-3), "bottom row 0 0 0 1"),
+    ((0, 0, 2.0), "orthonormal"),
+    ((0, 0, -1.0), "right-handed"),
+    ((1, 3, np.nan), "finite 4x4"),
+])
+def test_scan_refuses_a_pose_that_is_no_rigid_transform(change, words):
+    from rangesim.core.geometry import check_pose
+
+    pose = look_at((0, -180, 300), (0, 0, 10))
+    check_pose(pose)  # a camera pose from look_at is rigid
+    row, col, value = change
+    pose[row, col] = value
+    with pytest.raises(RangesimError, match=words):
+        rs.scan(rs.datasets.plate_scene(), "white_scanner", pose=pose)

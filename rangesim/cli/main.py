@@ -38,6 +38,7 @@ from rangesim import __version__
 from rangesim.cli.common import MESH_UNITS, check_suffix, check_writable, load_scene_arg, write_together
 from rangesim.core.constants import STATUS_NAMES, Status
 from rangesim.core.errors import RangesimError
+from rangesim.core.geometry import check_pose
 from rangesim.core.memory import check_memory
 from rangesim.core.rangescan import RangeScan
 from rangesim.io import load_scan, save_scan
@@ -132,19 +133,8 @@ def _load_pose(path: Path) -> np.ndarray:
             data = data["pose"]
     else:
         raise RangesimError("pose must be a .json or .npy file", source=path)
-    try:
-        pose = np.asarray(data, dtype=np.float64)
-    except (TypeError, ValueError):
-        pose = np.empty(0)
-    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-        raise RangesimError(
-            f"pose must be a finite 4x4 camera-to-world matrix, got shape {pose.shape}", source=path
-        )
-    # scan() checks this too, but without the file's name
-    rot = pose[:3, :3]
-    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise RangesimError("pose rotation must be orthonormal and right-handed", source=path)
-    return pose
+    # scan() checks it too, but without the file's name
+    return check_pose(data, source=path)
 
 
 #: memory (bytes per pixel) the scan writers take beyond the scan: float32 planes of the

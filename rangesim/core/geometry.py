@@ -1,8 +1,12 @@
 """Rigid transforms: look-at poses (OpenCV camera axes) and Euler rotations."""
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from rangesim.core.errors import RangesimError
 
 
 def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -40,6 +44,42 @@ def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     x = np.cross(y, z)
     pose = np.eye(4)
     pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, position
+    return pose
+
+
+def check_pose(pose: Any, source: Any = None) -> np.ndarray:
+    """``pose`` as a float64 (4, 4) rigid camera-to-world transform, or a one-line refusal.
+
+    A rigid transform has an orthonormal, right-handed rotation block (to 1e-6) and the bottom
+    row 0 0 0 1 (anything else would scale or project the rays the scanner casts).
+
+    Parameters
+    ----------
+    pose : array-like, (4, 4)
+    source : str or Path, optional
+        The file it came from, named in the message.
+
+    Examples
+    --------
+    >>> check_pose(np.eye(4)).shape
+    (4, 4)
+    """
+    try:
+        pose = np.asarray(pose, dtype=np.float64)
+    except (TypeError, ValueError):
+        pose = np.empty(0)
+    if pose.shape != (4, 4):
+        raise RangesimError(f"pose must be a finite 4x4 camera-to-world matrix, got shape {pose.shape}",
+                            source=source)
+    if not np.all(np.isfinite(pose)):
+        raise RangesimError("pose must be a finite 4x4 camera-to-world matrix (it holds NaN or infinity)",
+                            source=source)
+    rot = pose[:3, :3]
+    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise RangesimError("pose rotation must be orthonormal and right-handed", source=source)
+    if not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-9):
+        raise RangesimError(f"pose must be a rigid transform: bottom row 0 0 0 1, got {pose[3].tolist()}",
+                            source=source)
     return pose
 
 

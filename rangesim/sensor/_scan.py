@@ -9,6 +9,7 @@ import numpy as np
 
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
+from rangesim.core.geometry import check_pose
 from rangesim.core.memory import check_memory, memory_budget
 from rangesim.core.rangescan import RangeScan
 from rangesim.scene.scene import Scene, load_scene
@@ -186,12 +187,7 @@ def scan(scene: Any, sensor: Any, pose: np.ndarray | None = None, seed: int = 0,
     sensor = load_sensor(sensor)
     if pose is None:
         pose = default_pose(scene, sensor)
-    pose = np.asarray(pose, dtype=np.float64)
-    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-        raise RangesimError("pose must be a finite 4x4 camera-to-world matrix")
-    rot = pose[:3, :3]
-    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise RangesimError("pose rotation must be orthonormal and right-handed")
+    pose = check_pose(pose)
     if keep_frames and sensor.mode != "rendered":
         raise RangesimError("only the rendered mode has frames (set mode = \"rendered\")", source=sensor.source)
     if sensor.mode not in ("geometric", "rendered", "structured_light"):
