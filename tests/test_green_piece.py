@@ -117,6 +117,24 @@ def test_parameters_change_the_part_and_bad_ones_are_refused():
         green_piece(thikness=3)
 
 
+@pytest.mark.parametrize(("params", "words"), [
+    # the analytic features once listed rims of holes 42 mm off a 1 mm plate
+    ({"length": 1.0}, r"hole 1 at \(-42, -30\) reaching 3.2 mm does not lie on the 1 x 76.2 mm plate"),
+    ({"width": 5.0}, "does not lie on the 101.6 x 5 mm plate"),
+    ({"threads": [(48.0, 0.0, 6.0, 1.75)]}, r"thread 1 at \(48, 0\)"),
+    ({"dent": (-26.0, 16.0, 30.0, 13.0)}, "dent depth 13 mm must be less than"),
+    ({"scratches": [(40.0, 0.0, 0.0, 25.0, 0.6, 0.4)]}, "scratch 1"),
+    ({"holes": -1}, r"holes must be a list of \(x, y, radius\), got -1"),
+    ({"holes": [1, 2]}, r"holes must be a list of \(x, y, radius\) \(finite numbers\)"),
+    ({"dent": True}, r"dent must be \(x, y, sphere radius, depth\)"),
+    ({"threads": [(0.0, 0.0, 6.0, 0.0)]}, "pitch must be a number > 0"),
+    ({"length": -3.0}, "length must be a number > 0"),
+])
+def test_features_off_the_plate_and_wrong_types_are_refused(params, words):
+    with pytest.raises(rs.RangesimError, match=words):
+        green_piece(**params)
+
+
 def test_scene_file_scans_the_green_piece_cleanly():
     scene = rs.load_scene(REPO / "scenes" / "green_piece.toml")
     piece = scene.objects[0]

@@ -22,6 +22,7 @@ from typing import Any
 import manifold3d
 import numpy as np
 
+from rangesim.cad._layout import positive, tuples, within
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Segment3D
 from rangesim.cad.models import MODELS
 from rangesim.cad.part import BuiltPart, build_part, difference, solid
@@ -85,9 +86,9 @@ def green_piece(**params) -> BuiltPart:
     if unknown:
         raise RangesimError(f"unknown green_piece parameter(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
     p = {**DEFAULTS, **params}
+    positive("green_piece", length=p["length"], width=p["width"], thickness=p["thickness"])
     L, W, T = float(p["length"]), float(p["width"]), float(p["thickness"])
-    if min(L, W, T) <= 0:
-        raise RangesimError("green_piece: length, width and thickness must be positive")
+    p.update(_checked_layout(p, L, W, T))
     n_seg = int(p["segments"])
     features = AnalyticFeatures()
 
@@ -135,6 +136,36 @@ def green_piece(**params) -> BuiltPart:
         features.circles += rims
     tree = difference("green_piece", step3, *threads, function="part")
     return build_part("green_piece", tree, features, p)
+
+
+def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
+    """The holes, dent, scratches and threads as tuples of numbers, each on the plate (a feature
+    off it would be listed as a rim the mesh does not have)."""
+    m = "green_piece"
+    holes = tuples(m, "holes", p["holes"], ("x", "y", "radius"))
+    for k, (x, y, r) in enumerate(holes, start=1):
+        positive(m, **{f"holes[{k - 1}] radius": r})
+        within(m, f"hole {k}", x, y, r, L / 2, W / 2)
+    (dent,) = tuples(m, "dent", p["dent"], ("x", "y", "sphere radius", "depth"), many=False)
+    x, y, radius, depth = dent
+    positive(m, **{"dent sphere radius": radius, "dent depth": depth})
+    if depth >= min(2 * radius, T):
+        raise RangesimError(f"{m}: dent depth {depth:g} mm must be less than the sphere's diameter and the "
+                            f"thickness {T:g} mm")
+    within(m, "the dent", x, y, math.sqrt(radius**2 - (radius - depth) ** 2), L / 2, W / 2)
+    scratches = tuples(m, "scratches", p["scratches"], ("x", "y", "angle_deg", "length", "width", "depth"))
+    for k, (x, y, angle, length, width, depth) in enumerate(scratches, start=1):
+        positive(m, **{f"scratches[{k - 1}] length": length, f"scratches[{k - 1}] width": width,
+                       f"scratches[{k - 1}] depth": depth})
+        if depth >= T:
+            raise RangesimError(f"{m}: scratch {k} depth {depth:g} mm must be less than the thickness {T:g} mm")
+        for end in ((x, y), _along((x, y), angle, length)):
+            within(m, f"scratch {k}", *end, width / 2, L / 2, W / 2)
+    threads = tuples(m, "threads", p["threads"], ("x", "y", "major radius", "pitch"))
+    for k, (x, y, r_major, pitch) in enumerate(threads, start=1):
+        positive(m, **{f"threads[{k - 1}] major radius": r_major, f"threads[{k - 1}] pitch": pitch})
+        within(m, f"thread {k}", x, y, r_major, L / 2, W / 2)
+    return {"holes": holes, "dent": dent, "scratches": scratches, "threads": threads}
 
 
 def _along(start, angle_deg, distance) -> tuple[float, float]:

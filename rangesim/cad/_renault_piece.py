@@ -19,6 +19,7 @@ from typing import Any
 import manifold3d
 import numpy as np
 
+from rangesim.cad._layout import positive, tuples, within
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Curve3D, Segment3D
 from rangesim.cad.freeform import height_patch, surface_solid
 from rangesim.cad.models import MODELS
@@ -80,10 +81,9 @@ def renault_piece(**params) -> BuiltPart:
     if unknown:
         raise RangesimError(f"unknown renault_piece parameter(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
     p = {**DEFAULTS, **params}
+    _check_layout(p)
     L, W, T = p["plate_length"], p["plate_width"], p["plate_thickness"]
     r, n_seg = p["corner_radius"], int(p["segments"])
-    if min(L, W, T) <= 0 or not 0 < r < min(L, W) / 2:
-        raise RangesimError("renault_piece: plate dimensions must be positive and the corner radius smaller than half the plate")
     features = AnalyticFeatures()
     density = p["samples_per_mm"]
 
@@ -121,6 +121,22 @@ def renault_piece(**params) -> BuiltPart:
     right, left = heads
     tree = union("renault_piece", neck, right, bump, left, base, function="part")
     return build_part("renault_piece", tree, features, p)
+
+
+def _check_layout(p: dict) -> None:
+    """Sizes that are sizes, the corner radius under half the plate, the holes on it (a hole off
+    the plate would be listed as a rim the mesh does not have)."""
+    m = "renault_piece"
+    sizes = ("plate_length", "plate_width", "plate_thickness", "corner_radius", "hole_radius", "neck_length",
+             "neck_width", "neck_height", "neck_waist", "head_height", "bump_height", "samples_per_mm")
+    positive(m, **{k: p[k] for k in sizes})
+    for key in ("head_size", "bump_size"):
+        (size,) = tuples(m, key, p[key], ("x", "y"), many=False)
+        positive(m, **{f"{key} x": size[0], f"{key} y": size[1]})
+    L, W, r = p["plate_length"], p["plate_width"], p["corner_radius"]
+    if r >= min(L, W) / 2:
+        raise RangesimError(f"{m}: corner_radius {r:g} mm must be less than half the plate ({min(L, W) / 2:g} mm)")
+    within(m, "hole", float(p["hole_x"]), 0.0, p["hole_radius"], L / 2, W / 2)
 
 
 def _freeform(surface, size_x, size_y, density):
