@@ -2,6 +2,9 @@
 code 2, no traceback, and no output file left behind."""
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 import trimesh
 
@@ -178,6 +181,22 @@ def test_diff_names_both_files(plate, tmp_path, capsys):
     out = tmp_path / "d.png"
     _refused(capsys, ["diff", plate, other, "--out", out], "plate.exr", "small.npz")
     assert not out.exists()
+
+
+def test_diff_of_empty_scans_is_refused_and_of_disjoint_ones_says_so(plate, tmp_path, capsys):
+    scan = rs.load_scan(plate)
+    empty = tmp_path / "empty.npz"
+    dataclasses.replace(scan, **{k: getattr(scan, k)[:0, :0] for k in ("depth", "xyz", "valid", "normal", "intensity",
+                                                                      "part", "face", "status", "xyz_true", "sigma")
+                                  if getattr(scan, k) is not None}).save(empty)
+    out = tmp_path / "d.png"
+    _refused(capsys, ["diff", empty, empty, "--out", out], "empty.npz", "empty scan (0 x 0 px)")  # was ZeroDivisionError
+    assert not out.exists()
+    blank = tmp_path / "blank.npz"
+    dataclasses.replace(scan, valid=np.zeros_like(scan.valid)).save(blank)
+    assert main(["diff", str(blank), str(plate), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "no pixel valid in both" in printed and "nan" not in printed
 
 
 @pytest.mark.parametrize("command", ["detect", "features"])

@@ -15,18 +15,23 @@ def cmd_diff(args: argparse.Namespace) -> int:
     check_suffix(out, (".png",), "difference pictures")
     positive("--limit", args.limit)
     a, b = load_scan(args.scan_a), load_scan(args.scan_b)
-    if a.shape != b.shape:
-        from rangesim.core.errors import RangesimError
+    from rangesim.core.errors import RangesimError
 
+    for scan, path in ((a, args.scan_a), (b, args.scan_b)):
+        if scan.valid.size == 0:
+            raise RangesimError(f"empty scan ({scan.shape[1]} x {scan.shape[0]} px): nothing to compare", source=path)
+    if a.shape != b.shape:
         raise RangesimError(f"the scans differ in size: {args.scan_a} is {a.shape[1]:,} x {a.shape[0]:,} px, "
                             f"{args.scan_b} is {b.shape[1]:,} x {b.shape[0]:,} (W x H); diff compares two scans "
                             "of one view", source=args.scan_b)
     labels = tuple(args.labels) if args.labels else (Path(args.scan_a).stem, Path(args.scan_b).stem)
     with writing(out):
         stats = save_scan_difference(a, b, out, labels=labels, limit_mm=args.limit)
-    print(f"{labels[1]} - {labels[0]}: {stats['both']:,} px valid in both, median |d| "
-          f"{stats['median_abs_mm']:.4f} mm, p95 {stats['p95_abs_mm']:.4f} mm, mean {stats['mean_mm']:+.4f} mm; "
-          f"{stats['only_a']:,} only in {labels[0]}, {stats['only_b']:,} only in {labels[1]}. Wrote {out}.")
+    differences = (f"{stats['both']:,} px valid in both, median |d| {stats['median_abs_mm']:.4f} mm, "
+                   f"p95 {stats['p95_abs_mm']:.4f} mm, mean {stats['mean_mm']:+.4f} mm" if stats["both"]
+                   else "no pixel valid in both (no depth differences)")
+    print(f"{labels[1]} - {labels[0]}: {differences}; {stats['only_a']:,} only in {labels[0]}, "
+          f"{stats['only_b']:,} only in {labels[1]}. Wrote {out}.")
     return 0
 
 

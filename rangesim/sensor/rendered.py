@@ -198,7 +198,9 @@ def scan_rendered(scene, sensor: Sensor, pose: np.ndarray, seed: int, keep_frame
     sigma_mm = p["laser"]["stripe_width"] / FWHM_PER_SIGMA
     s_grid = np.where(hit, s_true, np.nan).reshape(h, w)
     with np.errstate(invalid="ignore"):
-        footprint = np.nan_to_num(np.abs(np.gradient(s_grid, axis=1)), nan=0.0).ravel() / ds
+        # (one column has no neighbour across it to measure the footprint by: none)
+        slope = np.gradient(s_grid, axis=1) if w > 1 else np.zeros_like(s_grid)
+        footprint = np.nan_to_num(np.abs(slope), nan=0.0).ravel() / ds
         expected = np.sqrt((sigma_mm / (lam_true * ds)) ** 2 + footprint**2 / 12.0)
 
     speckle = pixel_speckle_contrast(np.linalg.norm(xyz_true, axis=1), p["noise"]["speckle_contrast"],
