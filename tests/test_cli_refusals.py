@@ -52,6 +52,23 @@ def test_calibrate_refuses_a_mesh_that_does_not_overlap(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["compare", "calibrate"])
+@pytest.mark.parametrize(("text", "words"), [
+    ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "1 vertices have NaN or infinite coordinates"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles"),
+])
+def test_twin_meshes_with_nan_vertices_or_no_triangles_are_refused_by_name(tmp_path, capsys, command, text, words):
+    # compare once wrote IoU 0 and NaN statistics for the NaN mesh, with exit code 0
+    rec = tmp_path / "rec.npz"
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
+    mesh = tmp_path / "bad.obj"
+    mesh.write_text(text)
+    out = tmp_path / ("c.toml" if command == "calibrate" else "d")
+    extra = ["--sensor", "cyberware_3030", "--geometry-only"] if command == "calibrate" else ["--no-fit"]
+    _refused(capsys, [command, rec, "--mesh", mesh, "--out", out, *extra], "bad.obj", words)
+    assert not out.exists()
+
+
 def test_calibrate_views_refuses_no_overlap_in_the_library(tmp_path):
     from rangesim.twin.joint import calibrate_views
 

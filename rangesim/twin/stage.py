@@ -70,8 +70,9 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
     """
     import trimesh
 
+    source = None
     if isinstance(mesh, (str, Path)):
-        path = Path(mesh)
+        path = source = Path(mesh)
         if not path.is_file():
             raise RangesimError("mesh file not found", source=path)
         try:
@@ -80,7 +81,10 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
             raise RangesimError(f"cannot read mesh ({exc})", source=path) from exc
         mesh = loaded
     if not hasattr(mesh, "vertices") or not hasattr(mesh, "faces") or len(mesh.faces) == 0:
-        raise RangesimError("the mesh has no triangles")
+        raise RangesimError("the mesh has no triangles", source=source)
+    bad = int(np.count_nonzero(~np.isfinite(np.asarray(mesh.vertices, float)).all(axis=1)))
+    if bad:
+        raise RangesimError(f"{bad} vertices have NaN or infinite coordinates", source=source)
     mesh = mesh.copy()
     if scale == "auto":
         extent = float(np.ptp(mesh.vertices, axis=0).max())
