@@ -279,3 +279,23 @@ def test_cli_features_takes_one_radius_as_the_api_does(tmp_path):
     rs.datasets.plate_scan().save(scan_path)
     assert main(["features", str(scan_path), "--rmin", "20", "--rmax", "20", "--out", str(tmp_path / "f")]) == 0
     assert (tmp_path / "f").is_dir()
+
+
+# -- parameters of the curvature and pcl functions: RangesimError naming them, never garbage ---------
+@pytest.mark.parametrize(("call", "words"), [
+    (lambda s, m: rs.curvature.curvature_scan(s, max_dist=-1), "max_dist must be a finite distance > 0"),  # all NaN
+    (lambda s, m: rs.curvature.curvature_scan(s, window=4), "window must be an odd integer >= 3"),
+    (lambda s, m: rs.curvature.curvature_scan(s, min_points=2), "min_points must be"),
+    (lambda s, m: rs.curvature.curvature_mesh(m, radius=-1), "radius must be a finite distance > 0"),  # all NaN
+    (lambda s, m: rs.curvature.curvature_mesh(m, rings=0), "rings must be"),
+    (lambda s, m: rs.curvature.hk_sign_map(np.zeros(3), np.zeros(4)), "shapes differ"),
+    (lambda s, m: rs.curvature.surface_type_name(99), "no surface type 99"),  # was KeyError: 99
+    (lambda s, m: rs.edges.pcl_organized(s, distance_mm="3"), "distance_mm must be a number"),  # was 3 mm
+    (lambda s, m: rs.edges.pcl_organized(s, distance_mm=True), "distance_mm must be a number"),  # was 1 mm
+    (lambda s, m: rs.features.ellipses(np.zeros((8, 8), bool), hypotheses="bogus"), "hypotheses must be"),
+])
+def test_analysis_parameters_are_refused_with_a_rangesim_error(call, words):
+    import trimesh
+
+    with pytest.raises(RangesimError, match=words):
+        call(rs.datasets.plate_scan(width=32, height=30), trimesh.creation.icosphere(subdivisions=1))

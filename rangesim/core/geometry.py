@@ -34,12 +34,12 @@ def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     forward = np.asarray(target, dtype=np.float64) - position
     norm = np.linalg.norm(forward)
     if not np.isfinite(norm) or norm == 0:
-        raise ValueError("view position and look_at coincide")
+        raise RangesimError("view position and look_at coincide")
     z = forward / norm
     up = np.asarray(up, dtype=np.float64)
     down = -(up - np.dot(up, z) * z)
     if np.linalg.norm(down) < 1e-9 * max(np.linalg.norm(up), 1e-300):
-        raise ValueError("view 'up' is parallel to the viewing direction")
+        raise RangesimError("view 'up' is parallel to the viewing direction")
     y = down / np.linalg.norm(down)
     x = np.cross(y, z)
     pose = np.eye(4)

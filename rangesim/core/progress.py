@@ -16,6 +16,8 @@ import sys
 import time
 from typing import Literal
 
+from rangesim.core.errors import RangesimError
+
 #: seconds of work before anything is shown
 DELAY_S = 3.0
 #: a log line at least this often (seconds) while work goes on
@@ -33,7 +35,7 @@ def set_progress(mode: _Mode) -> None:
     """
     global _default
     if mode not in ("auto", "log", "off"):
-        raise ValueError(f"progress mode must be 'auto', 'log' or 'off', got {mode!r}")
+        raise RangesimError(f"progress mode must be 'auto', 'log' or 'off', got {mode!r}")
     _default = mode
 
 

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import Status
+from rangesim.core.errors import RangesimError
 from rangesim.core.writers import save_scan
 
 #: (name, dtype, trailing shape) of the per-pixel arrays, in a fixed order used by the writers
@@ -94,7 +95,7 @@ class RangeScan:
                 continue
             value = np.asarray(value, dtype=dtype)
             if value.shape != (h, w) + trailing:
-                raise ValueError(
+                raise RangesimError(
                     f"RangeScan.{name} has shape {value.shape}, expected {(h, w) + trailing}"
                 )
             setattr(self, name, value)
@@ -124,7 +125,7 @@ class RangeScan:
         if frame == "world":
             return p @ self.pose[:3, :3].T + self.pose[:3, 3]
         if frame != "camera":
-            raise ValueError(f"frame must be 'camera' or 'world', not {frame!r}")
+            raise RangesimError(f"frame must be 'camera' or 'world', not {frame!r}")
         return p
 
     def count(self, status: Status | int) -> int:

@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from rangesim.core.errors import RangesimError
+
 __all__ = ["curvature_edges"]
 
 
@@ -45,6 +47,6 @@ def curvature_edges(k1: ArrayLike, k2: ArrayLike, threshold: float) -> np.ndarra
     k1 = np.asarray(k1, dtype=np.float64)
     k2 = np.asarray(k2, dtype=np.float64)
     if k1.shape != k2.shape:
-        raise ValueError(f"k1 and k2 shapes differ: {k1.shape} vs {k2.shape}")
+        raise RangesimError(f"k1 and k2 shapes differ: {k1.shape} vs {k2.shape}")
     with np.errstate(invalid="ignore"):
         return (np.abs(k1) > threshold) & (np.abs(k2) > threshold)

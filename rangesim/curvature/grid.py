@@ -6,6 +6,8 @@ from typing import Any
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from rangesim.core import params as P
+from rangesim.core.errors import RangesimError
 from rangesim.curvature.quadric import fit_quadric_grid_batch
 
 __all__ = ["curvature_scan"]
@@ -23,7 +25,7 @@ def _xyz_valid(scan: Any) -> tuple[np.ndarray, np.ndarray]:
         xyz = np.asarray(scan, dtype=np.float64)
         valid = np.ones(xyz.shape[:2], bool)
     if xyz.ndim != 3 or xyz.shape[2] != 3:
-        raise ValueError(f"expected an (H, W, 3) point grid, got shape {xyz.shape}")
+        raise RangesimError(f"expected an (H, W, 3) point grid, got shape {xyz.shape}")
     return xyz, valid & np.isfinite(xyz).all(axis=2)
 
 
@@ -84,9 +86,11 @@ def curvature_scan(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
-    window = int(window)
-    if window < 3 or window % 2 == 0:
-        raise ValueError(f"window must be an odd integer >= 3, got {window}")
+    window = P.whole(window, "window", 3)
+    if window % 2 == 0:
+        raise RangesimError(f"window must be an odd integer >= 3, got {window}")
+    min_points = P.whole(min_points, "min_points", 6, none=True)  # a quadric has 6 coefficients
+    max_dist = P.number(max_dist, "max_dist", 0, lo_open=True, what="distance", unit="mm", none=True)
     if min_points is None:
         min_points = max(6, window * window // 2 + 1)
     xyz, valid = _xyz_valid(scan)

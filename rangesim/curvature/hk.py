@@ -6,6 +6,8 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import ArrayLike
 
+from rangesim.core.errors import RangesimError
+
 __all__ = ["SurfaceType", "hk_sign_map", "surface_type_name", "SURFACE_TYPE_NAMES"]
 
 
@@ -38,6 +40,8 @@ SURFACE_TYPE_NAMES: dict[int, str] = {
 
 def surface_type_name(label: int) -> str:
     """Name of a :class:`SurfaceType` label, e.g. ``surface_type_name(1) == "peak"``."""
+    if label not in SURFACE_TYPE_NAMES:
+        raise RangesimError(f"no surface type {label!r}; the labels are {min(SURFACE_TYPE_NAMES)}-{max(SURFACE_TYPE_NAMES)}")
     return SURFACE_TYPE_NAMES[int(label)]
 
 
@@ -85,7 +89,7 @@ def hk_sign_map(
     K = np.asarray(K, dtype=np.float64)
     H = np.asarray(H, dtype=np.float64)
     if K.shape != H.shape:
-        raise ValueError(f"K and H shapes differ: {K.shape} vs {H.shape}")
+        raise RangesimError(f"K and H shapes differ: {K.shape} vs {H.shape}")
     sk = np.where(K > eps_K, 1, np.where(K < -eps_K, -1, 0))
     sh = np.where(H > eps_H, 1, np.where(H < -eps_H, -1, 0))
     labels = (1 + 3 * (1 + sh) + (1 - sk)).astype(np.uint8)

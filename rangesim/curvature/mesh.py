@@ -7,6 +7,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from rangesim.core import params as P
+from rangesim.core.errors import RangesimError
 from rangesim.curvature.quadric import DEFAULT_CHUNK, fit_quadric
 
 if TYPE_CHECKING:  # annotations only: any mesh with trimesh's attributes will do
@@ -30,7 +32,7 @@ def ring_neighbourhoods(mesh: trimesh.Trimesh, rings: int = 2) -> sp.csr_matrix:
         Row i lists the vertices at most ``rings`` edges from vertex i.
     """
     if rings < 1:
-        raise ValueError(f"rings must be >= 1, got {rings}")
+        raise RangesimError(f"rings must be >= 1, got {rings}")
     nv = len(mesh.vertices)
     edges = np.asarray(mesh.edges_unique, dtype=np.int64).reshape(-1, 2)
     ii = np.concatenate([edges[:, 0], edges[:, 1], np.arange(nv)])
@@ -131,6 +133,9 @@ def curvature_mesh(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
+    rings = P.whole(rings, "rings", 1)
+    radius = P.number(radius, "radius", 0, lo_open=True, what="distance", unit="mm", none=True)
+    min_points = P.whole(min_points, "min_points", 6)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     vnormals = np.asarray(mesh.vertex_normals, dtype=np.float64)
     nbr = (radius_neighbourhoods(vertices, radius) if radius is not None

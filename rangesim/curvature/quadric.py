@@ -39,6 +39,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from rangesim.core.errors import RangesimError
+
 __all__ = [
     "QuadricFit", "fit_quadric", "pca_normals", "tangent_frames", "monge_curvature",
     "DEFAULT_CHUNK",
@@ -487,7 +489,7 @@ def fit_quadric(
     points = np.asarray(points, dtype=np.float64)
     n = len(centres)
     if points.ndim != 3 or points.shape[0] != n or points.shape[2] != 3:
-        raise ValueError(f"points must be (N, k, 3) with N = {n}, got {points.shape}")
+        raise RangesimError(f"points must be (N, k, 3) with N = {n}, got {points.shape}")
     weights = (np.ones(points.shape[:2]) if weights is None
                else np.broadcast_to(np.asarray(weights, dtype=np.float64), points.shape[:2]))
     if normals is not None:

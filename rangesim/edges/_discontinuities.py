@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
 from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
 from rangesim.edges._noise import depth_quantum, predicted_noise
 from rangesim.edges._pair_kernels import pair_tests, search_gaps
@@ -353,11 +354,11 @@ def find_discontinuities(
     Discontinuities
     """
     if rule not in ("any", "dominant"):
-        raise ValueError(f"rule must be 'any' or 'dominant', not {rule!r}")
+        raise RangesimError(f"rule must be 'any' or 'dominant', not {rule!r}")
     if connectivity is None:
         connectivity = 8 if rule == "dominant" else 4
     if connectivity not in (4, 8):
-        raise ValueError(f"connectivity must be 4 or 8, got {connectivity}")
+        raise RangesimError(f"connectivity must be 4 or 8, got {connectivity}")
     z = np.ascontiguousarray(z, dtype=np.float32)
     h, w = z.shape
     valid = np.isfinite(z)

@@ -99,6 +99,8 @@ def _depth_threshold(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, geo: Pix
     """
     if distance_mm is not None:
         try:
+            if isinstance(distance_mm, (str, bytes, bool, np.bool_)) or np.asarray(distance_mm).dtype.kind not in "iuf":
+                raise TypeError  # '3' and True would convert, to 3 mm and 1 mm
             d = np.asarray(distance_mm, dtype=np.float32)
         except (TypeError, ValueError):
             raise RangesimError(f"distance_mm must be a number or an {z.shape} array, got {distance_mm!r:.60}") from None

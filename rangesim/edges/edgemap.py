@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 
 __all__ = ["EdgeMap", "RIM", "LABEL_NAMES"]
 
@@ -72,15 +73,15 @@ class EdgeMap:
         self.labels = np.asarray(self.labels, dtype=np.uint8)
         self.strength = np.asarray(self.strength, dtype=np.float32)
         if self.labels.shape != shape or self.strength.shape != shape:
-            raise ValueError(f"EdgeMap arrays must share the mask's shape {shape}")
+            raise RangesimError(f"EdgeMap arrays must share the mask's shape {shape}")
         if self.direction is not None:
             self.direction = np.asarray(self.direction, dtype=np.float32)
             if self.direction.shape != shape:
-                raise ValueError(f"EdgeMap.direction must have shape {shape}")
+                raise RangesimError(f"EdgeMap.direction must have shape {shape}")
         if self.offset is not None:
             self.offset = np.asarray(self.offset, dtype=np.float32)
             if self.offset.shape != shape + (2,):
-                raise ValueError(f"EdgeMap.offset must have shape {shape + (2,)}")
+                raise RangesimError(f"EdgeMap.offset must have shape {shape + (2,)}")
         # labels only on edge pixels (NONE = 0); a product is ~20x cheaper than np.where
         self.labels = self.labels * self.mask
 

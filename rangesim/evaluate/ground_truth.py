@@ -103,7 +103,7 @@ def jump_edges(
     xyz = np.asarray(xyz, dtype=np.float64)
     hit = np.asarray(hit, dtype=bool)
     if xyz.shape[:2] != hit.shape or xyz.shape[-1] != 3:
-        raise ValueError(f"xyz {xyz.shape} and hit {hit.shape} must be (H, W, 3) and (H, W)")
+        raise RangesimError(f"xyz {xyz.shape} and hit {hit.shape} must be (H, W, 3) and (H, W)")
     pts = np.where(hit[..., None], xyz, 0.0)  # NaNs off the mask would poison the arithmetic
     hit = hit & np.all(np.isfinite(pts), axis=-1)
     pts = np.nan_to_num(pts)
@@ -131,10 +131,10 @@ def jump_edges(
 def _camera(scan: RangeScan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(world-to-camera rotation R (3, 3), translation t (3,), K (3, 3)) of a synthetic scan."""
     if scan.xyz_true is None:
-        raise ValueError("ground truth needs a synthetic scan (scan.xyz_true is None)")
+        raise RangesimError("ground truth needs a synthetic scan (scan.xyz_true is None)")
     K = scan.K
     if K is None:
-        raise ValueError("ground truth needs the scan's pinhole intrinsics (scan.meta['K'])")
+        raise RangesimError("ground truth needs the scan's pinhole intrinsics (scan.meta['K'])")
     inv = np.linalg.inv(scan.pose)
     return inv[:3, :3], inv[:3, 3], K
 
@@ -681,7 +681,7 @@ def ground_truth_edges(
     scene = load_scene(scene)
     R, t, K = _camera(scan)
     if scan.part.max(initial=-1) >= len(scene.objects):
-        raise ValueError(f"scan hits object {int(scan.part.max())} but the scene has {len(scene.objects)}")
+        raise RangesimError(f"scan hits object {int(scan.part.max())} but the scene has {len(scene.objects)}")
     if jump_rule not in ("contours", "pairs"):
         raise RangesimError(f"jump_rule must be 'contours' or 'pairs', got {jump_rule!r}")
     if jump_rule == "pairs":

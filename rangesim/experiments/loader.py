@@ -65,7 +65,7 @@ class SyntheticDataset:
         self.fields = tuple(ALL_FIELDS if fields is None else fields)
         unknown = sorted(set(self.fields) - set(ALL_FIELDS))
         if unknown:
-            raise ValueError(f"unknown field(s) {', '.join(unknown)}; known: {', '.join(ALL_FIELDS)}")
+            raise RangesimError(f"unknown field(s) {', '.join(unknown)}; known: {', '.join(ALL_FIELDS)}")
         self.transform = transform
         self.views: list[dict[str, Any]] = list(self.manifest["views"])
         self.K = np.asarray(self.manifest["K"], dtype=np.float64)

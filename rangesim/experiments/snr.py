@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 
 #: default number of pixels on each side of a crease in the slope estimate
 DEFAULT_WINDOW = 3
@@ -90,7 +91,7 @@ def slope_noise_factor(window: int) -> float:
     unit apart, per unit of sample noise."""
     k = int(window)
     if k < 2:
-        raise ValueError(f"the slope window needs at least 2 pixels, got {window}")
+        raise RangesimError(f"the slope window needs at least 2 pixels, got {window}")
     return math.sqrt(12.0 / (k * (k * k - 1)))
 
 
@@ -123,7 +124,7 @@ def depth_noise(scan) -> tuple[float, float]:
         Without ``xyz_true`` (a recorded scan has no truth to measure against).
     """
     if scan.xyz_true is None:
-        raise ValueError("depth noise needs a synthetic scan (xyz_true)")
+        raise RangesimError("depth noise needs a synthetic scan (xyz_true)")
     z_true = scan.xyz_true[..., 2].astype(np.float64)
     ok = scan.valid & np.isfinite(scan.depth) & np.isfinite(z_true) & (z_true > 0)
     e = scan.depth[ok].astype(np.float64) - z_true[ok]
@@ -195,7 +196,7 @@ def edge_snr(scan, labels: np.ndarray, window: int = DEFAULT_WINDOW,
     """
     labels = np.asarray(labels)
     if labels.shape != scan.shape:
-        raise ValueError(f"labels {labels.shape} and scan {scan.shape} differ in shape")
+        raise RangesimError(f"labels {labels.shape} and scan {scan.shape} differ in shape")
     sigma_z, sigma_fp = depth_noise(scan) if noise is None else noise
     factor = slope_noise_factor(window)
     hit = (scan.part >= 0) & np.all(np.isfinite(scan.xyz_true), axis=-1)

@@ -18,6 +18,7 @@ import numpy as np
 
 from rangesim.core.conics import ellipse_params
 from rangesim.core.constants import EdgeLabel
+from rangesim.core.errors import RangesimError
 from rangesim.features._conic_kernels import sampson_pairs
 from rangesim.features._ellipse_chains import chain_hypotheses
 from rangesim.features._ellipse_kernels import (
@@ -295,7 +296,7 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
         curve = smooth_curves(xy if pixels is None else pixels, theta)
         conics, n = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
     else:
-        raise ValueError(f"hypotheses must be 'chains' or 'tilings', not {hypotheses!r}")
+        raise RangesimError(f"hypotheses must be 'chains' or 'tilings', not {hypotheses!r}")
     if (hypotheses == "tilings" or CHAIN_OUTLINES) if outlines is None else outlines:
         c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
         if hypotheses == "chains":  # the outlines first: a rim's outline beats its arcs joined to crests

@@ -253,7 +253,7 @@ def ellipses(
        TPAMI 21(5), 476-480 (1999), doi:10.1109/34.765658.
     """
     if hypotheses not in (None, "tilings", "chains"):
-        raise ValueError(f"hypotheses must be 'tilings' or 'chains', got {hypotheses!r}")
+        raise RangesimError(f"hypotheses must be 'tilings' or 'chains', got {hypotheses!r}")
     mask = edge_mask(edge_map)
     if scan is not None:
         check_scan_shape(scan, mask)

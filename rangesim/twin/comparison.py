@@ -25,6 +25,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
 from rangesim.core.progress import Progress
 from rangesim.core.rangescan import RangeScan
 from rangesim.twin.calibration import calibrate, mask_iou, range_residuals
@@ -103,9 +104,9 @@ def compare_scans(recorded: RangeScan, twin_scan: RangeScan, *, detectors: Itera
                   edge_maps: dict | None = None) -> dict[str, Any]:
     """Metrics of a recorded scan against its twin (the twin must carry ``xyz_true``)."""
     if recorded.shape != twin_scan.shape:
-        raise ValueError(f"grids differ: recorded {recorded.shape}, twin {twin_scan.shape}")
+        raise RangesimError(f"grids differ: recorded {recorded.shape}, twin {twin_scan.shape}")
     if twin_scan.xyz_true is None:
-        raise ValueError("the twin has no xyz_true (noise-free hits)")
+        raise RangesimError("the twin has no xyz_true (noise-free hits)")
     truth = twin_scan.xyz_true
     silhouette = np.isfinite(truth).all(axis=2)
     holes = silhouette & ~recorded.valid

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from rangesim.core.errors import RangesimError
 from rangesim.volumes._decompose import capped_submesh, decompose, merge_small_regions, region_adjacency
 from rangesim.volumes.sections import Section, cut_section, sections_intersect
 
@@ -422,7 +423,7 @@ def _subparts(mesh: trimesh.Trimesh, parts: Any, crease_deg: float, min_area_fra
         return labels, names, solids
     labels = np.asarray(parts, dtype=np.int64)
     if labels.shape != (len(mesh.faces),):
-        raise ValueError(f"parts must be a BuiltPart or ({len(mesh.faces)},) face labels, got shape {labels.shape}")
+        raise RangesimError(f"parts must be a BuiltPart or ({len(mesh.faces)},) face labels, got shape {labels.shape}")
     ids = np.unique(labels)
     remap = np.searchsorted(ids, labels)
     return remap, [f"part_{int(i)}" for i in ids], [capped_submesh(mesh, np.flatnonzero(remap == k)) for k in range(len(ids))]
