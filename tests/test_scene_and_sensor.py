@@ -178,3 +178,16 @@ def test_scan_refuses_a_pose_that_is_no_rigid_transform(change, words):
     pose[row, col] = value
     with pytest.raises(RangesimError, match=words):
         rs.scan(rs.datasets.plate_scene(), "white_scanner", pose=pose)
+
+
+def test_scene_objects_with_one_name_are_refused(tmp_path):
+    from rangesim.experiments.scenes import apply_object_overrides
+
+    path = tmp_path / "dup.toml"
+    path.write_text('[[object]]\nname = "a"\nprimitive = "box"\nsize = [10, 10, 10]\n\n'
+                    '[[object]]\nname = "a"\nprimitive = "plane"\nsize = [100, 100]\n')
+    with pytest.raises(RangesimError, match="both named 'a'"):
+        rs.load_scene(path)
+    # a sweep's override of object "a" once changed only the second one
+    with pytest.raises(RangesimError, match="both named 'a'"):
+        apply_object_overrides(path, {"a": {"albedo": 0.1}})

@@ -74,13 +74,13 @@ def apply_object_overrides(path: str | Path, overrides: dict[str, dict[str, Any]
     RangesimError
         An object name the scene does not have.
     """
-    from rangesim.scene.scene import expand_data_path
+    from rangesim.scene.scene import expand_data_path, object_names
 
     path = Path(path)
     data = read_toml(path)
     tables = data.get("object", [])
     tables = [tables] if isinstance(tables, dict) else list(tables)
-    by_name = {str(t.get("name", f"object{k}")): t for k, t in enumerate(tables)}
+    by_name = dict(zip(object_names(tables, path), tables))
     for name, changes in overrides.items():
         if name not in by_name:
             raise RangesimError(f"no object {name!r} in the scene (it has {', '.join(by_name)})", source=path)

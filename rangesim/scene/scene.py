@@ -253,6 +253,7 @@ def _scene_from_toml(path: Path) -> Scene:
         raise RangesimError("'object' must be [[object]] tables", source=path)
     if not tables:
         raise RangesimError("scene has no [[object]] tables", source=path)
+    object_names(tables, path)
     objects = [_object_from_table(t, k, scene_mm, path) for k, t in enumerate(tables)]
     view = None
     if "view" in data:
@@ -268,6 +269,25 @@ def _scene_from_toml(path: Path) -> Scene:
         except ValueError as exc:
             raise RangesimError(str(exc), source=path) from exc
     return Scene(objects, view=view, source=str(path.resolve()))
+
+
+def object_names(tables: list[dict], path: Path | str) -> list[str]:
+    """The names of a scene file's ``[[object]]`` tables (``object<k>`` where a table has
+    none), refused when two are the same: sweeps and overrides address objects by name.
+
+    Examples
+    --------
+    >>> object_names([{"name": "part"}, {}], "scene.toml")
+    ['part', 'object1']
+    """
+    names = [str(t.get("name", f"object{k}")) for k, t in enumerate(tables)]
+    seen: dict[str, int] = {}
+    for k, name in enumerate(names):
+        if name in seen:
+            raise RangesimError(f"[[object]] {seen[name]} and {k} are both named {name!r}; object names must "
+                                "differ (sweeps and overrides address objects by name)", source=path)
+        seen[name] = k
+    return names
 
 
 def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObject:
