@@ -317,3 +317,16 @@ def test_python_m_rangesim_reports_errors_without_traceback(inputs, tmp_path):
         f"rangesim: error: {inputs['nan.obj']}: 1 vertices have NaN or infinite coordinates"
     ]
     assert not (tmp_path / "out").exists()
+
+
+def test_info_names_valid_pixels_without_a_depth(scanned, tmp_path, capsys):
+    import dataclasses
+
+    scan = rs.load_scan(scanned[0])
+    depth = scan.depth.copy()
+    holes = np.flatnonzero(scan.valid)[:5]
+    depth.ravel()[holes] = np.nan  # punched without updating valid: the detectors take them as holes
+    path = tmp_path / "punched.npz"
+    dataclasses.replace(scan, depth=depth).save(path)
+    assert main(["info", str(path)]) == 0
+    assert "note: 5 pixels marked valid have no depth (NaN)" in capsys.readouterr().out

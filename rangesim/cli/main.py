@@ -257,11 +257,16 @@ def cmd_info(args: argparse.Namespace) -> int:
     label = max(len(name) for name, _ in counts)
     digits = max(len(f"{n:,}") for _, n in counts)
     lines += [f"  {name:<{label}}  {n:>{digits},}  ({_percent(n, total)})" for name, n in counts]
-    depth = result.depth[result.valid & np.isfinite(result.depth)]
+    finite = np.isfinite(result.depth)
+    depth = result.depth[result.valid & finite]
     if depth.size:
         lines.append(f"depth: {depth.min():.3f} .. {depth.max():.3f} mm")
     else:
-        lines.append("depth: no valid pixels")
+        lines.append("depth: no valid pixel with a depth")
+    holes = int(np.count_nonzero(result.valid & np.isnan(result.depth)))
+    if holes:
+        # the detectors take them as holes (an edited scan may punch NaN without updating valid)
+        lines.append(f"note: {holes:,} pixels marked valid have no depth (NaN); the detectors treat them as invalid")
     if result.sigma is not None:
         sig = result.sigma[result.valid & np.isfinite(result.sigma)]
         if sig.size:
