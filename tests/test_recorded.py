@@ -399,6 +399,8 @@ def test_msu_bad_files(tmp_path):
     expect_error(path, r"NaN or infinity in the header")
     path.write_text("rows\ncols\n\n" + "1 " * 24)
     expect_error(path, r"does not give two positive integers")
+    path.write_text("-2 rows\n3 cols\n\n" + "1 " * 24)  # the sign was dropped: read as 2 rows
+    expect_error(path, r"does not give two positive integers \(rows, columns\): '-2 rows")
     path.write_text("2 rows\n3 cols\n")
     expect_error(path, r"fewer than 3 header lines")
     gz = tmp_path / "bad.msu.gz"

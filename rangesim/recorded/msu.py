@@ -29,7 +29,7 @@ __all__ = ["read_msu", "write_msu"]
 HEADER_LINES = 3
 GZIP_MAGIC = b"\x1f\x8b"
 # a whole integer, not part of a decimal number or a word ("480x512" counts as two)
-_INTEGER = re.compile(r"(?<![\w.])\d+(?![\w.])")
+_INTEGER = re.compile(r"(?<![\w.])[-+]?\d+(?![\w.])")  # signed: "-5 rows" is no size
 _TIMES = re.compile(r"(?<=\d)[xX*]\s*(?=\d)")
 _NOT_FINITE = re.compile(r"\b(nan|inf|infinity)\b", re.IGNORECASE)
 
