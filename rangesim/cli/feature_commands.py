@@ -89,8 +89,11 @@ def cmd_features(args: argparse.Namespace) -> int:
           f"{len(rows)} relations")
     if "scores" in report:
         s = report["scores"]
-        print(f"round features: recall {s['round']['recall']:.2f} precision {s['round']['precision']:.2f}; "
-              f"segments: recall {s['segments']['recall']:.2f}")
+        def share(value):  # a share of nothing (no truth, nothing found) is no number
+            return "-" if value is None or value != value else f"{value:.2f}"
+
+        print(f"round features: recall {share(s['round']['recall'])} precision {share(s['round']['precision'])}; "
+              f"segments: recall {share(s['segments']['recall'])}")
     print(f"wrote {out}/")
     return 0
 
