@@ -119,11 +119,11 @@ def test_parameters_change_the_part_and_bad_ones_are_refused():
 
 @pytest.mark.parametrize(("params", "words"), [
     # the analytic features once listed rims of holes 42 mm off a 1 mm plate
-    ({"length": 1.0}, r"hole 1 at \(-42, -30\) reaching 3.2 mm does not lie on the 1 x 76.2 mm plate"),
+    ({"length": 1.0}, r"holes\[0\] at \(-42, -30\) reaching 3.2 mm does not lie on the 1 x 76.2 mm plate"),
     ({"width": 5.0}, "does not lie on the 101.6 x 5 mm plate"),
-    ({"threads": [(48.0, 0.0, 6.0, 1.75)]}, r"thread 1 at \(48, 0\)"),
+    ({"threads": [(48.0, 0.0, 6.0, 1.75)]}, r"threads\[0\] at \(48, 0\)"),
     ({"dent": (-26.0, 16.0, 30.0, 13.0)}, "dent depth 13 mm must be less than"),
-    ({"scratches": [(40.0, 0.0, 0.0, 25.0, 0.6, 0.4)]}, "scratch 1"),
+    ({"scratches": [(40.0, 0.0, 0.0, 25.0, 0.6, 0.4)]}, r"scratches\[0\] at \(65, 0\)"),
     ({"holes": -1}, r"holes must be a list of \(x, y, radius\), got -1"),
     ({"holes": [1, 2]}, r"holes must be a list of \(x, y, radius\) \(finite numbers\)"),
     ({"dent": True}, r"dent must be \(x, y, sphere radius, depth\)"),

@@ -97,7 +97,7 @@ def test_scan_of_the_scene_is_clean():
 
 @pytest.mark.parametrize(("params", "words"), [
     ({"neck_width": 0}, "neck_width must be a number > 0"),  # was numpy's LinAlgError
-    ({"hole_radius": 500}, r"hole at \(66, 0\) reaching 500 mm does not lie on the 150 x 80 mm plate"),
+    ({"hole_radius": 500}, r"the hole \(hole_x, hole_radius\) at \(66, 0\) reaching 500 mm does not lie on the 150 x 80 mm plate"),
     ({"samples_per_mm": 0}, "samples_per_mm must be a number > 0"),  # was accepted
     ({"corner_radius": 50}, r"corner_radius 50 mm must be less than half the plate \(40 mm\)"),
     ({"head_size": 3}, r"head_size must be \(x, y\)"),

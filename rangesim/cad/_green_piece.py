@@ -145,26 +145,26 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     holes = tuples(m, "holes", p["holes"], ("x", "y", "radius"))
     for k, (x, y, r) in enumerate(holes, start=1):
         positive(m, **{f"holes[{k - 1}] radius": r})
-        within(m, f"hole {k}", x, y, r, L / 2, W / 2)
+        within(m, f"holes[{k - 1}]", x, y, r, L / 2, W / 2)
     (dent,) = tuples(m, "dent", p["dent"], ("x", "y", "sphere radius", "depth"), many=False)
     x, y, radius, depth = dent
     positive(m, **{"dent sphere radius": radius, "dent depth": depth})
     if depth >= min(2 * radius, T):
         raise RangesimError(f"{m}: dent depth {depth:g} mm must be less than the sphere's diameter and the "
                             f"thickness {T:g} mm")
-    within(m, "the dent", x, y, math.sqrt(radius**2 - (radius - depth) ** 2), L / 2, W / 2)
+    within(m, "dent", x, y, math.sqrt(radius**2 - (radius - depth) ** 2), L / 2, W / 2)
     scratches = tuples(m, "scratches", p["scratches"], ("x", "y", "angle_deg", "length", "width", "depth"))
     for k, (x, y, angle, length, width, depth) in enumerate(scratches, start=1):
         positive(m, **{f"scratches[{k - 1}] length": length, f"scratches[{k - 1}] width": width,
                        f"scratches[{k - 1}] depth": depth})
         if depth >= T:
-            raise RangesimError(f"{m}: scratch {k} depth {depth:g} mm must be less than the thickness {T:g} mm")
+            raise RangesimError(f"{m}: scratches[{k - 1}] depth {depth:g} mm must be less than the thickness {T:g} mm")
         for end in ((x, y), _along((x, y), angle, length)):
-            within(m, f"scratch {k}", *end, width / 2, L / 2, W / 2)
+            within(m, f"scratches[{k - 1}]", *end, width / 2, L / 2, W / 2)
     threads = tuples(m, "threads", p["threads"], ("x", "y", "major radius", "pitch"))
     for k, (x, y, r_major, pitch) in enumerate(threads, start=1):
         positive(m, **{f"threads[{k - 1}] major radius": r_major, f"threads[{k - 1}] pitch": pitch})
-        within(m, f"thread {k}", x, y, r_major, L / 2, W / 2)
+        within(m, f"threads[{k - 1}]", x, y, r_major, L / 2, W / 2)
     return {"holes": holes, "dent": dent, "scratches": scratches, "threads": threads}
 
 

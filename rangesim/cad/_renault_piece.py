@@ -136,7 +136,7 @@ def _check_layout(p: dict) -> None:
     L, W, r = p["plate_length"], p["plate_width"], p["corner_radius"]
     if r >= min(L, W) / 2:
         raise RangesimError(f"{m}: corner_radius {r:g} mm must be less than half the plate ({min(L, W) / 2:g} mm)")
-    within(m, "hole", float(p["hole_x"]), 0.0, p["hole_radius"], L / 2, W / 2)
+    within(m, "the hole (hole_x, hole_radius)", float(p["hole_x"]), 0.0, p["hole_radius"], L / 2, W / 2)
 
 
 def _freeform(surface, size_x, size_y, density):
