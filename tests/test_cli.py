@@ -330,3 +330,30 @@ def test_info_names_valid_pixels_without_a_depth(scanned, tmp_path, capsys):
     dataclasses.replace(scan, depth=depth).save(path)
     assert main(["info", str(path)]) == 0
     assert "note: 5 pixels marked valid have no depth (NaN)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("args", "mode"), [
+    (["info", "x.exr"], "log"), (["info", "x.exr", "--quiet"], "off"), (["--quiet", "info", "x.exr"], "off"),
+    (["compare", "x.pcd", "--out", "o", "--quiet"], "off"), (["detect", "x.exr", "--out", "o", "--quiet"], "off"),
+])
+def test_every_command_takes_quiet(monkeypatch, capsys, args, mode):
+    # the README promises --quiet for long work; only sweep and dataset took it
+    from rangesim.core import progress
+
+    seen = []
+
+    def record(*a, **k):
+        seen.append(progress._default)
+        raise RangesimError("stop here")
+
+    import rangesim.cli.compare_commands
+    import rangesim.cli.edge_commands
+    import rangesim.evaluate.runs
+
+    for module in (cli, rangesim.cli.compare_commands, rangesim.cli.edge_commands):
+        if hasattr(module, "load_scan"):
+            monkeypatch.setattr(module, "load_scan", record)
+    monkeypatch.setattr(rangesim.cli.compare_commands, "load_scan_with_labels", record, raising=False)
+    monkeypatch.setattr(rangesim.evaluate.runs, "load_scan_with_labels", record)
+    assert main(args) == 2
+    assert seen == [mode], capsys.readouterr().err

@@ -333,6 +333,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_info)
     for module in COMMAND_MODULES:
         importlib.import_module(module).register(sub)
+    # every command may show progress (rendered tiles, sweeps, comparisons): each takes --quiet,
+    # and so does the program (``rangesim --quiet COMMAND``)
+    parser.add_argument("--quiet", dest="quiet_all", action="store_true", help="no progress bar or progress lines")
+    for command in sub.choices.values():
+        try:
+            command.add_argument("--quiet", action="store_true", help="no progress bar or progress lines")
+        except argparse.ArgumentError:  # the command has its own
+            pass
     return parser
 
 
@@ -358,7 +366,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     before = progress._default
     # long work shows progress: a bar on a terminal, log lines in CI logs and nohup files
-    progress.set_progress("off" if getattr(args, "quiet", False) else "log")
+    quiet = getattr(args, "quiet", False) or getattr(args, "quiet_all", False)
+    progress.set_progress("off" if quiet else "log")
     try:
         return args.func(args)
     except KeyboardInterrupt:
