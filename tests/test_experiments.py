@@ -468,3 +468,15 @@ def test_another_sweep_into_the_same_folder_is_said(serial_run, sweep_dir, tmp_p
     err = capsys.readouterr().err
     assert "warning" in err and "'tiny_sweep'" in err and err.count("\n") == 1
     assert run_sweep(sweep_dir / "renamed.toml", out, workers=0, progress=False, plots=False).replaced is None
+
+
+def test_a_dead_worker_pool_says_how_to_call_from_a_script():
+    # a script that starts a sweep at its top level starts it again in every spawned worker,
+    # which dies: the error once said only "BrokenProcessPool"
+    from rangesim.core.errors import RangesimError
+    from rangesim.experiments.executors import Executor
+
+    with Executor(workers=1) as pool:
+        (index, result, error), = list(pool.run(os._exit, [3]))  # the worker dies mid-task
+    assert index == 0 and result is None
+    assert isinstance(error, RangesimError) and 'if __name__ == "__main__":' in str(error)

@@ -20,6 +20,7 @@ import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from rangesim.core.errors import RangesimError
@@ -217,6 +218,13 @@ class Executor:
                 for future in done:
                     i = pending.pop(future)
                     exc = future.exception()
+                    if isinstance(exc, BrokenProcessPool):
+                        # a spawned worker imports the calling script: one that starts the pool at its
+                        # top level starts it again in every worker, which then dies
+                        exc = RangesimError(
+                            "the worker processes died (BrokenProcessPool); called from a script, put the call "
+                            "under `if __name__ == \"__main__\":` (the workers are spawned and import the "
+                            "script), or run with workers=0")
                     yield (i, None, exc) if exc is not None else (i, future.result(), None)
         finally:
             for future in pending:
