@@ -357,3 +357,16 @@ def test_every_command_takes_quiet(monkeypatch, capsys, args, mode):
     monkeypatch.setattr(rangesim.evaluate.runs, "load_scan_with_labels", record)
     assert main(args) == 2
     assert seen == [mode], capsys.readouterr().err
+
+
+def test_warnings_print_as_one_line(monkeypatch, capsys):
+    import warnings
+
+    def warn(args):
+        warnings.warn("first line\n  second line", RuntimeWarning, stacklevel=1)
+        return 0
+
+    monkeypatch.setattr(cli, "cmd_info", warn)
+    monkeypatch.delenv("RANGESIM_DEBUG", raising=False)
+    assert main(["info", "x.exr"]) == 0
+    assert capsys.readouterr().err == "rangesim: warning: first line second line\n"  # not file:line and source

@@ -83,6 +83,11 @@ def _error(message: str) -> None:
     print(f"{PROG}: error: {_printable(_one_line(message))}", file=sys.stderr)
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` of the command line: ``rangesim: warning: <message>`` on one line."""
+    print(f"{PROG}: warning: {_printable(_one_line(str(message)))}", file=sys.stderr if file is None else file)
+
+
 def _os_error_message(exc: OSError) -> str:
     """``<file>: <reason>`` for an OSError (``[Errno 13] ...`` reads badly)."""
     reason = exc.strerror or str(exc) or type(exc).__name__
@@ -368,6 +373,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     # long work shows progress: a bar on a terminal, log lines in CI logs and nohup files
     quiet = getattr(args, "quiet", False) or getattr(args, "quiet_all", False)
     progress.set_progress("off" if quiet else "log")
+    shown = warnings.showwarning
+    # a warning is one line like an error (with RANGESIM_DEBUG, Python's own form: file and line)
+    if not _debug():
+        warnings.showwarning = _show_warning
     try:
         return args.func(args)
     except KeyboardInterrupt:
@@ -389,6 +398,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERNAL
     finally:
         progress.set_progress(before)
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":
