@@ -480,3 +480,78 @@ def test_a_dead_worker_pool_says_how_to_call_from_a_script():
         (index, result, error), = list(pool.run(os._exit, [3]))  # the worker dies mid-task
     assert index == 0 and result is None
     assert isinstance(error, RangesimError) and 'if __name__ == "__main__":' in str(error)
+
+
+# -- sweeps that could not be resumed or described themselves wrongly (a new user's probe) ------------
+@pytest.mark.parametrize(("grid", "words"), [
+    # one scan, two columns: a task file that never matched, whatever was deleted
+    ('"noise.sigma_px" = [0, 0.0]', ["noise.sigma_px=0,", "noise.sigma_px=0.0,"]),
+    ('"noise.sigma_px" = [0.5, 0.5]', ["noise.sigma_px=0.5,"]),  # scanned twice, two rows
+])
+def test_two_entries_that_make_one_scan_are_refused(sweep_dir, tmp_path, grid, words):
+    from rangesim.experiments.grid import plan_sweep
+    from rangesim.experiments.sweep_file import load_sweep
+
+    path = tmp_path / "sweep.toml"
+    for name in ("scene.toml", "tiny.toml"):
+        (tmp_path / name).write_text((sweep_dir / name).read_text())
+    path.write_text(SWEEP_TOML.replace('"noise.sigma_px" = [0.05, 0.5]', grid))
+    with pytest.raises(RangesimError, match="two entries of the sweep make the same scan") as info:
+        plan_sweep(load_sweep(path))
+    assert all(word in str(info.value) for word in words)
+
+
+def test_a_changed_mesh_changes_the_scene_digest(tmp_path):
+    import hashlib
+
+    import trimesh
+
+    from rangesim.experiments.scenes import scene_digest
+
+    trimesh.creation.box(extents=(10.0, 10.0, 10.0)).export(tmp_path / "part.stl")
+    scene = tmp_path / "scene.toml"
+    scene.write_text('[[object]]\nname = "part"\nmesh = "part.stl"\n')
+    before = scene_digest(scene)
+    trimesh.creation.box(extents=(10.0, 10.0, 12.0)).export(tmp_path / "part.stl")  # the scene file unchanged
+    assert scene_digest(scene) != before  # sweeps and datasets once reused the old mesh's results
+    plain = tmp_path / "plain.toml"
+    plain.write_text(BOX_SCENE_TOML)  # no mesh file: the file's own SHA-1, as before (old results stay valid)
+    assert scene_digest(plain) == hashlib.sha1(plain.read_bytes()).hexdigest()
+
+
+def test_a_failed_rerun_leaves_no_table_of_another_sweep(serial_run, sweep_dir, tmp_path):
+    import shutil
+
+    out = tmp_path / "reused"
+    shutil.copytree(serial_run.out, out)
+    assert (out / "results.csv").is_file() and list((out / "plots").glob("*.png"))
+    bad = sweep_dir / "bad_albedo.toml"
+    bad.write_text(SWEEP_TOML.replace('"object.box.albedo" = [0.6, 0.9]', '"object.box.albedo" = [0.6, 1.5]'))
+    with pytest.raises(RangesimError, match="4 of 4 tasks failed"):  # the 0.6 half is reused
+        run_sweep(bad, out, workers=0, progress=False)
+    assert json.loads((out / "sweep.json").read_text())["sweep"] == str(bad)
+    assert not (out / "results.csv").exists() and not list((out / "plots").glob("*.png"))
+
+
+def test_an_unreachable_scheduler_writes_nothing(sweep_dir, tmp_path, monkeypatch):
+    from rangesim.experiments import executors
+
+    def refuse(self):
+        raise RangesimError("cannot reach the Dask scheduler", source="tcp://127.0.0.1:1")
+
+    monkeypatch.setattr(executors.Executor, "__enter__", refuse)
+    with pytest.raises(RangesimError, match="cannot reach"):
+        run_sweep(sweep_dir / "sweep.toml", tmp_path / "out", workers=0, scheduler="tcp://127.0.0.1:1", progress=False)
+    assert not (tmp_path / "out").exists()  # once held a sweep.json
+
+
+def test_dataset_resume_redoes_views_whose_files_are_gone(sweep_dir, tmp_path):
+    out = tmp_path / "data"
+    kwargs = dict(seed=3, distance=(300, 500), workers=0, progress=False, sensor_changes={"camera.width": 32,
+                                                                                         "camera.height": 24})
+    make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 2, out, **kwargs)
+    next((out / "views").glob("000000_*.exr")).unlink()
+    next((out / "views").glob("000001_*_truth.npz")).unlink()
+    again = make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 2, out, **kwargs)
+    assert again.n_run == 2 and again.n_reused == 0  # once "2 reused", and the loader then failed
+    assert SyntheticDataset(out)[0]["depth"].shape == (24, 32) and SyntheticDataset(out)[1]["edges"].shape == (24, 32)

@@ -30,7 +30,6 @@ exists, and view ``i`` has the same pose and noise whatever the worker count.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import time
 from dataclasses import dataclass, field
@@ -185,7 +184,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     -------
     DatasetRun
     """
-    from rangesim.experiments.scenes import load_task_scene
+    from rangesim.experiments.scenes import load_task_scene, scene_digest
     from rangesim.sensor import load_sensor
 
     start = time.perf_counter()
@@ -219,7 +218,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     _check_distance_in_range(cap, scene_obj, sensor_obj)
 
     sensor_data = sensor_obj.to_dict()
-    scene_id = {"file": scene_path.name, "sha1": hashlib.sha1(scene_path.read_bytes()).hexdigest()}
+    scene_id = {"file": scene_path.name, "sha1": scene_digest(scene_path)}
     payloads = []
     for i in range(views):
         pose_id = {"scene": scene_id, "pose": pose_table, "view": i}
@@ -231,7 +230,9 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
                          "pose": pose_table, "pose_seed": pose_seed, "noise_seed": noise_seed,
                          "crease_deg": crease_deg})
     views_dir = out / VIEWS_DIR
-    todo = [p for p in payloads if not (views_dir / f"{_stem(p['index'], p['key'])}.json").is_file()]
+    # a view is done when its record and both files it names are there (the record is written last)
+    todo = [p for p in payloads if not all((views_dir / f"{_stem(p['index'], p['key'])}{end}").is_file()
+                                           for end in (".json", f".{fmt}", "_truth.npz"))]
     failures: list[tuple[dict, BaseException]] = []
     empty: list[tuple[int, str]] = []
     executor = Executor(workers, scheduler, max_tasks=len(todo))

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
 from rangesim.experiments.sweep_file import SweepSpec, split_overrides
 
 #: bump when a task's output changes meaning: old task files then no longer match any key
@@ -139,7 +140,21 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
                             "keep_scan": bool(keep_scans), "columns": columns, **evaluation,
                         }
                         tasks.append(SweepTask(len(tasks), key, columns, payload))
+    _refuse_repeated_tasks(tasks, spec)
     return tasks
+
+
+def _refuse_repeated_tasks(tasks: list[SweepTask], spec: SweepSpec) -> None:
+    """Two grid entries that make the same scan (``0`` and ``0.0``, a preset and its own file, one
+    scene by two paths, a value listed twice) would share one task file but not one row: refuse."""
+    first: dict[str, SweepTask] = {}
+    for task in tasks:
+        other = first.setdefault(task.key, task)
+        if other is not task:
+            def shown(t):
+                return ", ".join(f"{k}={v}" for k, v in t.columns.items() if k != "seed")
+            raise RangesimError(f"two entries of the sweep make the same scan: ({shown(other)}) and ({shown(task)}); "
+                                "list each value, sensor and scene once", source=spec.path)
 
 
 def _merge_objects(a: dict[str, dict[str, Any]], b: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:

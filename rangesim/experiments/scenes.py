@@ -58,6 +58,41 @@ def dump_scene_toml(data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def scene_digest(path: str | Path) -> str:
+    """SHA-1 (hex) of what a scene file makes: the file's bytes and, for a scene ``.toml``, the
+    bytes of every mesh file its ``[[object]]`` tables name (in order), so that results keyed on
+    it are not reused after a mesh changes under an unchanged scene file. A file that names no
+    mesh (models, primitives, a bare mesh file) digests as its own bytes alone.
+
+    Parameters
+    ----------
+    path : str or Path
+        Scene ``.toml`` or mesh file.
+    """
+    import hashlib
+
+    from rangesim.scene.scene import expand_data_path
+
+    path = Path(path)
+    raw = path.read_bytes()
+    own = hashlib.sha1(raw).hexdigest()
+    if path.suffix.lower() != ".toml":
+        return own
+    try:
+        tables = read_toml(path).get("object", [])
+    except RangesimError:
+        return own  # the scene's own loader names the problem
+    tables = [tables] if isinstance(tables, dict) else tables
+    meshes = [(path.parent / expand_data_path(str(t["mesh"]))).resolve() for t in tables
+              if isinstance(t, dict) and "mesh" in t]
+    if not meshes:
+        return own
+    combined = hashlib.sha1(own.encode())
+    for mesh in meshes:
+        combined.update(hashlib.sha1(mesh.read_bytes()).hexdigest().encode() if mesh.is_file() else b"missing")
+    return combined.hexdigest()
+
+
 def apply_object_overrides(path: str | Path, overrides: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The scene file's data with object keys replaced and mesh paths made absolute.
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,7 @@ from rangesim.core.version import __version__
 from rangesim.experiments.executors import Executor
 from rangesim.experiments.grid import SweepTask, plan_sweep
 from rangesim.experiments.results import (
+    TABLE_NAMES,
     build_table,
     scan_path,
     task_path,
@@ -112,12 +114,24 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
     tasks = plan_sweep(spec, keep_scans=keep_scans)
     todo = _todo(tasks, out, keep_scans)
     executor = Executor(workers, scheduler, max_tasks=len(todo))  # checks the options before any file
-    replaced = _other_sweep(out / "sweep.json", spec)
-    write_json(out / "sweep.json", _provenance(spec, len(tasks)))
     failures: list[tuple[SweepTask, BaseException]] = []
     where = executor.describe() if todo else "nowhere (every task was finished)"
-    if todo:
-        with executor, Progress(len(tasks), f"sweep {spec.name}", initial=len(tasks) - len(todo), enabled=progress) as bar:
+    with ExitStack() as stack:
+        if todo:
+            stack.enter_context(executor)  # a scheduler that cannot be reached: no file written
+        replaced = _other_sweep(out / "sweep.json", spec)
+        write_json(out / "sweep.json", _provenance(spec, len(tasks)))
+        # the table (and the plots, when drawn or of another sweep) are rebuilt from the task files
+        # at the end: until then old ones (another plan, tasks that fail now) would not describe
+        # this sweep.json
+        stale = [out / name for name in TABLE_NAMES]
+        if plots or replaced:
+            stale += (out / "plots").glob("*.png")
+        for path in stale:
+            path.unlink(missing_ok=True)
+        if todo:
+            bar = stack.enter_context(Progress(len(tasks), f"sweep {spec.name}", initial=len(tasks) - len(todo),
+                                               enabled=progress))
             for i, result, error in executor.run(run_sweep_task, [t.payload for t in todo]):
                 task = todo[i]
                 if error is not None:
@@ -143,11 +157,6 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
         plot_files = save_sweep_plots(table, spec.swept_keys, out / "plots", title=spec.name,
                                       tolerance_px=spec.tolerance_px)
         files += plot_files
-        # plots of an earlier plan (another grid, other swept keys) in a reused folder would mislead
-        current = {Path(f).resolve() for f in plot_files}
-        for stale in (out / "plots").glob("*.png"):
-            if stale.resolve() not in current:
-                stale.unlink(missing_ok=True)
     return SweepRun(out, table, len(tasks), len(todo) - len(failures), len(tasks) - len(todo),
                     time.perf_counter() - start, where, files, replaced)
 

@@ -36,7 +36,6 @@ sensor key (``noise.sigma_px``, ``laser.baseline``, ``camera.width``, ...).
 """
 from __future__ import annotations
 
-import hashlib
 import inspect
 import itertools
 import math
@@ -48,6 +47,7 @@ from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.core.tomlfile import check_keys, read_toml
 from rangesim.experiments.poses import POSE_KEYS, check_pose_table
+from rangesim.experiments.scenes import scene_digest
 
 TOP_KEYS = {
     "name", "description", "scenes", "sensors", "views", "repeats", "seed", "tolerance_px",
@@ -183,7 +183,7 @@ def _scene_ref(label: str, base: Path, source: Path) -> SceneRef:
     tables = data.get("object", [])
     tables = [tables] if isinstance(tables, dict) else tables
     names = tuple(str(t.get("name", f"object{k}")) for k, t in enumerate(tables) if isinstance(t, dict))
-    return SceneRef(label, str(path), hashlib.sha1(path.read_bytes()).hexdigest(), names)
+    return SceneRef(label, str(path), scene_digest(path), names)
 
 
 def _sensor_ref(label: str, base: Path, source: Path) -> SensorRef:
