@@ -139,6 +139,11 @@ def test_ply_header_errors(tmp_path):
     expect_error(path, r"no end_header")
     path.write_bytes(b"\x00garbage")
     expect_error(path, r"not a PLY file")
+    # a comment that mentions end_header does not end the header
+    text = cyberware_text().replace("format ascii 1.0\r\n", "format ascii 1.0\r\ncomment written before end_header\r\n", 1)
+    assert "comment written" in text
+    path.write_bytes(text.encode())
+    assert rs.load_scan(path).shape == (2, 3)
 
 
 # -- point lists -------------------------------------------------------------------------------
@@ -160,6 +165,8 @@ def test_xyz_and_npz_point_lists(tmp_path):
     assert np.array_equal(rs.load_scan(xyz, units="cm").xyz[0, 1], [40, 50, 60])
     xyz.write_text("1 2 3\n4 5\n")
     expect_error(xyz, r"XYZ data: every line needs the same number")
+    xyz.write_text("1 2 3\n4 5\n6 7 8 9\n")  # 9 numbers: once read as (1,2,3), (4,5,6), (7,8,9)
+    expect_error(xyz, r"line 1 has 3, data line 2 has 2")
 
     npz = tmp_path / "pts.npz"
     points = np.arange(12, dtype=np.float64).reshape(4, 3)

@@ -83,7 +83,8 @@ def read_ply_header(raw: bytes, path: Path) -> PlyHeader:
     """
     if not raw.startswith(b"ply"):
         raise RangesimError("not a PLY file (it does not start with 'ply')", path)
-    match = re.search(rb"end_header[ \t]*\r?\n", raw[:MAX_HEADER_BYTES])
+    # at a line's start: a comment may mention it
+    match = re.search(rb"(?m)^end_header[ \t]*\r?\n", raw[:MAX_HEADER_BYTES])
     if match is None:
         raise RangesimError("PLY header has no end_header line (truncated or not a PLY file)", path)
     text = raw[: match.start()].decode("ascii", errors="replace")

@@ -174,13 +174,17 @@ def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
     if not lines:
         raise RangesimError("no points in the file", path)
     columns = len(lines[0].split())
-    values = parse_numbers(b"\n".join(lines), path, "XYZ data")
-    if columns < 3 or values.size != columns * len(lines):
+    # each line's own count: a total alone lets ragged lines regroup into other points
+    ragged = next((k for k, line in enumerate(lines, start=1) if len(line.split()) != columns), None)
+    if columns < 3 or ragged is not None:
         raise RangesimError(
-            f"XYZ data: every line needs the same number (>= 3) of columns; line 1 has {columns}, "
-            f"{len(lines)} lines hold {values.size} numbers",
+            f"XYZ data: every line needs the same number (>= 3) of columns; line 1 has {columns}"
+            + ("" if ragged is None else f", data line {ragged} has {len(lines[ragged - 1].split())}"),
             path,
         )
+    values = parse_numbers(b"\n".join(lines), path, "XYZ data")
+    if values.size != columns * len(lines):
+        raise RangesimError(f"XYZ data: {len(lines)} lines of {columns} columns hold {values.size} numbers", path)
     table = values.reshape(len(lines), columns)
     scan = _points_scan(table[:, :3], path, "xyz", unit_scale(units, path), xyz_columns=columns)
     return apply_conf(scan, conf, path)
