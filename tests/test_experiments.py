@@ -218,6 +218,10 @@ def test_keys_and_seeds_derive_from_parameters(sweep_dir):
     ('scenes = ["scene.toml"]\n[grid]\n"noise.sigma_px" = [0.1, -1]', ["noise.sigma_px", "negative"]),
     ('scenes = ["scene.toml"]\ndetectors = ["canny"]', ["canny"]),
     ('scenes = ["scene.toml"]\n[detectors.gradient]\nthresh = 1', ["detectors.gradient", "thresh"]),
+    # values too, before any scan (they once failed every task after scanning)
+    ('scenes = ["scene.toml"]\n[detectors.gradient]\nthreshold = -5', ["detectors.gradient", "threshold", "-5"]),
+    ('scenes = ["scene.toml"]\n[detectors.normal]\nthreshold_deg = "abc"', ["detectors.normal", "threshold_deg", "abc"]),
+    ('scenes = ["scene.toml"]\ncrease_deg = 180', ["crease_deg", "below 180"]),  # every task refused it
     ('scenes = ["scene.toml"]\n[grid]\n"object.nothing.albedo" = [0.5]', ["object.nothing.albedo", "nothing"]),
     ('scenes = ["scene.toml"]\n[grid]\n"object.box.colour" = [1]', ["object.box.colour"]),
     ('scenes = ["missing.toml"]', ["missing.toml"]),
@@ -555,3 +559,15 @@ def test_dataset_resume_redoes_views_whose_files_are_gone(sweep_dir, tmp_path):
     again = make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 2, out, **kwargs)
     assert again.n_run == 2 and again.n_reused == 0  # once "2 reused", and the loader then failed
     assert SyntheticDataset(out)[0]["depth"].shape == (24, 32) and SyntheticDataset(out)[1]["edges"].shape == (24, 32)
+
+
+def test_dataset_checks_the_crease_angle_and_snr_its_window_before_work(sweep_dir, tmp_path):
+    from rangesim.experiments.snr import edge_snr
+
+    with pytest.raises(RangesimError, match="crease_deg must be a finite angle"):  # once after every view
+        make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 2, tmp_path / "d", crease_deg=500,
+                     workers=0, progress=False)
+    assert not (tmp_path / "d").exists()
+    scan = rs.datasets.plate_scan(width=32, height=30)
+    with pytest.raises(RangesimError, match="snr_window must be a whole number of pixels with 2 k"):
+        edge_snr(scan, np.zeros(scan.shape, np.uint8), window=100000)  # once an SNR of 6.65e7

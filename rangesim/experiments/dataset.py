@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 from rangesim.core.progress import Progress
 from rangesim.core.version import __version__
@@ -194,8 +195,8 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
         raise RangesimError(f"views must be an integer in 1..{MAX_VIEWS:,}, got {views!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise RangesimError(f"seed must be a non-negative integer, got {seed!r}")
-    if not crease_deg > 0:
-        raise RangesimError(f"crease angle must be positive, got {crease_deg!r}")
+    # the ground truth's own check, before any view is rendered
+    P.number(crease_deg, "crease_deg", 0, 180, lo_open=True, hi_open=True, what="angle", unit="degrees")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)

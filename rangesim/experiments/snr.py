@@ -197,6 +197,10 @@ def edge_snr(scan, labels: np.ndarray, window: int = DEFAULT_WINDOW,
     labels = np.asarray(labels)
     if labels.shape != scan.shape:
         raise RangesimError(f"labels {labels.shape} and scan {scan.shape} differ in shape")
+    if not isinstance(window, (int, np.integer)) or isinstance(window, bool) or 2 * int(window) + 1 > min(scan.shape):
+        # k pixels on each side of the crease and the crease itself must fit the image
+        raise RangesimError(f"snr_window must be a whole number of pixels with 2 k + 1 <= {min(scan.shape)} (the "
+                            f"image's {scan.shape[1]} x {scan.shape[0]} px), got {window!r}")
     sigma_z, sigma_fp = depth_noise(scan) if noise is None else noise
     factor = slope_noise_factor(window)
     hit = (scan.part >= 0) & np.all(np.isfinite(scan.xyz_true), axis=-1)

@@ -43,6 +43,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.core.tomlfile import check_keys, read_toml
@@ -222,8 +224,29 @@ def _detectors(value: Any, source: Path) -> dict[str, dict[str, Any]]:
         if unknown:
             raise RangesimError(f"detectors.{name}: unknown parameter(s) {', '.join(unknown)}; "
                                 f"known: {', '.join(accepted)}", source=source)
+        try:  # the values too, before any scan: the detector on a small tilted plane
+            DETECTORS[name](_probe_scan(), **params)
+        except RangesimError as exc:
+            raise RangesimError(f"detectors.{name}: {exc}", source=source) from exc
         out[name] = dict(params)
     return out
+
+
+def _probe_scan():
+    """A 16 x 16 px scan of a plane tilted 30 degrees at 400 mm (pinhole, f = 100 px): enough for
+    every detector to check its parameters on."""
+    from rangesim.core.rangescan import RangeScan
+
+    n, f = 16, 100.0
+    j, i = np.meshgrid(np.arange(n) + 0.5 - n / 2, np.arange(n) + 0.5 - n / 2)
+    rays = np.stack([j / f, i / f, np.ones_like(j)], axis=-1)
+    normal = np.array([0.0, np.sin(np.radians(30)), -np.cos(np.radians(30))])
+    t = (normal @ [0.0, 0.0, 400.0]) / (rays @ normal)  # the plane through (0, 0, 400)
+    xyz = (rays * t[..., None]).astype(np.float32)
+    zeros = np.zeros((n, n))
+    return RangeScan(depth=xyz[..., 2], xyz=xyz, valid=np.ones((n, n), bool),
+                     normal=np.broadcast_to(normal, (n, n, 3)).astype(np.float32), intensity=zeros, part=zeros,
+                     face=zeros, status=zeros, meta={"K": [[f, 0, n / 2], [0, f, n / 2], [0, 0, 1]]})
 
 
 def _check_override_keys(table: dict[str, Any], where: str, scenes: tuple[SceneRef, ...], source: Path) -> None:
@@ -284,6 +307,8 @@ def load_sweep(path: str | Path) -> SweepSpec:
     window = _int(data, "snr_window", 3, path, 2)
     tolerance = _float(data, "tolerance_px", 2.0, path, at_most=MAX_TOLERANCE_PX)
     crease = _float(data, "crease_deg", 20.0, path, positive=True, at_most=180.0)
+    if crease >= 180.0:  # the ground truth's rule: a dihedral angle strictly between 0 and 180
+        raise RangesimError(f"crease_deg must be below 180 degrees, got {crease!r}", source=path)
     detectors = _detectors(data.get("detectors"), path)
 
     grid = data.get("grid", {})
