@@ -571,3 +571,22 @@ def test_dataset_checks_the_crease_angle_and_snr_its_window_before_work(sweep_di
     scan = rs.datasets.plate_scan(width=32, height=30)
     with pytest.raises(RangesimError, match="snr_window must be a whole number of pixels with 2 k"):
         edge_snr(scan, np.zeros(scan.shape, np.uint8), window=100000)  # once an SNR of 6.65e7
+
+
+def test_damaged_dataset_folders_are_named_not_raw_errors(sweep_dir, tmp_path):
+    out = tmp_path / "data"
+    make_dataset(sweep_dir / "scene.toml", sweep_dir / "tiny.toml", 1, out, workers=0, progress=False,
+                 sensor_changes={"camera.width": 32, "camera.height": 24})
+    truth = next((out / "views").glob("*_truth.npz"))
+    truth.write_bytes(truth.read_bytes()[:50])  # truncated: once zipfile.BadZipFile
+    with pytest.raises(RangesimError, match="unreadable truth file"):
+        SyntheticDataset(out)[0]
+    truth.unlink()  # once FileNotFoundError
+    with pytest.raises(RangesimError, match="truth file missing"):
+        SyntheticDataset(out, fields=["edges"])[0]
+    manifest = json.loads((out / "manifest.json").read_text())
+    for damaged in ([], {**manifest, "views": None}, {k: v for k, v in manifest.items() if k != "K"},
+                    {**manifest, "views": [{"index": 0}]}):  # once AttributeError / KeyError
+        (out / "manifest.json").write_text(json.dumps(damaged))
+        with pytest.raises(RangesimError, match="manifest"):
+            SyntheticDataset(out)

@@ -7,6 +7,7 @@ as it is (the default collate turns the arrays into tensors).
 from __future__ import annotations
 
 import json
+import zipfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
@@ -60,8 +61,13 @@ class SyntheticDataset:
             raise RangesimError("no manifest.json: not a rangesim dataset folder", source=self.root) from None
         except (OSError, ValueError) as exc:
             raise RangesimError(f"unreadable manifest ({exc})", source=path) from exc
-        if self.manifest.get("format") != "rangesim-dataset":
+        if not isinstance(self.manifest, dict) or self.manifest.get("format") != "rangesim-dataset":
             raise RangesimError("not a rangesim dataset manifest", source=path)
+        views = self.manifest.get("views")
+        if (not isinstance(views, list) or not all(isinstance(v, dict) and {"scan", "truth", "pose", "index"} <= set(v)
+                                                    for v in views) or "K" not in self.manifest):
+            raise RangesimError("damaged manifest: it needs 'K' and 'views' records with scan, truth, pose and "
+                                "index; rerun the dataset to rewrite it", source=path)
         self.fields = tuple(ALL_FIELDS if fields is None else fields)
         unknown = sorted(set(self.fields) - set(ALL_FIELDS))
         if unknown:
@@ -93,10 +99,18 @@ class SyntheticDataset:
                 if f in SCAN_FIELDS:
                     sample[f] = getattr(scan, f)
         if any(f in TRUTH_FIELDS for f in self.fields):
-            with np.load(self.root / rec["truth"]) as npz:
-                for f in self.fields:
-                    if f in TRUTH_FIELDS:
-                        sample[f] = npz[f]
+            truth = self.root / rec["truth"]
+            try:
+                with np.load(truth) as npz:
+                    for f in self.fields:
+                        if f in TRUTH_FIELDS:
+                            sample[f] = npz[f]
+            except FileNotFoundError:
+                raise RangesimError(f"view {rec['index']}: truth file missing; rerun the dataset to redo the view",
+                                    source=truth) from None
+            except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+                raise RangesimError(f"view {rec['index']}: unreadable truth file ({type(exc).__name__}: {exc}); "
+                                    "delete it and rerun the dataset", source=truth) from exc
         if "pose" in self.fields:
             sample["pose"] = np.asarray(rec["pose"], dtype=np.float64)
         if "K" in self.fields:
