@@ -69,6 +69,20 @@ def test_twin_meshes_with_nan_vertices_or_no_triangles_are_refused_by_name(tmp_p
     assert not out.exists()
 
 
+def test_compare_refuses_a_mesh_that_does_not_overlap(tmp_path, capsys):
+    # without a fit nothing checked it: IoU 0, NaN statistics and "hole recall 1.000", exit code 0
+    rec = tmp_path / "rec.npz"
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
+    far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    far.apply_translation((5000.0, 5000.0, 0.0))
+    mesh = tmp_path / "far.stl"
+    far.export(mesh)
+    out = tmp_path / "d"
+    _refused(capsys, ["compare", rec, "--mesh", mesh, "--out", out, "--no-fit", "--sensor", "cyberware_3030"],
+             "do not overlap", "silhouette", "far.stl")
+    assert not out.exists()
+
+
 def test_calibrate_views_refuses_no_overlap_in_the_library(tmp_path):
     from rangesim.twin.joint import calibrate_views
 

@@ -132,8 +132,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
         fit = [k for k in ("theta_deg", "alpha_deg", "sigma_mm") if k not in fixed]
     else:
         fit = "auto"  # a calibrated sensor (a [twin] table) is used as it is
-    metrics, twin_scan, edge_maps = compare(scan, args.mesh, args.sensor, params=fixed, fit=fit,
-                                            seed=args.seed, return_scans=True)
+    try:
+        metrics, twin_scan, edge_maps = compare(scan, args.mesh, args.sensor, params=fixed, fit=fit,
+                                                seed=args.seed, return_scans=True)
+    except RangesimError as exc:
+        if exc.source is not None:
+            raise
+        # the twin's refusals (no overlap) concern the mesh against the recording, as calibrate's do
+        raise RangesimError(str(exc), source=f"{args.mesh} with {path}") from exc
     metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **_recorded_sensor(scan, args),
                **metrics}
     make_out_dir(out)

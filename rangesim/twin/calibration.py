@@ -22,6 +22,22 @@ from rangesim.twin.stage import TwinStage
 __all__ = ["calibrate", "robust_std", "range_residuals", "mask_iou", "search_geometry"]
 
 FITTABLE = ("theta_deg", "alpha_deg", "sigma_mm", "min_cos")
+#: the least valid-mask IoU of twin and recording that a calibration or comparison accepts. A
+#: twin of the right mesh in the recording's pose covers most of what the scanner recorded
+#: whatever the angles (shadows and the grazing cut-off remove a share of the surface, not all of
+#: it: good fits reach 0.9 and more); below 0.1 the mesh and the recordings do not overlap
+#: (another object, a wrong pose, wrong units) and every later stage would fit noise to nothing.
+MIN_CALIBRATION_IOU = 0.1
+
+
+def check_overlap(iou: float, what: str, *, plural: bool = False) -> None:
+    """Refuse a twin that does not overlap its recording(s): ``iou`` (``what`` it is) under
+    :data:`MIN_CALIBRATION_IOU`, or NaN."""
+    if not iou >= MIN_CALIBRATION_IOU:  # NaN included
+        recording, poses = ("recording(s)", "recordings' poses") if plural else ("recording", "recording's pose")
+        raise RangesimError(
+            f"the mesh and the {recording} do not overlap: {what} is {float(iou):.4f} (at least "
+            f"{MIN_CALIBRATION_IOU} needed); check the mesh, the {poses} and the units")
 THETA_COARSE = np.arange(-40.0, 40.0 + 1e-9, 5.0)
 ALPHA_COARSE = np.arange(-30.0, 30.0 + 1e-9, 5.0)
 MIN_COS_GRID = np.array([0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3])
@@ -174,12 +190,7 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
     fixed.setdefault("camera_views", int(values.get("camera_views", 1)))
     iou, (theta, alpha, cmin, _) = search_geometry([stage], theta_grid=theta_grid, alpha_grid=alpha_grid,
                                                    fixed=fixed, refine=refine)
-    from rangesim.twin.joint import MIN_CALIBRATION_IOU
-
-    if not iou >= MIN_CALIBRATION_IOU:  # NaN included
-        raise RangesimError(
-            f"the mesh and the recording do not overlap: the best twin's valid-mask IoU is {float(iou):.4f} "
-            f"(at least {MIN_CALIBRATION_IOU} needed); check the mesh, the recording's pose and the units")
+    check_overlap(iou, "the best twin's valid-mask IoU")
     values.update(theta_deg=theta, alpha_deg=alpha, min_cos=cmin)
 
     # noise: recorded points against the twin's noise-free hits

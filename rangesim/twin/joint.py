@@ -40,6 +40,7 @@ from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.stripe_noise import StripeNoise, detection_probability, partial_stripe_fraction
+from rangesim.twin.calibration import check_overlap
 from rangesim.twin.comparison import RANGE_AXIS
 from rangesim.twin.realism import MIN_BIN_CELLS, binned_robust_std, incidence_deg, neighbour_correlation
 from rangesim.twin.stage import Registration, TwinOptics, TwinStage
@@ -55,12 +56,6 @@ BAND_LOG = math.log(1.12)
 BAND_WEIGHT = 20.0
 #: seeds of the noise fit's simulated twins (common random numbers)
 FIT_SEED = 12345
-#: the least joint noise-free valid-mask IoU a calibration accepts. A twin of the right mesh in
-#: the recording's pose covers most of what the scanner recorded whatever the angles (shadows and
-#: the grazing cut-off remove a share of the surface, not all of it: good fits reach 0.9 and more);
-#: below 0.1 the mesh and the recordings do not overlap (another object, a wrong pose, wrong units)
-#: and every later stage would fit noise to nothing.
-MIN_CALIBRATION_IOU = 0.1
 #: the fewest measurable cells (recorded and twin both valid) the range-error fit needs: one
 #: incidence bin's worth (:data:`rangesim.twin.realism.MIN_BIN_CELLS`), else its cost is NaN
 MIN_MEASURABLE_CELLS = MIN_BIN_CELLS
@@ -240,10 +235,7 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
                                                     enumerate(recordings)]
     max_evaluations = P.whole(max_evaluations, "max_evaluations", 1)
     iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
-    if not iou >= MIN_CALIBRATION_IOU:  # NaN included
-        raise RangesimError(
-            f"the mesh and the recording(s) do not overlap: the best twin's valid-mask IoU is {float(iou):.4f} "
-            f"(at least {MIN_CALIBRATION_IOU} needed); check the mesh, the recordings' poses and the units")
+    check_overlap(iou, "the best twin's valid-mask IoU", plural=True)
     geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos, "camera_views": views}
     views = _views(stages, geometry)
     measurable = sum(int(np.count_nonzero(v["cells"])) for v in views)
