@@ -222,6 +222,9 @@ def test_pcd_hand_written_ascii_and_binary(tmp_path):
     assert scan.valid.tolist() == [[True, False, True]]
     assert np.allclose(scan.xyz[0, [0, 2]], [[1, 2, 500], [-250, 0, 1000]])
     assert extras["label"].tolist() == [[7, 0, 65535]] and extras["label"].dtype == np.uint16
+    ascii_pcd.write_text(header.format("ascii") + "0.001 0.002 0.5 7\nnan nan nan 0\n-0.25 0 1 65536\n")
+    expect_error(ascii_pcd, r"integer field label holds values outside its type uint16 \(0..65535\): 0..65536",
+                 call=rec.read_pcd)  # once wrapped to 0
     # binary with a PCL padding field "_" between z and label
     binary = tmp_path / "b.pcd"
     text = header.format("binary").replace("FIELDS x y z label", "FIELDS x y z _ label")

@@ -284,6 +284,12 @@ def _read_body(raw: bytes, header: PcdHeader, path: Path) -> dict[str, np.ndarra
             if f.code[-2] != "f":
                 if not np.isfinite(block).all() or (block != np.round(block)).any():
                     raise RangesimError(f"PCD ascii data: integer field {f.name} holds non-integer values", path)
+                info = np.iinfo(f.code)
+                if block.size and (block.min() < info.min or block.max() > info.max):
+                    # the cast would wrap them (300 as a U 1 label reads 44)
+                    raise RangesimError(f"PCD ascii data: integer field {f.name} holds values outside its type "
+                                        f"{np.dtype(f.code).name} ({info.min}..{info.max}): "
+                                        f"{block.min():g}..{block.max():g}", path)
             columns[f.name] = _squeeze(block.astype(f.code), f)
         return columns
     if header.data == "binary":
