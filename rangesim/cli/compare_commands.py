@@ -59,7 +59,12 @@ def _kinect_twin(scan, labels, args, out: Path) -> int:
     from rangesim.twin.kinect import compare_kinect
     from rangesim.viz.compare import save_comparison
 
-    metrics, twin_scan, edge_maps = compare_kinect(scan, labels, args.sensor, seed=args.seed, return_scans=True)
+    try:
+        metrics, twin_scan, edge_maps = compare_kinect(scan, labels, args.sensor, seed=args.seed, return_scans=True)
+    except RangesimError as exc:
+        if exc.source is not None:
+            raise
+        raise RangesimError(str(exc), source=args.recorded) from exc  # (no table, no object: the frame's)
     metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **_recorded_sensor(scan, args),
                **metrics}
     make_out_dir(out)
