@@ -248,3 +248,12 @@ def test_truncated_exr_is_one_line(plate, tmp_path, capfd):
     assert captured.out == ""
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and "trunc.exr" in lines[0] and "truncated or corrupt" in lines[0], captured.err
+
+
+def test_kinect_twin_refusals_name_the_frame(tmp_path, capsys):
+    from rangesim.recorded import write_pcd
+
+    scan = rs.datasets.plate_scan(width=32, height=30)
+    frame = tmp_path / "frame.pcd"
+    write_pcd(scan, frame, extras={"label": np.zeros(scan.shape, np.uint32)})  # no table label at all
+    _refused(capsys, ["compare", frame, "--sensor", "kinect_v1", "--out", tmp_path / "d"], "frame.pcd", "table")
