@@ -427,3 +427,20 @@ def test_load_scan_options_and_missing_files(tmp_path):
     other = tmp_path / "scan.gz"
     other.write_bytes(gzip.compress(b"x"))
     expect_error(other, r"cannot read scans from '\.gz' files")
+
+
+def test_far_coordinates_warn_of_float32_steps(tmp_path):
+    import dataclasses
+    import warnings
+
+    scan = small_scan()
+    near = rec.write_pcd(scan, tmp_path / "near.pcd", precision="float64")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec.read_pcd(near)  # plain millimetres: no warning
+    shifted = dataclasses.replace(scan, xyz=scan.xyz.astype(np.float64) + [5e8, 4e9, 0.0])
+    far = rec.write_pcd(shifted, tmp_path / "far.pcd", precision="float64")
+    # georeferenced points once landed on a 256 mm lattice without a word
+    with pytest.warns(RuntimeWarning, match=r"far.pcd: coordinates reach 4e\+09 mm, where the scan's float32 "
+                                            r"steps by 256 mm; subtract an offset"):
+        rec.read_pcd(far)
