@@ -274,8 +274,10 @@ def _check_override_keys(table: dict[str, Any], where: str, scenes: tuple[SceneR
 def load_sweep(path: str | Path) -> SweepSpec:
     """Read and validate a sweep file.
 
-    Every sensor combination of the grid is built once here, so a bad key or value fails
-    before any scan with one line naming the file and the key.
+    Every sensor combination of the grid is built once here and every detector runs once on a
+    small plane with its parameters, so a bad key or value of those fails before any scan with
+    one line naming the file and the key. Object overrides are checked for their keys here and
+    for their values by the scene each task builds (a bad value fails those tasks, named).
 
     Parameters
     ----------
