@@ -370,3 +370,17 @@ def test_warnings_print_as_one_line(monkeypatch, capsys):
     monkeypatch.delenv("RANGESIM_DEBUG", raising=False)
     assert main(["info", "x.exr"]) == 0
     assert capsys.readouterr().err == "rangesim: warning: first line second line\n"  # not file:line and source
+
+
+def test_points_far_from_the_origin_warn_under_the_file_s_own_name(tmp_path, capsys):
+    box = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    box.apply_translation((1e7, 0.0, 0.0))  # 10 km: a .ply's float32 steps by 1 mm there
+    box.export(tmp_path / "far.stl")
+    out = tmp_path / "far.ply"
+    assert main(["points", str(tmp_path / "far.stl"), "--resolution", "2mm", "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err == ("rangesim: warning: far.ply: coordinates reach 1e+07 mm, where float32 steps by 1 mm; "
+                   "a .ply stores float32: write .npz (float64)\n")  # the file's name, not its temporary's
+    assert main(["points", str(tmp_path / "far.stl"), "--resolution", "2mm", "--out", str(tmp_path / "f.npz"),
+                 "--quiet"]) == 0
+    assert capsys.readouterr().err == ""

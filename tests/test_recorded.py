@@ -441,6 +441,6 @@ def test_far_coordinates_warn_of_float32_steps(tmp_path):
     shifted = dataclasses.replace(scan, xyz=scan.xyz.astype(np.float64) + [5e8, 4e9, 0.0])
     far = rec.write_pcd(shifted, tmp_path / "far.pcd", precision="float64")
     # georeferenced points once landed on a 256 mm lattice without a word
-    with pytest.warns(RuntimeWarning, match=r"far.pcd: coordinates reach 4e\+09 mm, where the scan's float32 "
-                                            r"steps by 256 mm; subtract an offset"):
+    with pytest.warns(RuntimeWarning, match=r"far.pcd: coordinates reach 4e\+09 mm, where float32 steps by "
+                                            r"256 mm; a scan stores float32: subtract an offset"):
         rec.read_pcd(far)

@@ -145,6 +145,7 @@ class SurfacePoints:
         RangesimError
             An unsupported extension.
         """
+        from rangesim.core.precision import warn_float32_steps
         from rangesim.io.atomic import atomic_path
         from rangesim.io.ply import VERTEX_DTYPE, ply_header
 
@@ -159,6 +160,8 @@ class SurfacePoints:
                 np.savez(fh, points=self.points, normals=self.normals,
                          face_index=self.face_index, resolution=np.float64(self.resolution))
             else:
+                warn_float32_steps(self.points, path.name, "a .ply stores float32: write .npz (float64)",
+                                   stacklevel=4)
                 vertices = np.empty(len(self), dtype=VERTEX_DTYPE)
                 for i, axis in enumerate("xyz"):
                     vertices[axis] = self.points[:, i]

@@ -162,13 +162,19 @@ def write_together(writes: Sequence[tuple[Path, Callable[[Path], Any]]]) -> None
     writes : sequence of (path, write)
         Target and the function that writes the file to the path it is given.
     """
+    import warnings
+
     with ExitStack() as stack:
         for path, write in writes:
             path = Path(path)
             stack.enter_context(writing(path))
             tmp = stack.enter_context(atomic_path(path))
-            with writing(path, tmp):
+            with writing(path, tmp), warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
                 write(tmp)
+            for w in caught:  # about the file, not its temporary name
+                text = str(w.message).replace(str(tmp), str(path)).replace(tmp.name, path.name)
+                warnings.warn_explicit(text, w.category, w.filename, w.lineno)
 
 
 def json_safe(value: Any) -> Any:

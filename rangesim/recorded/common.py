@@ -12,6 +12,7 @@ import numpy as np
 
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
+from rangesim.core.precision import warn_float32_steps
 from rangesim.core.rangescan import RangeScan
 from rangesim.core.units import UNITS_MM
 
@@ -51,31 +52,6 @@ def recorded_meta(fmt: str, path: Path, frame: str, **extra: Any) -> dict[str, A
     return {"units": "mm", "frame": frame, "source": {"format": fmt, "file": path.name}, **extra}
 
 
-#: float32 steps (mm) beyond which a recording's coordinates lose what a scanner measures: a
-#: laser scanner's noise is 0.02-0.1 mm, so steps of 0.01 mm (coordinates past ~130 m) are kept
-FLOAT32_STEP_WARN_MM = 0.01
-
-
-def _warn_float32_steps(xyz: Any, meta: dict[str, Any]) -> None:
-    """Warn when storing ``xyz`` as float32 (the scan's type) rounds it to steps over
-    :data:`FLOAT32_STEP_WARN_MM`: georeferenced coordinates (hundreds of km in mm) land on a grid
-    of tens of mm and the detectors then find flat steps, not surfaces."""
-    values = np.asarray(xyz)
-    if values.dtype == np.float32 or values.size == 0:
-        return
-    with np.errstate(invalid="ignore"):
-        largest = float(np.nanmax(np.abs(np.where(np.isfinite(values), values, np.nan)), initial=0.0))
-    step = float(np.spacing(np.float32(largest)))
-    if step > FLOAT32_STEP_WARN_MM:
-        import warnings
-
-        source = meta.get("source")
-        name = source.get("file", "recording") if isinstance(source, dict) else "recording"
-        warnings.warn(f"{name}: coordinates reach {largest:.6g} mm, where the scan's "
-                      f"float32 steps by {step:g} mm; subtract an offset first (e.g. the points' centroid)",
-                      RuntimeWarning, stacklevel=3)
-
-
 def grid_scan(
     xyz: np.ndarray,
     meta: dict[str, Any],
@@ -108,7 +84,9 @@ def grid_scan(
         ``depth`` = z, ``status`` 0 (valid) or 1 (no surface), ``part``/``face`` -1,
         ``xyz_true`` None.
     """
-    _warn_float32_steps(xyz, meta)
+    source = meta.get("source")
+    warn_float32_steps(xyz, source.get("file", "recording") if isinstance(source, dict) else "recording",
+                       "a scan stores float32: subtract an offset first (e.g. the points' centroid)")
     xyz = np.asarray(xyz, dtype=np.float32)
     ok = np.isfinite(xyz).all(axis=-1)
     if valid is not None:
