@@ -72,6 +72,25 @@ def mitsuba() -> ModuleType:
     return mi
 
 
+def aligned(a, align: int = 64):
+    """A copy of the NumPy array ``a`` starting on an ``align``-byte boundary, for Dr.Jit.
+
+    Dr.Jit's LLVM backend reads a NumPy array in place and compiles its kernels for the array's
+    alignment: arrays at other offsets (NumPy aligns to 16 bytes; arrays under malloc's mmap
+    threshold, ~128 KB, land anywhere on that grid) would compile new variants of the same
+    kernels, at random, and a new image size would compile again. Every image-sized array
+    handed to Dr.Jit goes through here.
+    """
+    import numpy as np
+
+    a = np.ascontiguousarray(a)
+    buf = np.empty(a.nbytes + align, np.uint8)
+    start = (-buf.ctypes.data) % align
+    out = buf[start:start + a.nbytes].view(a.dtype).reshape(a.shape)
+    out[...] = a
+    return out
+
+
 def opaque_transform(matrix):
     """``mi.Transform4f`` of a 4x4 matrix whose entries enter kernels as opaque variables.
 

@@ -12,7 +12,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import aligned, mitsuba
 from rangesim.core.errors import RangesimError
 from rangesim.scene.materials import bsdf_dict
 
@@ -69,9 +69,9 @@ def numpy_to_mitsuba_mesh(name: str, vertices: np.ndarray, faces: np.ndarray, bs
     mesh = mi.Mesh(name, len(vertices), len(faces), props=props)
     params = mi.traverse(mesh)
     params["vertex_positions"] = dr.ravel(
-        mi.Point3f(np.ascontiguousarray(np.asarray(vertices, dtype=np.float32).T))
+        mi.Point3f(aligned(np.asarray(vertices, dtype=np.float32).T))
     )
-    params["faces"] = dr.ravel(mi.Vector3u(np.ascontiguousarray(np.asarray(faces, dtype=np.uint32).T)))
+    params["faces"] = dr.ravel(mi.Vector3u(aligned(np.asarray(faces, dtype=np.uint32).T)))
     params.update()
     return mesh
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba, opaque_scalar
+from rangesim.core.backend import aligned, mitsuba, opaque_scalar
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
@@ -70,7 +70,7 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows: tup
 
     # 2-5. laser geometry, shadows, signal, working range
     sources, sheet_n = sheet_through(points, p["laser"]["sweep"], p["laser"]["baseline"], sensor.tilt_rad)
-    albedo = dr.gather(mi.Float, mi.Float(np.array([o.albedo for o in scene.objects], np.float32)), hits.part, hit)
+    albedo = dr.gather(mi.Float, mi.Float(aligned(np.array([o.albedo for o in scene.objects], np.float32))), hits.part, hit)
     signal, _ = return_signal(albedo, normals, points, sources, sensor.reference_distance)
     in_range, lit = laser_reach(mscene, view, sources, pose, near, far)
     signal = dr.select(lit, signal, 0.0)
@@ -165,7 +165,7 @@ def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], 
         d = np.full(status_np.size, np.inf, np.float32)
         d[ask] = border_distance_at(reached.reshape(shape), ask) / np.where(
             (status_np[ask] == Status.VALID) & (m > 0), m, 1.0)
-        return mi.Float(d)
+        return mi.Float(aligned(d))
 
     corr = noise.correlation_mm * f / z_ref
     draw = simulate(noise, draws, shape, candidate=candidate, signal=signal, cos_incidence=cos_i,

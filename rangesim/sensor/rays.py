@@ -8,7 +8,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import coherent_rays, mitsuba, opaque_point, opaque_scalar, opaque_transform
+from rangesim.core.backend import aligned, coherent_rays, mitsuba, opaque_point, opaque_scalar, opaque_transform
 
 #: shift (pixels) of the second ray cast by the shared-edge guard
 RECAST_OFFSET_PX = 1e-3
@@ -36,18 +36,7 @@ def _tile_permutation(height: int, width: int, tile: int) -> tuple[np.ndarray, n
     position = (np.cumsum(present) - 1)[key]
     order = np.empty(n, np.int64)
     order[position] = np.arange(n)
-    return _aligned(order.astype(np.uint32)), _aligned(position.astype(np.uint32))
-
-
-def _aligned(a: np.ndarray, align: int = 64) -> np.ndarray:
-    """A copy of ``a`` starting on an ``align``-byte boundary. Dr.Jit's LLVM backend reads a
-    NumPy array in place and compiles its kernels for the array's alignment: arrays at other
-    offsets (NumPy aligns to 16 bytes) would compile new variants of the same kernels."""
-    buf = np.empty(a.nbytes + align, np.uint8)
-    start = (-buf.ctypes.data) % align
-    out = buf[start:start + a.nbytes].view(a.dtype)
-    out[...] = a
-    return out
+    return aligned(order.astype(np.uint32)), aligned(position.astype(np.uint32))
 
 
 def tile_order(height: int, width: int):
@@ -156,7 +145,7 @@ def cast_primary(mscene, K, height, width, pose, maxt, watertight) -> PrimaryHit
     dr.eval(*hits)
     t, p, n, part, face, d_world = (dr.gather(type(v), v, position) for v in hits)
     rays = pixel_rays(K, w, index)
-    closed = mi.Bool(np.asarray(watertight, dtype=bool))
+    closed = mi.Bool(aligned(np.asarray(watertight, dtype=bool)))
     dr.eval(t, p, n, part, face, d_world)
 
     hit = dr.isfinite(t)

@@ -89,6 +89,8 @@ import drjit as dr
 import numpy as np
 from scipy import ndimage, special
 
+from rangesim.core.backend import aligned
+
 __all__ = [
     "StripeNoise", "stripe_width_px", "dorsch_sigma_mm", "partial_stripe_shift_mm",
     "peak_sigma_px", "correlated_field", "draw_peak_error_px", "detection_probability",
@@ -410,12 +412,12 @@ class PixelDraws:
         if max(corr_px) < 0.05:  # the same cut-off as correlated_field's white case
             return self.white(shape[0] * shape[1])
         if self.rows is None:
-            return self.mi.Float(correlated_field(self.rng, shape, corr_px).reshape(-1).astype(np.float32))
+            return self.mi.Float(aligned(correlated_field(self.rng, shape, corr_px).reshape(-1).astype(np.float32)))
         key = self._calls
         self._calls += 1
         if key not in self.fields:
             self.fields[key] = correlated_field(self.rng, self.image_shape, corr_px).astype(np.float32)
-        return self.mi.Float(np.ascontiguousarray(self.fields[key][self.rows[0]:self.rows[1]]).reshape(-1))
+        return self.mi.Float(aligned(self.fields[key][self.rows[0]:self.rows[1]].reshape(-1)))
 
 
 def _draws(rng) -> "NumPyDraws | PixelDraws":

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from rangesim.core.backend import mitsuba
+from rangesim.core.backend import aligned, mitsuba
 from rangesim.core.constants import Status
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.block_matching import block_match
@@ -143,7 +143,7 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     zero = dr.zeros(mi.Float, h * w)
     sources = mi.Vector3f(b + zero, zero, zero)
     in_range, lit = laser_reach(scene.mitsuba_scene(), view, sources, pose, near, far)
-    albedo = dr.gather(mi.Float, mi.Float(np.array([o.albedo for o in scene.objects], np.float32)), hits.part,
+    albedo = dr.gather(mi.Float, mi.Float(aligned(np.array([o.albedo for o in scene.objects], np.float32))), hits.part,
                        hits.hit)
     dr.eval(points, normals, in_range, lit, albedo)
     P = np.asarray(dr.ravel(points), np.float64).reshape(-1, 3)

@@ -243,9 +243,11 @@ def fit_grid(scan: RangeScan) -> GridModel:
 
 
 def _mi_vec(mi, arr: np.ndarray, kind: str = "Vector3f"):
+    from rangesim.core.backend import aligned
+
     arr = np.asarray(arr, dtype=np.float32)
-    return getattr(mi, kind)(mi.Float(np.ascontiguousarray(arr[:, 0])), mi.Float(np.ascontiguousarray(arr[:, 1])),
-                             mi.Float(np.ascontiguousarray(arr[:, 2])))
+    return getattr(mi, kind)(mi.Float(aligned(arr[:, 0])), mi.Float(aligned(arr[:, 1])),
+                             mi.Float(aligned(arr[:, 2])))
 
 
 class TwinStage:
