@@ -38,17 +38,22 @@ def plate(tmp_path_factory):
     return folder / "plate.exr"
 
 
-# -- 1: calibrate a mesh that does not overlap the recording ---------------------------------
-def test_calibrate_refuses_a_mesh_that_does_not_overlap(tmp_path, capsys):
+# -- 1: calibrate or compare a mesh that does not overlap the recording -------------------------
+@pytest.mark.parametrize(("command", "options", "words"), [
+    ("calibrate", ["--geometry-only"], ["IoU"]),
+    # without a fit nothing checked it: IoU 0, NaN statistics and "hole recall 1.000", exit code 0
+    ("compare", ["--no-fit"], ["silhouette"]),
+])
+def test_a_mesh_that_does_not_overlap_is_refused(tmp_path, capsys, command, options, words):
     rec = tmp_path / "rec.npz"
     grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
     far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
     far.apply_translation((5000.0, 5000.0, 0.0))
     mesh = tmp_path / "far.stl"
     far.export(mesh)
-    out = tmp_path / "c.toml"
-    _refused(capsys, ["calibrate", rec, "--mesh", mesh, "--sensor", "cyberware_3030", "--out", out,
-                      "--geometry-only"], "do not overlap", "IoU", "far.stl")
+    out = tmp_path / ("c.toml" if command == "calibrate" else "d")
+    _refused(capsys, [command, rec, "--mesh", mesh, "--sensor", "cyberware_3030", "--out", out, *options],
+             "do not overlap", "far.stl", *words)
     assert not out.exists()
 
 
@@ -66,20 +71,6 @@ def test_twin_meshes_with_nan_vertices_or_no_triangles_are_refused_by_name(tmp_p
     out = tmp_path / ("c.toml" if command == "calibrate" else "d")
     extra = ["--sensor", "cyberware_3030", "--geometry-only"] if command == "calibrate" else ["--no-fit"]
     _refused(capsys, [command, rec, "--mesh", mesh, "--out", out, *extra], "bad.obj", words)
-    assert not out.exists()
-
-
-def test_compare_refuses_a_mesh_that_does_not_overlap(tmp_path, capsys):
-    # without a fit nothing checked it: IoU 0, NaN statistics and "hole recall 1.000", exit code 0
-    rec = tmp_path / "rec.npz"
-    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
-    far = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-    far.apply_translation((5000.0, 5000.0, 0.0))
-    mesh = tmp_path / "far.stl"
-    far.export(mesh)
-    out = tmp_path / "d"
-    _refused(capsys, ["compare", rec, "--mesh", mesh, "--out", out, "--no-fit", "--sensor", "cyberware_3030"],
-             "do not overlap", "silhouette", "far.stl")
     assert not out.exists()
 
 
