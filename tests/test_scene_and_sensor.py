@@ -182,6 +182,7 @@ def test_scan_refuses_a_pose_that_is_no_rigid_transform(change, words):
 
 def test_scene_objects_with_one_name_are_refused(tmp_path):
     from rangesim.experiments.scenes import apply_object_overrides
+    from rangesim.experiments.sweep_file import load_sweep
 
     path = tmp_path / "dup.toml"
     path.write_text('[[object]]\nname = "a"\nprimitive = "box"\nsize = [10, 10, 10]\n\n'
@@ -191,3 +192,7 @@ def test_scene_objects_with_one_name_are_refused(tmp_path):
     # a sweep's override of object "a" once changed only the second one
     with pytest.raises(RangesimError, match="both named 'a'"):
         apply_object_overrides(path, {"a": {"albedo": 0.1}})
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('scenes = ["dup.toml"]\n[grid]\n"noise.sigma_px" = [0, 0.2]\n')
+    with pytest.raises(RangesimError, match="sweep.toml: scenes: .*both named 'a'"):  # when loaded, before any scan
+        load_sweep(sweep)

@@ -50,6 +50,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.core.tomlfile import check_keys, read_toml
 from rangesim.experiments.poses import POSE_KEYS, check_pose_table
 from rangesim.experiments.scenes import scene_digest
+from rangesim.scene.scene import object_names
 
 TOP_KEYS = {
     "name", "description", "scenes", "sensors", "views", "repeats", "seed", "tolerance_px",
@@ -184,7 +185,10 @@ def _scene_ref(label: str, base: Path, source: Path) -> SceneRef:
         raise RangesimError(f"scenes: {exc}", source=source) from exc
     tables = data.get("object", [])
     tables = [tables] if isinstance(tables, dict) else tables
-    names = tuple(str(t.get("name", f"object{k}")) for k, t in enumerate(tables) if isinstance(t, dict))
+    try:
+        names = tuple(object_names([t for t in tables if isinstance(t, dict)], label))
+    except RangesimError as exc:  # two objects of one name: overrides could not tell them apart
+        raise RangesimError(f"scenes: {exc}", source=source) from exc
     return SceneRef(label, str(path), scene_digest(path), names)
 
 
