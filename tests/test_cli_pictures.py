@@ -51,3 +51,20 @@ def test_preview_of_a_large_scan_is_drawn_from_every_kth_pixel(tmp_path, monkeyp
     path = preview.save_preview(scan, tmp_path / "p.png")
     assert "128" in preview.default_title(scan)  # the title still gives the full size
     assert _png_size(path)[0] > 100
+
+
+def test_the_structured_light_twin_panel_shows_its_figures():
+    # the Kinect twin's comparison left its fourth panel empty: its figures were only in metrics.json
+    from matplotlib.figure import Figure
+
+    from rangesim.viz.compare import _structured_light_table
+
+    ax = Figure().subplots()
+    _structured_light_table(ax, {
+        "z2_coefficient_mm_per_m2": {"recorded": 4.21, "twin": 3.47}, "z_spread": {"recorded": 1.3, "twin": 1.06},
+        "depth_level_gaps_in_steps": {"recorded": {"median": 0.9}, "twin": {"median": 1.0}},
+        "iou": 0.93, "iou_no_physics": 0.942, "edges": {"gradient": {"f1": 0.27, "edges": 10}}})
+    text = "\n".join(t.get_text() for t in ax.texts)
+    for line in ("z^2 noise k (mm/m^2)         4.21     3.47", "depth-level gap (steps)      0.90     1.00",
+                 "valid-mask IoU 0.930 (no physics 0.942)", "edge F1 gradient      0.270"):
+        assert line in text, (line, text)
