@@ -31,15 +31,21 @@ def edge_overlay_rgb(scan: RangeScan, edge_map) -> np.ndarray:
     return rgb
 
 
-def save_edge_overlay(scan: RangeScan, edge_map, path: str | Path, *, title: str | None = None,
-                      dpi: int = 150) -> Path:
-    """Write the edges of ``edge_map`` over ``scan`` as a PNG with a legend of pixel counts."""
+def edge_legend(edge_map) -> list[tuple[tuple[float, float, float], str]]:
+    """(colour, "<type> edge: <n> px") of every edge type the map holds, for a picture's legend."""
     legend = []
     for label in (EdgeLabel.CONVEX, EdgeLabel.CONCAVE, EdgeLabel.JUMP, RIM, EdgeLabel.NONE):
         n = int(np.count_nonzero(edge_map.mask & (edge_map.labels == int(label))))
         if n:
             name = "edge, type unknown" if label == EdgeLabel.NONE else f"{LABEL_NAMES[int(label)]} edge"
             legend.append((EDGE_COLORS[label], f"{name}: {n:,} px"))
+    return legend
+
+
+def save_edge_overlay(scan: RangeScan, edge_map, path: str | Path, *, title: str | None = None,
+                      dpi: int = 150) -> Path:
+    """Write the edges of ``edge_map`` over ``scan`` as a PNG with a legend of pixel counts."""
+    legend = edge_legend(edge_map)
     h, w = scan.shape
     default = f"{edge_map.method or 'edges'} — {w}x{h} px, {int(edge_map.mask.sum()):,} edge pixels"
     return save_labelled_image(edge_overlay_rgb(scan, edge_map), path, title=title or default,

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 from skimage.draw import line as draw_line
 
-from rangesim.viz.edge_overlay import edge_overlay_rgb
+from rangesim.viz.edge_overlay import edge_legend, edge_overlay_rgb
 from rangesim.viz.figure import save_labelled_image
 
 FEATURE_COLORS = {
     "segments": (0.1, 0.85, 1.0),
     "circles": (0.2, 1.0, 0.2),
-    "arcs": (1.0, 0.6, 0.0),
+    "arcs": (0.25, 0.45, 1.0),  # not orange: rim edges are
     "ellipses": (1.0, 0.2, 1.0),
 }
 
@@ -61,7 +61,8 @@ def features_rgb(scan, edge_map, features: dict[str, list]) -> np.ndarray:
 def save_features_overlay(scan, edge_map, features: dict[str, list], path: str | Path, *,
                           title: str | None = None, dpi: int = 150) -> Path:
     """Write the features over the edges as a PNG with a legend of feature counts."""
-    legend = [(FEATURE_COLORS[k], f"{k}: {len(features.get(k, []))}") for k in FEATURE_COLORS]
+    # the features, then the edge types they were found on
+    legend = [(FEATURE_COLORS[k], f"{k}: {len(features.get(k, []))}") for k in FEATURE_COLORS] + edge_legend(edge_map)
     h, w = scan.shape
     return save_labelled_image(features_rgb(scan, edge_map, features), path,
                                title=title or f"features on {edge_map.method or 'edges'} — {w}x{h} px",
