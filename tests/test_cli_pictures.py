@@ -68,3 +68,15 @@ def test_the_structured_light_twin_panel_shows_its_figures():
     for line in ("z^2 noise k (mm/m^2)         4.21     3.47", "depth-level gap (steps)      0.90     1.00",
                  "valid-mask IoU 0.930 (no physics 0.942)", "edge F1 gradient      0.270"):
         assert line in text, (line, text)
+
+
+def test_region_truth_is_drawn_without_a_type():
+    # segment-label boundaries were drawn and counted as "jump edge" (table contacts included)
+    from rangesim.core.constants import EdgeLabel
+    from rangesim.evaluate.runs import EdgeTruth
+
+    labels = np.zeros((6, 6), np.uint8)
+    labels[2, 1:5] = EdgeLabel.JUMP
+    regions, geometry = EdgeTruth(labels, "regions").edge_map(), EdgeTruth(labels, "geometry").edge_map()
+    assert regions.mask.sum() == geometry.mask.sum() == 4
+    assert not regions.labels.any() and (geometry.labels[2, 1:5] == EdgeLabel.JUMP).all()

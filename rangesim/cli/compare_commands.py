@@ -116,7 +116,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         make_out_dir(out)
         write_json(metrics, out / "metrics.json")
         # no twin to compare with: the picture shows the recording and what each detector finds in it
-        save_edge_panels(scan, edge_maps, out / "compare.png", truth=truth, scores=metrics["edges"],
+        save_edge_panels(scan, edge_maps, out / "compare.png", truth=None if truth is None else truth.edge_map(),
+                         scores=metrics["edges"],
                          title=f"{path.name}: edges (no mesh, so no twin)")
         for name, e in metrics["edges"].items():
             score = f"  F1 {e['f1']:.3f}" if "f1" in e else ""

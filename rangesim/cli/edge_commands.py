@@ -50,7 +50,7 @@ def sensor_summary(scan, given) -> dict:
 
 
 def cmd_detect(args: argparse.Namespace) -> int:
-    from rangesim.edges import DETECTORS, EdgeMap
+    from rangesim.edges import DETECTORS
     from rangesim.evaluate.runs import load_scan_with_labels, run_detectors, scan_truth
     from rangesim.viz.edge_overlay import save_edge_overlay
 
@@ -89,8 +89,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
             np.savez_compressed(tmp, **arrays)
         save_edge_overlay(scan, edge_map, out / f"{method}.png")
     if truth is not None:
-        save_edge_overlay(scan, EdgeMap(truth.mask, truth.labels, np.zeros(truth.labels.shape), method="ground truth"),
-                          out / "ground_truth.png", title=f"ground truth ({truth.kind})")
+        save_edge_overlay(scan, truth.edge_map(), out / "ground_truth.png", title=f"ground truth ({truth.kind})")
         report = {
             "scan": str(path), "truth": truth.kind, "tolerance_px": args.tolerance, "crease_deg": args.crease_deg,
             "methods": {m: {"seconds": r["seconds"], **r["scores"]} for m, r in results.items()},

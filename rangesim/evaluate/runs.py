@@ -36,6 +36,14 @@ class EdgeTruth:
     def mask(self) -> np.ndarray:
         return self.labels != EdgeLabel.NONE
 
+    def edge_map(self):
+        """The truth as an :class:`~rangesim.edges.edgemap.EdgeMap` for pictures: region
+        boundaries with no type (label 0 on the mask, "type unknown"), not as jumps."""
+        from rangesim.edges.edgemap import EdgeMap
+
+        labels = self.labels if self.kind == "geometry" else np.zeros_like(self.labels)
+        return EdgeMap(self.mask, labels, np.zeros(self.labels.shape, np.float32), method=f"ground truth ({self.kind})")
+
 
 #: extensions whose reader takes ``sensor=`` (what recorded the file; see :func:`load_scan_with_labels`)
 SENSOR_READERS = (".pcd",)
