@@ -80,3 +80,14 @@ def test_region_truth_is_drawn_without_a_type():
     regions, geometry = EdgeTruth(labels, "regions").edge_map(), EdgeTruth(labels, "geometry").edge_map()
     assert regions.mask.sum() == geometry.mask.sum() == 4
     assert not regions.labels.any() and (geometry.labels[2, 1:5] == EdgeLabel.JUMP).all()
+
+
+def test_a_structured_light_scan_s_shadow_is_the_projector_s():
+    # the preview's legend and the scan summary said "laser shadow" for a sensor without a laser
+    from rangesim.core.constants import Status, status_name
+    from rangesim.viz.preview import _status_label
+
+    assert status_name(Status.SHADOW) == "laser shadow"
+    assert status_name(Status.SHADOW, "structured_light") == _status_label(Status.SHADOW, "structured_light") \
+        == "projector shadow"
+    assert status_name(Status.DROPOUT, "structured_light") == "dropout"

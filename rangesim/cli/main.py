@@ -36,7 +36,7 @@ import numpy as np
 
 from rangesim import __version__
 from rangesim.cli.common import MESH_UNITS, check_suffix, check_writable, load_scene_arg, write_together
-from rangesim.core.constants import STATUS_NAMES, Status
+from rangesim.core.constants import Status, status_name
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import check_pose
 from rangesim.core.memory import check_memory
@@ -149,7 +149,7 @@ WRITE_BYTES_PER_PIXEL = 56
 
 def _status_counts(result: RangeScan) -> list[tuple[str, int]]:
     """(name, pixel count) per status: every known code, then any unknown code present."""
-    rows = [(STATUS_NAMES[code], result.count(code)) for code in Status]
+    rows = [(status_name(code, result.meta.get("mode")), result.count(code)) for code in Status]
     known = {int(code) for code in Status}
     for code in np.unique(result.status):
         if int(code) not in known:

@@ -28,6 +28,20 @@ STATUS_NAMES = {
 }
 
 
+def status_name(code: int, mode: str | None = None) -> str:
+    """The name of a status code for a scan of sensor ``mode``: a structured-light scanner's
+    shadow is the projector's, not a laser's.
+
+    Examples
+    --------
+    >>> status_name(Status.SHADOW), status_name(Status.SHADOW, "structured_light")
+    ('laser shadow', 'projector shadow')
+    """
+    if mode == "structured_light" and int(code) == Status.SHADOW:
+        return "projector shadow"
+    return STATUS_NAMES[Status(int(code))]
+
+
 class EdgeLabel(IntEnum):
     """Edge types in edge maps and ground truth (``EdgeMap.labels``, uint8)."""
 

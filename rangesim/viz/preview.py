@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.colors import Colormap
 
-from rangesim.core.constants import STATUS_NAMES, Status
+from rangesim.core.constants import Status, status_name
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.viz.figure import ColorbarSpec, save_labelled_image
@@ -279,11 +279,11 @@ def _status_counts(scan: RangeScan) -> dict[int, int]:
     return {int(c): int(n) for c, n in zip(codes, counts)}
 
 
-def _status_label(code: int) -> str:
+def _status_label(code: int, mode: str | None = None) -> str:
     if code == Status.VALID:  # flagged valid yet without a finite depth: inconsistent data
         return "valid, no depth"
     try:
-        return STATUS_NAMES[Status(code)]
+        return status_name(code, mode)
     except (ValueError, KeyError):
         return f"status {code}"
 
@@ -388,7 +388,7 @@ def save_preview(
     lo, hi = depth_limits(view) if limits is None else (float(limits[0]), float(limits[1]))
     rgb = depth_rgb(view, cmap=cmap, limits=(lo, hi), shade=shade)
     legend = [
-        (status_color(c), f"{_status_label(c)}: {n:,} px ({_percent(n, h * w)})")
+        (status_color(c), f"{_status_label(c, scan.meta.get('mode'))}: {n:,} px ({_percent(n, h * w)})")
         for c, n in _status_counts(scan).items()
     ]
     valid_d = view.depth[_valid_depth_mask(view)]

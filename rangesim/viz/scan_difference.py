@@ -90,7 +90,10 @@ def save_scan_difference(a: RangeScan, b: RangeScan, path: str | Path, *, labels
     axes[2].imshow(diff_rgb, interpolation="nearest")
     axes[2].set_title(f"{labels[1]} - {labels[0]}: median |d| {stats['median_abs_mm']:.3f} mm, "
                       f"p95 {stats['p95_abs_mm']:.3f} mm", fontsize=10)
-    fig.colorbar(ScalarMappable(norm, "RdBu_r"), ax=axes[2], fraction=0.046, pad=0.02, label="depth difference [mm]")
+    # arrows where differences go beyond the limit (by default its 95th percentile: 5 % do)
+    beyond = np.abs(difference[both]) > limit_mm
+    fig.colorbar(ScalarMappable(norm, "RdBu_r"), ax=axes[2], fraction=0.046, pad=0.02, label="depth difference [mm]",
+                 extend="both" if beyond.any() else "neither")
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
