@@ -64,7 +64,7 @@ def _frame(ax, points: np.ndarray, elev: float = 25, azim: float = -60) -> None:
     ax.set_axis_off()
 
 
-def save_part_tree(tree, path: str | Path, cell_in: float = 1.25, dpi: int = 90) -> Path:
+def save_part_tree(tree, path: str | Path, cell_in: float = 1.25, dpi: int = 130) -> Path:
     """Draw a part tree (:class:`~rangesim.cad.part.PartNode`): each node's solid in a tree layout.
 
     Leaves spread left to right in tree order; an inner node sits above the middle of its
@@ -115,10 +115,11 @@ def save_part_tree(tree, path: str | Path, cell_in: float = 1.25, dpi: int = 90)
         _frame(ax, mesh.vertices)
         op = f" ({symbol[node.operation]})" if node.operation != "solid" else ""
         vol = node.properties.get("volume", 0.0)
-        back.text(cx, cy + 0.5 * cell_in, f"{node.name}{op}", ha="center", va="bottom", fontsize=7.5,
-                  fontweight="bold" if node.operation != "solid" else "normal")
-        back.text(cx, cy - 0.52 * cell_in, f"{node.function}, {vol:,.0f} mm³", ha="center", va="top",
-                  fontsize=6.5, color="0.3")
+        # figure texts draw over every axes: a tall solid's panel no longer covers its caption
+        fig.text(cx / fig_w, (cy + 0.5 * cell_in) / fig_h, f"{node.name}{op}", ha="center", va="bottom",
+                 fontsize=8, fontweight="bold" if node.operation != "solid" else "normal")
+        fig.text(cx / fig_w, (cy - 0.52 * cell_in) / fig_h, f"{node.function}, {vol:,.0f} mm\u00b3", ha="center",
+                 va="top", fontsize=7.5, color="0.25")
     back.text(0.1, fig_h - 0.1, f"Part tree of {tree.name}: − difference (first child minus the others), "
               "∪ union; blue: material, red: cutters", fontsize=8.5, va="top")
     path = Path(path)
