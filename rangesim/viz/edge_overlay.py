@@ -108,7 +108,8 @@ def save_edge_panels(scan: RangeScan, edge_maps: dict, path: str | Path, *, trut
     for ax in axes.ravel():
         ax.set_axis_off()
     for ax, (rgb, label) in zip(axes.ravel(), panels):
-        ax.imshow(np.clip(rgb, 0, 1), interpolation="nearest")
+        # (panels smaller than the frame: see viz.compare, "antialiased" keeps 1 px edges)
+        ax.imshow(np.clip(rgb, 0, 1), interpolation="antialiased")
         ax.set_title(label, fontsize=9)
     n_valid = int(scan.valid.sum())
     fig.suptitle(title or f"edges — {w} × {h} px (W × H), {n_valid:,} valid", fontsize=11)
