@@ -8,11 +8,13 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
+from rangesim.core.constants import Status, status_name
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.io.atomic import atomic_path
-from rangesim.viz.preview import depth_limits, depth_rgb
+from rangesim.viz.preview import depth_limits, depth_rgb, status_color
 
 __all__ = ["depth_difference", "save_scan_difference"]
 
@@ -80,6 +82,13 @@ def save_scan_difference(a: RangeScan, b: RangeScan, path: str | Path, *, labels
     for ax, scan, label in zip(axes[:2], (a, b), labels):
         ax.imshow(depth_rgb(scan, limits=limits), interpolation="nearest")
         ax.set_title(f"{label}: {int(scan.valid.sum()):,} valid px")
+    # the depth scale of both panels, and what the unmeasured pixels' colours mean
+    fig.colorbar(ScalarMappable(Normalize(*limits), "turbo"), ax=axes[1], fraction=0.046, pad=0.02,
+                 label="depth z [mm]")
+    codes = sorted({int(c) for scan in (a, b) for c in np.unique(scan.status[~scan.valid])})
+    if codes:
+        axes[0].legend(handles=[Patch(color=status_color(c), label=status_name(c, a.meta.get("mode")))
+                                for c in codes if c in set(Status)], loc="lower left", fontsize=8)
     diff_rgb = np.empty((h, w, 3))
     diff_rgb[:] = ONE_OR_NEITHER
     norm = Normalize(-limit_mm, limit_mm)
