@@ -120,6 +120,9 @@ def plot_f1_vs_snr(table, path: str | Path, *, swept: Sequence[str] = (), title:
                 continue
             s = np.array(sorted(stats))
             ax.fill_between(s[:, 0], s[:, 1], s[:, 3], color=colors[det], alpha=0.18, linewidth=0)
+            # the quartiles as bars too: a band through one point has no width
+            ax.errorbar(s[:, 0], s[:, 2], yerr=[s[:, 2] - s[:, 1], s[:, 3] - s[:, 2]], fmt="none",
+                        ecolor=colors[det], alpha=0.6, capsize=2, linewidth=1)
             ax.plot(s[:, 0], s[:, 2], "-o", color=colors[det], markersize=3.5, linewidth=1.6, label=det)
         ax.set_xscale("log")
         ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
@@ -159,6 +162,8 @@ def plot_f1_vs_param(table, key: str, path: str | Path, *, swept: Sequence[str] 
         q = np.array([np.percentile(d.loc[d[key] == v, "f1"].to_numpy(dtype=float), [25, 50, 75])
                       if (d[key] == v).any() else [np.nan] * 3 for v in values])
         ax.fill_between(xs, q[:, 0], q[:, 2], color=colors[det], alpha=0.18, linewidth=0)
+        ax.errorbar(xs, q[:, 1], yerr=[q[:, 1] - q[:, 0], q[:, 2] - q[:, 1]], fmt="none", ecolor=colors[det],
+                    alpha=0.6, capsize=2, linewidth=1)
         ax.plot(xs, q[:, 1], "-o", color=colors[det], markersize=3.5, linewidth=1.6, label=det)
     first = table[table["detector"] == detectors[0]]
     labels = []
