@@ -36,13 +36,18 @@ from rangesim.edges._scan_access import pixel_geometry, scan_depth
 __all__ = [
     "depth_quantum", "quantised_sigma", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
     "predicted_noise", "scan_sigma", "raised_threshold", "stride_gain",
-    "NOISE_FLOOR",
+    "NOISE_FLOOR", "NOISE_MEASURABLE",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_NORMAL_LOCAL", "NOISE_K_PCL",
 ]
 
 #: depth noise (pixel footprints) below which a scan counts as noise-free: the detectors'
 #: noise-free defaults hold unchanged (a noise-free scan measures < 0.001)
 NOISE_FLOOR = 0.05
+#: depth noise (pixel footprints) a scan has at all: a noise-free scan measures < 0.001, a
+#: laser scan with only its peak quantisation (1/16 px) about 0.04. Above it the gradient's
+#: crease threshold follows the measured noise even under :data:`NOISE_FLOOR` (its fixed 15
+#: degrees are only 2.6 sigma of the bend at 0.04 footprints)
+NOISE_MEASURABLE = 0.001
 #: threshold multiples of the median strength on noisy scans (see the module docstring):
 #: the gradient's noise bend ``2 atan(max response)`` (an upper estimate, as if the
 #: neighbour across responded as much; 3 medians ~ 4 sigma of the bend estimate), the
