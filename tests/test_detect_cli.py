@@ -16,7 +16,7 @@ import rangesim as rs
 from rangesim.cli.main import main
 from rangesim.core.geometry import look_at
 from rangesim.edges import DETECTORS
-from tests.conftest import BOX_SCENE_TOML, make_sensor
+from tests.conftest import BOX_SCENE_TOML, grid_recording, make_sensor
 
 SCENE_TOML = BOX_SCENE_TOML
 
@@ -90,6 +90,17 @@ def test_single_method(synthetic, tmp_path, capsys):
     assert names == ["gradient.png", "gradient_edges.npz", "ground_truth.png", "scores.json"]
     with np.load(out / "gradient_edges.npz") as npz:
         assert "direction" in npz.files  # the gradient detector also gives edge directions
+
+
+def test_a_scan_without_truth_leaves_no_old_scores_in_a_reused_folder(synthetic, tmp_path, capsys):
+    scan_path, scene = synthetic
+    out = tmp_path / "edges"
+    assert _detect(capsys, scan_path, "--method", "gradient", "--scene", scene, "--out", out)[0] == 0
+    json.loads((out / "scores.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in scores.json"))
+    recording = tmp_path / "rec.npz"
+    grid_recording(40, 50).save(recording)  # no truth: scores.json and ground_truth.png were the first scan's
+    assert _detect(capsys, recording, "--method", "gradient", "--out", out)[0] == 0
+    assert sorted(p.name for p in out.iterdir()) == ["gradient.png", "gradient_edges.npz"]
 
 
 def test_recorded_range_grid_without_truth(data_dir, tmp_path, capsys):

@@ -127,6 +127,16 @@ def test_cli_writes_outputs(green, tmp_path):
         assert (tmp_path / "o" / name).is_file()
     report = json.loads((tmp_path / "o" / "features.json").read_text())
     assert report["scores"]["round"]["recall"] == 1.0
+    # no round feature found: the precision of nothing found was a bare NaN (not JSON)
+    small = rs.scan(rs.load_scene("scenes/green_piece.toml"),
+                    rs.load_sensor("white_scanner").with_params({"camera.width": 64, "camera.height": 48}))
+    small.save(tmp_path / "small.npz")
+    args = p.parse_args(["features", str(tmp_path / "small.npz"), "--out", str(tmp_path / "none"),
+                         "--scene", "scenes/green_piece.toml", "--rmin", "40", "--rmax", "41"])
+    assert args.func(args) == 0
+    strict = json.loads((tmp_path / "none" / "features.json").read_text(),
+                        parse_constant=lambda c: pytest.fail(f"{c} in features.json"))
+    assert strict["scores"]["round"]["precision"] is None
 
 
 def test_flat_target_labelled_rims(data_dir, monkeypatch):

@@ -444,3 +444,13 @@ def test_far_coordinates_warn_of_float32_steps(tmp_path):
     with pytest.warns(RuntimeWarning, match=r"far.pcd: coordinates reach 4e\+09 mm, where float32 steps by "
                                             r"256 mm; a scan stores float32: subtract an offset"):
         rec.read_pcd(far)
+
+
+def test_msu_written_in_inches_reads_back_in_millimetres(tmp_path):
+    # write_msu names its unit in the header; the reader took every file as mm (25.4x too small)
+    scan = small_scan()
+    path = rec.write_msu(scan, tmp_path / "inch.msu", units="in")
+    back = rs.load_scan(path)
+    assert back.meta["msu_units"] == "in"
+    assert np.allclose(back.xyz[back.valid], scan.xyz[scan.valid], rtol=1e-5)
+    assert np.allclose(rs.load_scan(path, units="mm").xyz[back.valid] * 25.4, scan.xyz[scan.valid], rtol=1e-5)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_out_files, make_out_dir, positive, writing
+from rangesim.cli.common import check_out_files, json_safe, make_out_dir, positive, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -79,7 +79,7 @@ def cmd_features(args: argparse.Namespace) -> int:
         report["scores"] = _plain(feature_scores(feats, truth, scan))
     target = out / "features.json"
     with writing(target), atomic_path(target) as tmp:
-        Path(tmp).write_text(json.dumps(report, indent=1, default=float))
+        Path(tmp).write_text(json.dumps(json_safe(report), indent=1, default=float))  # strict JSON: NaN as null
     target = out / "relations.csv"
     with writing(target), atomic_path(target) as tmp:
         Path(tmp).write_text(F.relations_to_csv(rows))

@@ -30,18 +30,21 @@ HEADER_LINES = 3
 GZIP_MAGIC = b"\x1f\x8b"
 # a whole integer, not part of a decimal number or a word ("480x512" counts as two)
 _INTEGER = re.compile(r"(?<![\w.])[-+]?\d+(?![\w.])")  # signed: "-5 rows" is no size
+#: write_msu's third header line: "flag X Y Z images, row order, <unit> (written by rangesim)"
+_WRITTEN_UNITS = re.compile(r"row order, (\S+) \(written by rangesim\)")
 _TIMES = re.compile(r"(?<=\d)[xX*]\s*(?=\d)")
 _NOT_FINITE = re.compile(r"\b(nan|inf|infinity)\b", re.IGNORECASE)
 
 
-def read_msu(path: str | Path, *, units: str = "mm", conf: str | Path | None = None) -> RangeScan:
+def read_msu(path: str | Path, *, units: str | None = None, conf: str | Path | None = None) -> RangeScan:
     """Read an MSU range image (plain or gzipped, recognised by content).
 
     Parameters
     ----------
     path : str or Path
-    units : str
-        Unit of X, Y, Z in the file (``"mm"``, ``"in"``, ...); the scan is in mm.
+    units : str, optional
+        Unit of X, Y, Z in the file (``"mm"``, ``"in"``, ...); the scan is in mm. Default: the
+        unit :func:`write_msu` named in the header, else millimetres (the format has none).
     conf : str or Path, optional
         A Stanford ``.conf`` whose ``bmesh`` line for this file sets ``pose``.
 
@@ -58,7 +61,8 @@ def read_msu(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
         or a value count other than 4 x rows x columns.
     """
     path = check_file(path)
-    scale = unit_scale(units, path)
+    if units is not None:
+        unit_scale(units, path)  # a bad unit before the file is read
     raw = read_bytes(path)
     if raw.startswith(GZIP_MAGIC):
         try:
@@ -84,6 +88,10 @@ def read_msu(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
             + (" (truncated)" if values.size < 4 * cells else ""),
             path,
         )
+    if units is None:  # the unit write_msu names in its third line, else the format's millimetres
+        written = _WRITTEN_UNITS.search(header[2])
+        units = written.group(1) if written else "mm"
+    scale = unit_scale(units, path)
     images = values.reshape(4, rows, cols)
     xyz = (np.moveaxis(images[1:], 0, -1) * scale).astype(np.float32)
     meta = recorded_meta("msu", path, "scanner", organized=True, msu_header=header, msu_units=units)
