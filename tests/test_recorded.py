@@ -225,6 +225,11 @@ def test_pcd_hand_written_ascii_and_binary(tmp_path):
     ascii_pcd.write_text(header.format("ascii") + "0.001 0.002 0.5 7\nnan nan nan 0\n-0.25 0 1 65536\n")
     expect_error(ascii_pcd, r"integer field label holds values outside its type uint16 \(0..65535\): 0..65536",
                  call=rec.read_pcd)  # once wrapped to 0
+    scan = small_scan()
+    big = rec.write_pcd(scan, tmp_path / "big.pcd", data="ascii", extras={"id": np.full(scan.shape, 2**64 - 1, np.uint64)})
+    expect_error(big, r"64-bit integer field id holds values of 2\*\*53 or more", call=rec.read_pcd)  # once read as 0
+    small_ids = rec.write_pcd(scan, tmp_path / "ids.pcd", data="ascii", extras={"id": np.full(scan.shape, 7, np.int64)})
+    assert (rec.read_pcd(small_ids)[1]["id"] == 7).all()
     # binary with a PCL padding field "_" between z and label
     binary = tmp_path / "b.pcd"
     text = header.format("binary").replace("FIELDS x y z label", "FIELDS x y z _ label")

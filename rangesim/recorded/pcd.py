@@ -285,6 +285,10 @@ def _read_body(raw: bytes, header: PcdHeader, path: Path) -> dict[str, np.ndarra
                 if not np.isfinite(block).all() or (block != np.round(block)).any():
                     raise RangesimError(f"PCD ascii data: integer field {f.name} holds non-integer values", path)
                 info = np.iinfo(f.code)
+                if info.bits == 64 and block.size and np.abs(block).max() >= 2.0**53:
+                    # parsed as float64, whose integers end at 2**53 (2**64 - 1 read back as 0)
+                    raise RangesimError(f"PCD ascii data: 64-bit integer field {f.name} holds values of 2**53 or "
+                                        "more, which ascii cannot carry exactly here; write the file as binary", path)
                 if block.size and (block.min() < info.min or block.max() > info.max):
                     # the cast would wrap them (300 as a U 1 label reads 44)
                     raise RangesimError(f"PCD ascii data: integer field {f.name} holds values outside its type "
