@@ -277,3 +277,29 @@ def test_run_timings_stay_out_of_scan_files():
 
     text = encode_meta({"seed": 3, "seconds": {"paths": 0.1}, "kernels": {"first_tile": 2}, "frames": 9})
     assert json.loads(text) == {"seed": 3, "frames": 9}
+
+
+def test_atomic_writes_keep_long_names_permissions_and_links(tmp_path):
+    # a file system's 255-byte names failed on the temporary's 14 extra bytes; a replaced 0600
+    # file came back 0644; a symlink was replaced by a file and its target never updated
+    import os
+
+    from rangesim.core.atomic import atomic_path
+
+    long = tmp_path / ("a" * 246 + ".txt")
+    with atomic_path(long) as tmp:
+        tmp.write_text("one")
+    assert long.read_text() == "one"
+    os.chmod(long, 0o600)
+    with atomic_path(long) as tmp:
+        tmp.write_text("two")
+    assert long.read_text() == "two" and os.stat(long).st_mode & 0o777 == 0o600
+    target = tmp_path / "runs" / "42.txt"
+    target.parent.mkdir()
+    target.write_text("old")
+    link = tmp_path / "latest.txt"
+    link.symlink_to(Path("runs") / "42.txt")
+    with atomic_path(link) as tmp:
+        tmp.write_text("new")
+    assert link.is_symlink() and target.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.name.startswith(".")) == []  # no temporaries left

@@ -7,9 +7,13 @@ from __future__ import annotations
 
 import os
 import secrets
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+#: the longest file name (bytes) most file systems take (ext4, XFS, APFS, NTFS)
+MAX_NAME_BYTES = 255
 
 
 def temp_path_for(path: str | Path) -> Path:
@@ -20,8 +24,12 @@ def temp_path_for(path: str | Path) -> Path:
     extension still work). The file is not created.
     """
     path = Path(path)
+    # the 14 characters added must not push a long name past the file system's 255 bytes
+    stem = path.stem
+    while len(f".{stem}.tmp-00000000{path.suffix}".encode()) > MAX_NAME_BYTES and stem:
+        stem = stem[:-1]
     while True:
-        tmp = path.with_name(f".{path.stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
+        tmp = path.with_name(f".{stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
         if not tmp.exists():
             return tmp
 
@@ -50,11 +58,17 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     ...     imageio.imwrite(tmp, image)
     """
     path = Path(path)
+    if path.is_symlink():  # as open() does: the file the link names is replaced, the link stays
+        path = path.resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     # not created here (e.g. with mkstemp) so the file gets the usual umask permissions
     tmp = temp_path_for(path)
     try:
         yield tmp
+        if path.exists():  # a replaced file keeps its permissions (a 0600 file stays private)
+            os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
+        with open(tmp, "rb") as handle:  # on disk before the rename, so a crash leaves old or new
+            os.fsync(handle.fileno())
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
