@@ -2,12 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_conf, check_out_files, json_safe, make_out_dir, positive, writing
+from rangesim.cli.common import check_conf, check_out_files, make_out_dir, positive, write_json, writing
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
@@ -97,8 +96,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
         if args.sensor is not None:
             report["sensor"] = sensor_summary(scan, args.sensor)
         target = out / "scores.json"
-        with writing(target), atomic_path(target) as tmp:
-            Path(tmp).write_text(json.dumps(json_safe(report), indent=1, default=float))  # strict JSON
+        write_json(report, target)  # strict JSON: NaN as null
     else:  # a scan without truth: a reused folder's old scores and truth picture are another scan's
         for stale in ("scores.json", "ground_truth.png"):
             (out / stale).unlink(missing_ok=True)

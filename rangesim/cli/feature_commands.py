@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_out_files, json_safe, make_out_dir, positive, writing
+from rangesim.cli.common import check_out_files, make_out_dir, positive, write_json, writing
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
 
@@ -78,8 +77,7 @@ def cmd_features(args: argparse.Namespace) -> int:
         truth = ground_truth_features(scan, model if model is not None else scene)
         report["scores"] = _plain(feature_scores(feats, truth, scan))
     target = out / "features.json"
-    with writing(target), atomic_path(target) as tmp:
-        Path(tmp).write_text(json.dumps(json_safe(report), indent=1, default=float))  # strict JSON: NaN as null
+    write_json(report, target)  # strict JSON: NaN as null
     target = out / "relations.csv"
     with writing(target), atomic_path(target) as tmp:
         Path(tmp).write_text(F.relations_to_csv(rows))
