@@ -217,6 +217,7 @@ def _detectors(value: Any, source: Path) -> dict[str, dict[str, Any]]:
     if not isinstance(value, dict) or not value:
         raise RangesimError("detectors must be a non-empty list of names or a table of tables", source=source)
     out = {}
+    probe = None
     for name, params in value.items():
         if name not in DETECTORS:
             raise RangesimError(f"detectors: unknown detector {name!r}; known: {', '.join(DETECTORS)}",
@@ -228,10 +229,12 @@ def _detectors(value: Any, source: Path) -> dict[str, dict[str, Any]]:
         if unknown:
             raise RangesimError(f"detectors.{name}: unknown parameter(s) {', '.join(unknown)}; "
                                 f"known: {', '.join(accepted)}", source=source)
-        try:  # the values too, before any scan: the detector on a small tilted plane
-            DETECTORS[name](_probe_scan(), **params)
-        except RangesimError as exc:
-            raise RangesimError(f"detectors.{name}: {exc}", source=source) from exc
+        if params:  # the values too, before any scan: the detector on a small tilted plane
+            probe = _probe_scan() if probe is None else probe
+            try:
+                DETECTORS[name](probe, **params)
+            except RangesimError as exc:
+                raise RangesimError(f"detectors.{name}: {exc}", source=source) from exc
         out[name] = dict(params)
     return out
 
