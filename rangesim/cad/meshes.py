@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
+from typing import Any
 
 import numba
 import numpy as np
@@ -111,6 +112,25 @@ def _read_and_validate(path: Path) -> trimesh.Trimesh:
     return validate_mesh(loaded, source=path)
 
 
+def check_mesh_arrays(mesh: Any, source: str | Path | None = "mesh") -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's vertices (V, 3) float64 and faces (F, 3) int64, refused with a one-line message
+    naming ``source`` when there are no triangles, a face is no triangle, a vertex is not finite
+    or an index is out of range.
+    """
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+    if faces.ndim != 2 or len(faces) == 0:
+        raise RangesimError("mesh is empty (no triangles)", source=source)
+    if faces.shape[1] != 3:
+        raise RangesimError(f"faces must be triangles, got {faces.shape[1]} indices", source=source)
+    if not np.all(np.isfinite(vertices)):
+        bad = int(np.count_nonzero(~np.isfinite(vertices).all(axis=1)))
+        raise RangesimError(f"{bad} vertices have NaN or infinite coordinates", source=source)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise RangesimError("face indices out of range of the vertex list", source=source)
+    return vertices, faces
+
+
 def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh.Trimesh:
     """Check a mesh is usable for ray casting and return a cleaned copy.
 
@@ -124,17 +144,7 @@ def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh
     RangesimError
         No triangles, non-finite vertex coordinates, or face indices out of range.
     """
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64)
-    if faces.ndim != 2 or len(faces) == 0:
-        raise RangesimError("mesh is empty (no triangles)", source=source)
-    if faces.shape[1] != 3:
-        raise RangesimError(f"faces must be triangles, got {faces.shape[1]} indices", source=source)
-    if not np.all(np.isfinite(vertices)):
-        bad = int(np.count_nonzero(~np.isfinite(vertices).all(axis=1)))
-        raise RangesimError(f"{bad} vertices have NaN or infinite coordinates", source=source)
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise RangesimError("face indices out of range of the vertex list", source=source)
+    vertices, faces = check_mesh_arrays(mesh, source)
     clean = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
     # NumPy checks instead of trimesh's watertightness and mass properties (3x the time and
     # memory at a million triangles), cached on the mesh for the scanner's shared-edge guard.

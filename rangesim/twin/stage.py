@@ -80,11 +80,9 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
         except Exception as exc:  # trimesh raises many kinds
             raise RangesimError(f"cannot read mesh ({exc})", source=path) from exc
         mesh = loaded
-    if not hasattr(mesh, "vertices") or not hasattr(mesh, "faces") or len(mesh.faces) == 0:
-        raise RangesimError("the mesh has no triangles", source=source)
-    bad = int(np.count_nonzero(~np.isfinite(np.asarray(mesh.vertices, float)).all(axis=1)))
-    if bad:
-        raise RangesimError(f"{bad} vertices have NaN or infinite coordinates", source=source)
+    from rangesim.cad.meshes import check_mesh_arrays
+
+    check_mesh_arrays(mesh, source)
     mesh = mesh.copy()
     if scale == "auto":
         extent = float(np.ptp(mesh.vertices, axis=0).max())
