@@ -206,6 +206,10 @@ def test_pcd_round_trip(tmp_path, data, shape):
     assert back.meta["pcd_fields"] == ["x", "y", "z", "label", "rgba", "hist", "flag"]
     for name, value in extras.items():
         assert back_extras[name].dtype == value.dtype and np.array_equal(back_extras[name], value)
+    # PCD floats are 4 or 8 bytes: float16 is written as F 4 (it once wrote F 2, which no reader takes)
+    half = rng.normal(size=shape).astype(np.float16)
+    back_half = rec.read_pcd(rec.write_pcd(scan, tmp_path / "half.pcd", data=data, extras={"h": half}))[1]["h"]
+    assert back_half.dtype == np.float32 and np.array_equal(back_half, half.astype(np.float32))
     single = rec.read_pcd(rec.write_pcd(scan, tmp_path / "single.pcd", data=data))[0]
     ulp = np.spacing(np.abs(scan.xyz[scan.valid]))
     assert (np.abs(single.xyz[scan.valid] - scan.xyz[scan.valid]) <= ulp).all()  # float32 metres

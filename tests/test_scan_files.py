@@ -27,6 +27,18 @@ def test_exact_round_trip(tmp_path, noisy_scan, suffix):
     np.testing.assert_array_equal(back.K, noisy_scan.K)
 
 
+@pytest.mark.parametrize("suffix", [".exr", ".npz", ".ply", ".pcd"])
+def test_a_pose_that_is_not_finite_is_refused_by_every_writer(tmp_path, noisy_scan, suffix):
+    import copy
+
+    bad = copy.copy(noisy_scan)
+    bad.pose = noisy_scan.pose.copy()
+    bad.pose[0, 3] = np.nan  # a .ply written with it could not be read back
+    with pytest.raises(rs.RangesimError, match=r"scan\S* .*pose holds NaN or infinity"):
+        bad.save(tmp_path / f"scan{suffix}")
+    assert list(tmp_path.iterdir()) == []  # nothing written, not even a temporary
+
+
 def test_ply_holds_the_valid_points(tmp_path, noisy_scan):
     cloud = trimesh.load(noisy_scan.save(tmp_path / "scan.ply"))
     assert len(cloud.vertices) == noisy_scan.valid.sum()

@@ -14,6 +14,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rangesim.core.atomic import atomic_path
 from rangesim.core.errors import RangesimError
 
@@ -73,6 +75,9 @@ def save_scan(scan: Any, path: str | Path) -> Path:
         supported = ", ".join(sorted(WRITERS)) or "none (import rangesim.io to register the scan formats)"
         what = f"{path.suffix!r} files" if path.suffix else "files without an extension"
         raise RangesimError(f"cannot write scans as {what}; supported: {supported}", path)
+    pose = getattr(scan, "pose", None)
+    if pose is not None and not np.all(np.isfinite(pose)):  # no reader takes such a pose back
+        raise RangesimError("cannot write the scan: its pose holds NaN or infinity", path)
     with atomic_path(path) as tmp:
         try:
             writer(scan, tmp)

@@ -363,7 +363,8 @@ def write_pcd(
     path : str or Path
     data : {"binary", "ascii", "binary_compressed"}
     extras : dict of str to ndarray, optional
-        Arrays of shape (H, W) or (H, W, COUNT), integer, unsigned, float or bool.
+        Arrays of shape (H, W) or (H, W, COUNT), integer, unsigned, float or bool (bool is
+        written as U 1, float16 as F 4 and long double as F 8: PCD floats are 4 or 8 bytes).
     precision : {"float32", "float64"}
         Type of x/y/z and the normals. Metres in float32 round-trip millimetres to within
         one float32 ulp; ``"float64"`` round-trips them exactly.
@@ -403,6 +404,8 @@ def write_pcd(
             )
         if value.dtype.kind == "b":
             value = value.astype(np.uint8)
+        elif value.dtype.kind == "f" and value.dtype.itemsize not in (4, 8):  # PCD floats are F 4 or F 8
+            value = value.astype(np.float32 if value.dtype.itemsize < 4 else np.float64)
         columns.append((name, value.reshape(n, -1) if value.ndim == 3 else value.reshape(n)))
     header = _header_text(columns, w, h, scan.meta, data)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
