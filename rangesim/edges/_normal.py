@@ -25,7 +25,14 @@ from rangesim.edges._noise import (
 from rangesim.edges._normal_blocks import block_bends
 from rangesim.edges._normal_sl import sl_creases
 from rangesim.edges._scan_access import scan_depth, scan_points
-from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, ridge_offsets, thin_staircases
+from rangesim.edges._thinning import (
+    JUMP_CLEARANCE,
+    drop_specks,
+    near_mask,
+    nonmax_suppress,
+    ridge_offsets,
+    thin_staircases,
+)
 from rangesim.edges._trig import half_atan2
 from rangesim.edges.edgemap import RIM, EdgeMap
 
@@ -124,7 +131,9 @@ def normal(
         camera it is ``jump_threshold / f`` times the depth (PCL's 0.02 z is 0.02 f).
     nms : bool
         Thin creases to 1 px by non-maximum suppression across the crease (its direction is
-        the dominant harmonic of the four axis strengths).
+        the dominant harmonic of the four axis strengths). Thinned, crease fragments of at
+        most 2 px that touch no other edge pixel are dropped on the single-threshold paths
+        (noise excursions; :func:`~rangesim.edges._thinning.drop_specks`).
     max_search : int
         Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
     blocks : bool, optional
@@ -247,7 +256,9 @@ def _placed_creases(crease: np.ndarray, rank: np.ndarray | None, theta: np.ndarr
     """Creases thinned and placed as both of :func:`normal`'s paths do: non-maximum
     suppression on ``rank`` across ``theta`` (None: no NMS), no crease within
     :data:`JUMP_CLEARANCE` of a jump or rim (the crest beside one is the jump itself, as in
-    gradient), NMS staircases thinned to 1-px diagonals; labels CONVEX/CONCAVE, RIM, JUMP;
+    gradient), NMS staircases thinned to 1-px diagonals, then (with NMS) fragments of at most
+    :data:`~rangesim.edges._thinning.SPECK_MAX_PX` crease pixels touching no other edge
+    dropped (:func:`~rangesim.edges._thinning.drop_specks`); labels CONVEX/CONCAVE, RIM, JUMP;
     offsets: the jumps' and rims' and, with NMS, the creases' sub-pixel vertex from the
     ranks NMS compared (the summed bend across a sampled roof is a peak about two samples
     wide, so the triangle's vertex; on analytic roofs mean |distance| to the line 0.65-0.75
@@ -265,6 +276,8 @@ def _placed_creases(crease: np.ndarray, rank: np.ndarray | None, theta: np.ndarr
     rim = disc.rim
     crease &= ~near_mask(crease, jump | disc.occluded | rim, JUMP_CLEARANCE)
     crease = thin_staircases(crease | jump | rim, droppable=crease) & ~jump & ~rim
+    if rank is not None:  # thinned to lines, a lone crease pixel or pair is noise (one threshold)
+        crease = drop_specks(crease, crease | jump | rim)
     offset = disc.offsets_at(jump | rim)
     if rank is not None:
         offset += ridge_offsets(rank, theta, crease, peak="triangle")
