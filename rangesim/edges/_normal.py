@@ -132,8 +132,10 @@ def normal(
     nms : bool
         Thin creases to 1 px by non-maximum suppression across the crease (its direction is
         the dominant harmonic of the four axis strengths). Thinned, crease fragments of at
-        most 2 px that touch no other edge pixel are dropped on the single-threshold paths
-        (noise excursions; :func:`~rangesim.edges._thinning.drop_specks`).
+        most 2 px that touch no other edge pixel are dropped on noisy scans (noise excursions
+        over one threshold; :func:`~rangesim.edges._thinning.drop_specks`; not on the
+        block-matched path, whose hysteresis needs a strong pixel, nor on noise-free scans,
+        where they are small features such as the Green Piece's scratches).
     max_search : int
         Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
     blocks : bool, optional
@@ -240,7 +242,7 @@ def normal(
         np.copyto(rank, np.nan, where=np.isnan(strength))
     else:
         rank = None
-    crease, labels, offset = _placed_creases(crease, rank, theta, concave, disc)
+    crease, labels, offset = _placed_creases(crease, rank, theta, concave, disc, specks=noisy)
     jump, rim = disc.occluding, disc.rim
     params = {
         "threshold_deg": float(threshold_deg), "window": window,
@@ -252,13 +254,13 @@ def normal(
 
 
 def _placed_creases(crease: np.ndarray, rank: np.ndarray | None, theta: np.ndarray, concave: np.ndarray,
-                    disc: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    disc: Any, specks: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Creases thinned and placed as both of :func:`normal`'s paths do: non-maximum
     suppression on ``rank`` across ``theta`` (None: no NMS), no crease within
     :data:`JUMP_CLEARANCE` of a jump or rim (the crest beside one is the jump itself, as in
-    gradient), NMS staircases thinned to 1-px diagonals, then (with NMS) fragments of at most
-    :data:`~rangesim.edges._thinning.SPECK_MAX_PX` crease pixels touching no other edge
-    dropped (:func:`~rangesim.edges._thinning.drop_specks`); labels CONVEX/CONCAVE, RIM, JUMP;
+    gradient), NMS staircases thinned to 1-px diagonals, then (with NMS, and ``specks``: on noisy
+    scans) fragments of at most :data:`~rangesim.edges._thinning.SPECK_MAX_PX` crease pixels
+    touching no other edge dropped (:func:`~rangesim.edges._thinning.drop_specks`); labels CONVEX/CONCAVE, RIM, JUMP;
     offsets: the jumps' and rims' and, with NMS, the creases' sub-pixel vertex from the
     ranks NMS compared (the summed bend across a sampled roof is a peak about two samples
     wide, so the triangle's vertex; on analytic roofs mean |distance| to the line 0.65-0.75
@@ -276,7 +278,7 @@ def _placed_creases(crease: np.ndarray, rank: np.ndarray | None, theta: np.ndarr
     rim = disc.rim
     crease &= ~near_mask(crease, jump | disc.occluded | rim, JUMP_CLEARANCE)
     crease = thin_staircases(crease | jump | rim, droppable=crease) & ~jump & ~rim
-    if rank is not None:  # thinned to lines, a lone crease pixel or pair is noise (one threshold)
+    if rank is not None and specks:  # thinned to lines, a lone crease pixel or pair is noise (one threshold)
         crease = drop_specks(crease, crease | jump | rim)
     offset = disc.offsets_at(jump | rim)
     if rank is not None:
@@ -297,7 +299,7 @@ def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_thresho
     theta = half_atan2(bends.chord[1] - bends.chord[3], bends.chord[0] - bends.chord[2])
     # (the bend of blocks sharing the pixel peaks on the crease and falls by a row of the
     # other face per pixel off it: a triangle, as the stencil's summed bend)
-    crease, labels, offset = _placed_creases(crease, rank if nms else None, theta, bends.concave, disc)
+    crease, labels, offset = _placed_creases(crease, rank if nms else None, theta, bends.concave, disc, specks=True)
     jump, rim = disc.occluding, disc.rim
     params = {
         "threshold_deg": float(bends.floor_deg), "window": None, "blocks": list(bends.sizes),

@@ -312,12 +312,13 @@ def hysteresis(strength: np.ndarray, low: float | np.ndarray, high: float | np.n
 
 
 #: crease fragments of at most this many pixels that touch no other edge pixel are dropped by
-#: normal's single-threshold paths (:func:`drop_specks`): after NMS a crease is a line, and a
-#: lone pixel or pair over one threshold is a noise excursion. Machined parts, laser-stripe
-#: presets, F1 noise-free / noisy: tuning seeds 0-7 (inria_laser 20-29) +0.000-0.002 /
-#: +0.002-0.005, check seeds 8-15 (30-39) -0.000-+0.002 / +0.001-0.005 (3 px: within 0.001).
-#: Not for gradient (tuning +0.001-0.009, but check seeds -0.002 to -0.013: its noisy creases
-#: come in dashes along true edges) nor under hysteresis (which already needs a strong pixel)
+#: normal's single-threshold paths on noisy scans (:func:`drop_specks`): after NMS a crease is
+#: a line, and a lone pixel or pair over one threshold is a noise excursion. Machined parts,
+#: laser-stripe presets, noisy F1: tuning seeds 0-7 (inria_laser 20-29) +0.002-0.005, check
+#: seeds 8-15 (30-39) +0.001-0.005 (3 px: within 0.001). Not on noise-free scans (there they
+#: are small features: the Green Piece's F1 -0.002 / -0.006 with and without the stripe's
+#: width), nor for gradient (tuning +0.001-0.009, but check seeds -0.002 to -0.013: its noisy
+#: creases come in dashes along true edges), nor under hysteresis (which needs a strong pixel)
 SPECK_MAX_PX = 2
 
 
