@@ -102,13 +102,17 @@ def test_z_score_has_unit_std_in_every_incidence_bin(terms):
 
 
 def test_speckle_correlation_length_carries_into_the_depth_error():
-    corr_mm, z = 3.0, 400.0  # 1.2 px: a kernel the pixel grid resolves
+    """``correlation_mm`` is mm on a facing surface at the reference distance, one size on the
+    sensor (subjective speckle grains): the depth error's neighbour correlation is
+    exp(-1 / (4 l^2)) with l = correlation_mm f / z_ref pixels, at any range."""
+    corr_mm = 3.0  # 1.2 px: a kernel the pixel grid resolves
     sensor = make_sensor(**{"noise.speckle_contrast": 1.0, "noise.correlation_mm": corr_mm})
-    scan = rs.scan([plane()], sensor, pose=top_down_pose(z), seed=4)
-    e = scan.depth - z
     corr_px = corr_mm * sensor.K[0, 0] / sensor.reference_distance
-    rho = np.corrcoef(e[:, :-1].ravel(), e[:, 1:].ravel())[0, 1]
-    assert rho == pytest.approx(math.exp(-1 / (4 * corr_px**2)), abs=0.05)
+    for z in (250.0, 400.0, 800.0):
+        scan = rs.scan([plane()], sensor, pose=top_down_pose(z), seed=4)
+        e = scan.depth - z
+        rho = np.corrcoef(e[:, :-1].ravel(), e[:, 1:].ravel())[0, 1]
+        assert rho == pytest.approx(math.exp(-1 / (4 * corr_px**2)), abs=0.05), z
 
 
 def test_dropouts_follow_the_speckle_detection_law():

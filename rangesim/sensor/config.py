@@ -50,7 +50,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "speckle_contrast": 0.0,
         # rangesim.sensor.stripe_noise: all off by default, so a quiet sensor stays exact
         "signal_px": 0.0,  # detector/shot-noise peak error of the facing white stripe, pixels
-        "correlation_mm": 0.0,  # speckle correlation length on the surface (Gaussian std), mm
+        "correlation_mm": 0.0,  # speckle correlation length (Gaussian std), mm at z_ref (fixed px on the sensor)
         "edge_gain": 0.0,  # fraction of a truncated stripe's centroid shift that reaches the peak
         "signal_contrast": 0.0,  # speckle contrast of the detected amplitude (dropout probability)
     },
@@ -148,7 +148,8 @@ class Sensor:
 
     @property
     def reference_distance(self) -> float:
-        """Distance (mm) at which a white target facing the sensor returns signal 1: mid-range."""
+        """Distance (mm) at which a white target facing both the laser and the camera (at this distance
+        from each) returns signal 1: mid-range."""
         r = self.params["range"]
         return 0.5 * (r["near"] + r["far"])
 

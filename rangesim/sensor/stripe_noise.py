@@ -35,7 +35,9 @@ Imaged stripe width. A sheet of FWHM ``s`` (mm) falling on a surface at laser in
    stripe as narrow as a speckle grain; a wider stripe holds w / w0 more grains, whose
    random intensities move the centroid as a random walk, so sigma_speckle ~ sqrt(w / w0).
    Terms 2-4 share one **correlated field**: white noise filtered with a Gaussian of std
-   ``noise.correlation_mm`` (mm on the surface, converted to pixels by the caller) and
+   ``noise.correlation_mm`` (mm on a facing surface at the reference distance: the caller
+   converts it to pixels once, ``correlation_mm f / z_ref``, so the grains keep one size on
+   the sensor at every range, as subjective speckle's do) and
    scaled back to unit variance.
 4. Partial stripes (``noise.edge_gain`` g): where an outline or a shadow border lies inside
    the stripe's footprint, the imaged stripe is truncated (Curless and Levoy 1995). A
@@ -147,7 +149,8 @@ class StripeNoise:
     speckle_contrast : float
         Speckle contrast C of term 3 (0 disables it).
     correlation_mm : float
-        Std (mm on the surface) of the Gaussian kernel of the correlated terms (0: white).
+        Std of the Gaussian kernel of the correlated terms, mm on a facing surface at the
+        reference distance (a fixed ``correlation_mm f / z_ref`` pixels at every range; 0: white).
     edge_gain : float
         Fraction g of a truncated stripe's centroid shift that reaches the peak (term 4).
     min_signal, signal_contrast : float

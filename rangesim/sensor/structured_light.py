@@ -29,8 +29,9 @@ on the IR camera's -x side), looking along +z: a rectified pair):
 
 So depth noise follows sigma_z = z^2 sigma_d / (f b), with sigma_d growing with the surface's
 slant (:mod:`rangesim.sensor.matching_noise`: the scan's ``sigma``), depth comes in steps of
-f b / d - f b / (d + 1/8), projector shadows are h b / (D - h) wide behind an edge of height h
-in front of a surface at D, and depth edges fatten outwards by about half the window.
+f b / d - f b / (d + 1/8), projector shadows are (b - x_e) h / (D - h) wide behind an edge of
+height h in front of a surface at D (x_e the edge's offset from the camera towards the
+projector; h b / (D - h) on the axis), and depth edges fatten outwards by about half the window.
 
 Status: valid where a disparity was accepted and its depth lies in [near, far]; otherwise
 no surface (1), projector shadow (2), outside the range (4) or dropout (3, rejected match
