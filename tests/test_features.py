@@ -165,3 +165,25 @@ def test_flat_target_labelled_rims(data_dir, monkeypatch):
           scores["precision"], "centre error", scores["center_error_px"])
     assert scores["recall"] == 1.0
     assert scores["center_error_px"]["max"] <= 1.0
+
+
+@pytest.mark.parametrize("span_deg", [90, 120, 180])
+def test_arcs_span_thin_8_connected_arcs(span_deg):
+    """A thin arc's pixels lie up to sqrt(2) px apart along it, so one-pixel angular bins left a
+    lone empty bin every few pixels and the longest run stopped at 45-60 degrees (a clean 180
+    degree arc ran 61 degrees); a lone empty bin no longer breaks the run."""
+    y, x = np.mgrid[0:160, 0:160]
+    ring = np.abs(np.hypot(x - 80.3, y - 79.6) - 30) < 0.5
+    arc = ring & (np.degrees(np.arctan2(y - 79.6, x - 80.3)) % 360 <= span_deg)
+    best = rs.features.arcs(arc, radii=(5, 80))[0]
+    assert abs(best.radius - 30) < 1.5 and abs(np.degrees(best.span) - span_deg) < 10
+
+
+def test_arcs_on_a_canny_edge_map():
+    """A half disc through skimage's Canny (1 px wide, 8-connected): its 180 degree arc is found."""
+    from skimage.feature import canny
+
+    y, x = np.mgrid[0:160, 0:160]
+    edges = canny(((np.hypot(x - 80.3, y - 79.6) < 40) & (y < 79.6)).astype(float), sigma=1.5)
+    found = rs.features.arcs(edges, radii=(20, 60))
+    assert found and abs(found[0].radius - 40) < 1 and np.degrees(found[0].span) > 170

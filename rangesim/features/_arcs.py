@@ -66,12 +66,14 @@ def arcs(
 
     Examples
     --------
+    >>> import numpy as np
     >>> import rangesim as rs
-    >>> scan = rs.datasets.plate_scan()        # a plate with a hole, on a table, 128 x 120
-
-    >>> found = rs.features.arcs(rs.edges.gradient(scan), radii=(5, 30))
-    >>> all(0 < a.coverage < 1 for a in found)
-    True
+    >>> y, x = np.mgrid[0:120, 0:120]          # a thin 120 degree arc, radius 30 px, centre (60.3, 59.6)
+    >>> ring = np.abs(np.hypot(x - 60.3, y - 59.6) - 30) < 0.5
+    >>> arc = ring & (np.degrees(np.arctan2(y - 59.6, x - 60.3)) % 360 <= 120)
+    >>> (found,) = rs.features.arcs(arc, radii=(10, 50))
+    >>> round(found.radius), round(float(np.degrees(found.span))), found.coverage < 0.5
+    (30, 119, True)
 
     References
     ----------
