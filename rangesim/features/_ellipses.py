@@ -206,10 +206,7 @@ def ellipses(
     direct least-squares conic fit (Fitzgibbon) on the remaining edge points within a band
     of ``band_px`` (default ``max(3, 0.15 b)``) px whose edge direction agrees, narrowing the
     band over three passes. Kept when its supporting points cover at least ``min_support``
-    of its perimeter (about one point per pixel). Each edge point supports one rim: where two
-    predictions refine onto the same edge (a through-hole's top and hidden bottom rim, 2-3 px
-    apart in the image), the one predicted nearest its refit keeps it and the other is
-    dropped when more than half its points are taken.
+    of its perimeter (about one point per pixel).
 
     Without a model (:func:`~._arc_ellipses.free_ellipses`): the edge pixels are linked into
     smooth curves (neighbours, or up to 3 px apart along their tangent, whose normals agree
@@ -296,8 +293,7 @@ def ellipses(
     keep = ~remove | claimed
     out: list[Ellipse] = []
     if predictions:
-        found = []  # (distance of the refit from its prediction, prediction index, Ellipse, its points)
-        for k, (name, conic) in enumerate(predictions):
+        for name, conic in predictions:
             ell = ellipse_from_conic(conic)
             if ell is None:
                 continue
@@ -316,19 +312,9 @@ def ellipses(
             if len(sel) < min_support * perim or len(sel) < min_points:
                 continue
             rms = float(np.sqrt(np.mean(sampson_distance(c2, xy[keep][sel]) ** 2)))
-            found.append((float(np.hypot(*(e2[0] - ell[0]))), k,
-                          Ellipse((float(e2[0][0]), float(e2[0][1])), (float(e2[1][0]), float(e2[1][1])),
-                                  float(e2[2]), rms, len(sel), name), sel))
-        # one edge, one rim: two predictions 2-3 px apart (a hole's top and hidden bottom rim)
-        # both lock onto the one edge the map holds; the prediction nearest its refit claims
-        # the points, and a refit whose points are mostly claimed already is that edge again
-        taken = np.zeros(int(keep.sum()), bool)
-        kept = []
-        for _, k, e, sel in sorted(found, key=lambda f: f[0]):
-            if taken[sel].mean() <= 0.5:
-                kept.append((k, e))
-                taken[sel] = True
-        return [e for _, e in sorted(kept, key=lambda ke: ke[0])]
+            out.append(Ellipse((float(e2[0][0]), float(e2[0][1])), (float(e2[1][0]), float(e2[1][1])),
+                               float(e2[2]), rms, len(sel), name))
+        return out
     # -- no model: arcs of the remaining points, grown --
     labels = point_labels(edge_map, pixels)
     return _free(xy[keep], theta[keep], pixels[keep], None if labels is None else labels[keep], min_points,
