@@ -206,7 +206,13 @@ def ellipses(
     direct least-squares conic fit (Fitzgibbon) on the remaining edge points within a band
     of ``band_px`` (default ``max(3, 0.15 b)``) px whose edge direction agrees, narrowing the
     band over three passes. Kept when its supporting points cover at least ``min_support``
-    of its perimeter (about one point per pixel).
+    of its perimeter (about one point per pixel). The predictions are refined independently,
+    so two predicted rims closer than the band may lock onto the one edge the map holds and
+    both be returned with the same geometry: a chamfered hole's two circles 1-2 px apart (on
+    the flat machined target each truth rim then has its match), or a through-hole's bottom
+    rim, partly seen through the hole, beside its top rim (the plate of
+    :func:`rangesim.datasets.plate_scene` returns ``loop_1`` and ``loop_2`` alike). Claiming
+    each edge point for one prediction was tried and dropped: it lost one of each chamfer pair.
 
     Without a model (:func:`~._arc_ellipses.free_ellipses`): the edge pixels are linked into
     smooth curves (neighbours, or up to 3 px apart along their tangent, whose normals agree
