@@ -187,3 +187,51 @@ def test_arcs_on_a_canny_edge_map():
     edges = canny(((np.hypot(x - 80.3, y - 79.6) < 40) & (y < 79.6)).astype(float), sigma=1.5)
     found = rs.features.arcs(edges, radii=(20, 60))
     assert found and abs(found[0].radius - 40) < 1 and np.degrees(found[0].span) > 170
+
+
+def test_feature_finders_refuse_bad_parameters_in_one_line():
+    """ellipses and circle_hypotheses check what circles, arcs and lines check (they raised
+    TypeError / ZeroDivisionError from inside NumPy, or took the value silently)."""
+    from rangesim.core.errors import RangesimError
+
+    m = np.zeros((60, 60), bool)
+    m[20, 10:40] = True
+    bad = [
+        lambda: F.ellipses(m, min_points="a"),
+        lambda: F.ellipses(m, explained=5),
+        lambda: F.ellipses(m, free_support=np.nan),
+        lambda: F.ellipses(m, min_support=-1),
+        lambda: F.ellipses(m, band_px=-1),
+        lambda: F.ellipses(m, remove_explained="no"),
+        lambda: F.ellipses(m, scene=rs.datasets.plate_scene()),      # a model needs the scan too
+        lambda: F.ellipses(m, rs.datasets.plate_scan(width=60, height=60), "scenes/plate.toml"),
+        lambda: F.circle_hypotheses(m, angle_tol_deg=-5),
+        lambda: F.circle_hypotheses(m, threshold=np.nan),
+        lambda: F.circle_hypotheses(m, max_hypotheses=0),
+        lambda: F.circle_hypotheses(m, max_hypotheses=2.5),
+        lambda: F.circle_hypotheses(m, radius_step=0),
+        lambda: F.circle_hypotheses(m, cell_px=-1),
+        lambda: F.circles(m, split_tangent="no"),
+    ]
+    for call in bad:
+        with pytest.raises(RangesimError) as info:
+            call()
+        assert "\n" not in str(info.value)
+
+
+def test_feature_edge_cases_from_a_users_probe():
+    # a run of exactly min_length px is kept (its projected extent rounded to 29.999...)
+    m = np.zeros((100, 100), bool)
+    m[50, 10:41] = True
+    assert len(F.lines(m, min_length=30)) == 1
+    # radii beyond the image's diagonal are not searched (a 1e6 px range was refused for memory)
+    y, x = np.mgrid[0:100, 0:100]
+    ring = np.abs(np.hypot(x - 50, y - 50) - 20) < 0.6
+    (c,) = F.circles(ring, radii=(5, 1e6))
+    assert abs(c.radius - 20) < 0.1
+    # relations as strict JSON: a non-finite value is null
+    from rangesim.features._circles import Circle
+    from rangesim.features._lines import Segment
+
+    text = F.relations_to_json(F.relations([Segment((0, 0), (10, 0), 10, None, 10, 0)], [Circle((np.nan, 1), 3, 1, 1, 0)]))
+    assert "NaN" not in text and json.loads(text)[0]["value"] is None

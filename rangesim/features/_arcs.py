@@ -58,7 +58,8 @@ def arcs(
     Same accumulator as :func:`~rangesim.features.circles` with a lower threshold (a
     fraction of 2 pi r, so proportional to r); kept when the longest contiguous supported run
     spans at least ``min_span_deg`` while the total coverage stays below ``max_coverage``
-    (above it the hypothesis is a circle).
+    (above it the hypothesis is a circle). As for circles, the centre must lie inside the
+    image: the arc of a large rim whose centre the frame cuts off is not found.
 
     Returns
     -------
@@ -97,5 +98,8 @@ def arcs(
         _, cov, s, e, rms = _support(xy, c, r)
         if cov < max_coverage and (e - s) >= np.deg2rad(min_span_deg) and rms <= max_residual:
             found.append(Arc((float(c[0]), float(c[1])), float(r), s, e, cov, votes, rms))
-    found.sort(key=lambda a: -a.span)
-    return _dedupe(found, lambda k: np.array(k.center), lambda k: k.radius, 2.0)
+    # of near-duplicates the one covering more of its circle stays (then the closer fit), so a
+    # hypothesis refined 1 px off does not win by a few degrees more of run
+    found.sort(key=lambda a: (-a.coverage, a.residual))
+    kept = _dedupe(found, lambda k: np.array(k.center), lambda k: k.radius, 2.0)
+    return sorted(kept, key=lambda a: -a.span)

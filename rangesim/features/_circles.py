@@ -74,7 +74,9 @@ def circle_hypotheses(
     A circle of radius r collects about 2 pi r votes, so the thresholds are ``threshold *
     2 pi r`` (proportional to r), first on 2 x 2 cell sums (centre candidates), then on each
     candidate's histogram of voter distances (``radius_step`` px bins; every peak is a
-    hypothesis, so concentric rims each get one). The centre of a candidate starts at the
+    hypothesis, so concentric rims each get one). Only centres inside the image (within half a
+    pixel of it) are candidates, so radii beyond the image's diagonal are not searched, and
+    the arc of a rim whose centre lies outside the frame is not found. The centre of a candidate starts at the
     least-squares intersection of its voters' normal lines; each hypothesis is refined by
     geometric (Gauss-Newton) fits on the edge points of a ring around it (its pixels looked up
     row by row) whose direction is radial within ``DIRECTION_TOL_DEG`` (15), the ring
@@ -90,6 +92,13 @@ def circle_hypotheses(
     (largest fraction of 2 pi r in inliers).
     """
     radii = check_range(radii, "radii")
+    P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
+    P.number(threshold, "threshold", 0, lo_open=True)
+    P.number(band_px, "band_px", 0, lo_open=True, unit="pixels")
+    max_hypotheses = P.whole(max_hypotheses, "max_hypotheses", 1)
+    P.number(cell_px, "cell_px", 0, lo_open=True, unit="pixels")
+    P.number(radius_step, "radius_step", 0, lo_open=True, unit="pixels")
+    P.number(rel_cell, "rel_cell", 0, lo_open=True, none=True)
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, band_px,
@@ -113,6 +122,11 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, shape: tu
     their edge kinds (None: a bare mask); ``split``: replace a hypothesis whose ring holds two
     near-concentric edges by the two circles (:func:`~._circle_kernels._two_edges`)."""
     if len(xy) < 5:
+        return None
+    # a circle centred in the image through an edge pixel is at most the diagonal wide: larger
+    # radii asked for cost accumulator memory and find nothing
+    radii = (radii[0], min(radii[1], float(np.hypot(*shape)) + 1.0))
+    if radii[0] > radii[1]:
         return None
     bands = radius_bands(shape, radii, cell_px, rel_cell)
     tol = np.deg2rad(angle_tol_deg)
@@ -261,6 +275,7 @@ def circles(
     P.number(threshold, "threshold", 0, lo_open=True)
     P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
     P.number(max_residual, "max_residual", 0, lo_open=True, unit="pixels")
+    split_tangent = P.flag(split_tangent, "split_tangent")
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     labels = point_labels(edge_map, pixels)

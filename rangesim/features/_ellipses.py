@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.conics import (
     conic_normal_angle,
     ellipse_from_conic,
@@ -39,7 +40,7 @@ class Ellipse:
     axes : (a, b) float
         Semi-major and semi-minor axes, pixels.
     orientation : float
-        Major-axis direction, radians from +x towards +y, in (-pi/2, pi/2].
+        Major-axis direction, radians from +x towards +y, in [-pi/2, pi/2).
     residual : float
         RMS Sampson distance of the supporting edge pixels, pixels.
     n_points : int
@@ -260,6 +261,18 @@ def ellipses(
     """
     if hypotheses not in (None, "tilings", "chains"):
         raise RangesimError(f"hypotheses must be 'tilings' or 'chains', got {hypotheses!r}")
+    if scene is not None and scan is None:
+        raise RangesimError("a scene needs its scan (the scan's pose and intrinsics project the scene's "
+                            "circles); give both, or no scene for the model-free search")
+    if scene is not None and not hasattr(scene, "objects"):
+        raise RangesimError(f"scene must be a loaded scene (rangesim.load_scene), not {type(scene).__name__}")
+    remove_explained = P.flag(remove_explained, "remove_explained")
+    if not isinstance(explained, (tuple, list)):
+        raise RangesimError(f"explained must be a tuple of found lines, circles or arcs, not {type(explained).__name__}")
+    P.number(band_px, "band_px", 0, lo_open=True, unit="pixels", none=True)
+    min_points = P.whole(min_points, "min_points", 5)
+    P.number(min_support, "min_support", 0, 1, what="share")
+    P.number(free_support, "free_support", 0, 1, what="share")
     mask = edge_mask(edge_map)
     if scan is not None:
         check_scan_shape(scan, mask)

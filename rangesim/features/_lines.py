@@ -154,7 +154,7 @@ def lines(
         idx, t = idx[o], t[o]
         cuts = np.nonzero(np.diff(t) > max_gap)[0] + 1
         for run in np.split(np.arange(len(idx)), cuts):
-            if len(run) < 2 or t[run[-1]] - t[run[0]] < min_length:
+            if len(run) < 2 or t[run[-1]] - t[run[0]] < min_length - 1e-9:  # (a 30.0 px run projects to 29.999...)
                 continue
             p = xy[idx[run]]
             m = p.mean(0)

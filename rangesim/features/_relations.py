@@ -4,6 +4,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import secrets
 from pathlib import Path
@@ -99,7 +100,9 @@ def relations_to_csv(rows: list[dict], path: str | Path | None = None) -> str:
 
 def relations_to_json(rows: list[dict], path: str | Path | None = None) -> str:
     """The table as JSON text (a list of objects), written to ``path`` when given, atomically."""
-    text = json.dumps(rows, indent=1)
+    # strict JSON: a non-finite value (hand-made features) is null, never a bare NaN
+    rows = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()} for row in rows]
+    text = json.dumps(rows, indent=1, allow_nan=False)
     if path is not None:
         _write_text(path, text)
     return text
