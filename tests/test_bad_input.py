@@ -133,8 +133,6 @@ CASES = [
                  ["camera.width x camera.height", "20,000 x 20,000", "GB"], id="scan-too-many-pixels"),
     pytest.param(["model", "green_piece", "--out", "{out}/m.stl", "--param", "segments=4000"],
                  ["segments=4000", "GB"], id="model-segments-memory"),
-    pytest.param(["features", "{scan}", "--rmax", "10000000", "--out", "{out}/f"], ["--rmax", "accumulator"],
-                 id="features-rmax-memory"),
     # arguments
     pytest.param(_scan("scene.toml", "--set", "noise.sigma_px=-1"), ["noise.sigma_px"], id="set-negative-noise"),
     pytest.param(_scan("scene.toml", "--set", "camera.width=0"), ["camera.width"], id="set-zero-width"),

@@ -339,7 +339,7 @@ def test_sweep_cli_summary_and_errors(sweep_dir, capsys, tmp_path):
     code = main(["sweep", str(sweep_dir / "sweep.toml"), "--out", str(sweep_dir / "serial"), "--workers", "0",
                  "--quiet", "--no-plots"])
     out = capsys.readouterr().out
-    assert code == 0 and "8 scans (0 run" in out and "8 reused" in out and "gradient" in out
+    assert code == 0 and "8 scans (all reused)" in out and "gradient" in out
     for args, words in (
         (["--scheduler", "udp://x"], "local:N or tcp://HOST:PORT"),
         (["--scheduler", "local:0"], "local:N"),
@@ -590,3 +590,75 @@ def test_damaged_dataset_folders_are_named_not_raw_errors(sweep_dir, tmp_path):
         (out / "manifest.json").write_text(json.dumps(damaged))
         with pytest.raises(RangesimError, match="manifest"):
             SyntheticDataset(out)
+
+
+def test_task_scene_cache_follows_the_mesh_files(tmp_path):
+    """A mesh changed under an unchanged scene file: a long-lived process (a notebook's
+    workers=0 run, a Dask worker) once kept serving the old geometry under the new task keys."""
+    import trimesh
+
+    from rangesim.experiments.scenes import load_task_scene
+
+    mesh = tmp_path / "part.stl"
+    trimesh.creation.box((20, 20, 10)).export(mesh)
+    scene_file = tmp_path / "s.toml"
+    scene_file.write_text('units = "mm"\n[[object]]\nname = "part"\nmesh = "part.stl"\n')
+    first = load_task_scene(scene_file)
+    assert load_task_scene(scene_file) is first  # cached while nothing changed
+    trimesh.creation.box((20, 20, 10)).apply_translation((15, 0, 0)).export(mesh)
+    os.utime(mesh, ns=(time.time_ns() + 10**9,) * 2)  # (a later mtime even on a coarse clock)
+    moved = load_task_scene(scene_file)
+    assert moved is not first
+    assert moved.objects[0].mesh.bounds[0][0] == pytest.approx(first.objects[0].mesh.bounds[0][0] + 15)
+
+
+def test_task_keys_follow_the_code(monkeypatch, sweep_dir):
+    """A sweep resumed after a code update must not reuse the old code's rows: the task keys
+    hold a fingerprint of the package's sources."""
+    from rangesim.experiments import grid
+
+    spec = load_sweep(sweep_dir / "sweep.toml")
+    before = [t.key for t in plan_sweep(spec)]
+    assert before == [t.key for t in plan_sweep(spec)]  # stable within one code version
+    monkeypatch.setattr(grid, "code_fingerprint", lambda: "another-version")
+    after = [t.key for t in plan_sweep(spec)]
+    assert not set(before) & set(after)
+
+
+def test_code_fingerprint_is_a_digest_of_the_sources():
+    from rangesim.experiments.grid import code_fingerprint
+
+    fp = code_fingerprint()
+    assert len(fp) == 16 and int(fp, 16) >= 0 and code_fingerprint() == fp
+
+
+def test_sweep_refuses_views_that_cannot_reach_the_part(sweep_dir, tmp_path):
+    """A distance range outside the sensor's working range made every scan empty, and empty
+    scans scored F1 1.0 (nothing to find, nothing found): refused before any scan, as datasets do."""
+    import dataclasses
+
+    spec = load_sweep(sweep_dir / "sweep.toml")
+    spec = dataclasses.replace(spec, pose={**spec.pose, "distance": [50000.0, 50001.0]})
+    with pytest.raises(RangesimError, match="outside .* working range .* every view would be empty"):
+        run_sweep(spec, tmp_path / "out", workers=0, progress=False)
+    assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_a_scan_with_nothing_to_find_scores_nan():
+    from rangesim.experiments.tasks import _undefined_as_nan
+
+    row = {"precision": 1.0, "recall": 1.0, "f1": 1.0, "fom": 1.0, "jump_precision": 1.0, "jump_recall": 1.0,
+           "jump_f1": 1.0}
+    _undefined_as_nan(row, "", 0, 0, ("fom",))
+    _undefined_as_nan(row, "jump_", 3, 0)
+    assert all(math.isnan(v) for v in row.values())
+    row = {"precision": 1.0, "recall": 0.0, "f1": 0.0}
+    _undefined_as_nan(row, "", 0, 5)  # found nothing of something: recall and F1 0, precision undefined
+    assert math.isnan(row["precision"]) and row["recall"] == 0.0 and row["f1"] == 0.0
+
+
+def test_one_sweep_by_two_paths_is_the_same_sweep(sweep_dir, serial_run, monkeypatch):
+    """``../s.toml`` and ``/abs/s.toml`` once warned that the folder "held the results of another sweep"."""
+    monkeypatch.chdir(sweep_dir)
+    again = run_sweep("sweep.toml", sweep_dir / "serial", workers=0, progress=False, plots=False)
+    assert again.replaced is None and again.n_run == 0

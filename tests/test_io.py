@@ -303,3 +303,15 @@ def test_atomic_writes_keep_long_names_permissions_and_links(tmp_path):
         tmp.write_text("new")
     assert link.is_symlink() and target.read_text() == "new"
     assert sorted(p.name for p in tmp_path.rglob("*") if p.name.startswith(".")) == []  # no temporaries left
+
+
+def test_atomic_write_errors_name_the_final_file(tmp_path):
+    """An OSError on the temporary name (a read-only folder) names the file the user asked for
+    ("out/sweep.json: Read-only file system", not ".sweep.tmp-....json"), and leaves nothing."""
+    from rangesim.core.atomic import atomic_path
+
+    with pytest.raises(PermissionError) as info:
+        with atomic_path(tmp_path / "sweep.json") as tmp:
+            raise PermissionError(13, "Permission denied", str(tmp))
+    assert info.value.filename == str(tmp_path / "sweep.json") and info.value.strerror == "Permission denied"
+    assert list(tmp_path.iterdir()) == []

@@ -41,13 +41,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if run.replaced:
         print(f"rangesim: warning: {args.out} held the results of sweep {run.replaced}: their task files stay "
               f"as a cache, the table and plots now follow {args.sweep}", file=sys.stderr)
-    print(f"{args.sweep}: {run.n_tasks} scans ({run.n_run} run on {run.executor}, {run.n_reused} reused), "
-          f"{len(table)} rows in {run.seconds:.1f} s")
+    done = f"{run.n_run} run on {run.executor}, {run.n_reused} reused" if run.n_run else "all reused"
+    print(f"{args.sweep}: {run.n_tasks} scans ({done}), {len(table)} rows in {run.seconds:.1f} s")
     if len(table):
         summary = table.groupby("detector", sort=False)["f1"].agg(["median", "min", "max"])
         print(f"{'detector':<15}{'F1 median':>10}{'min':>7}{'max':>7}")
         for det, row in summary.iterrows():
             print(f"{det:<15}{row['median']:>10.3f}{row['min']:>7.3f}{row['max']:>7.3f}")
+        unscored = int((table["n_gt"] == 0).sum()) // max(table["detector"].nunique(), 1)
+        if unscored:
+            print(f"({unscored} of {run.n_tasks} scans had no true edge pixel to find: their scores are NaN, "
+                  "left out of these figures and the plots)")
     print("wrote " + ", ".join(str(p) for p in run.files))
     return 0
 
@@ -77,7 +81,8 @@ def cmd_dataset(args: argparse.Namespace) -> int:
                        scheduler=args.scheduler, progress=_progress(args))
     for index, reason in run.empty:  # as `rangesim scan --keep-empty`: kept, and said once per view
         print(f"rangesim: warning: view {index}: {reason} (kept in the dataset)", file=sys.stderr)
-    print(f"{args.scene}: {run.n_views} views ({run.n_run} rendered on {run.executor}, {run.n_reused} reused) "
+    done = f"{run.n_run} rendered on {run.executor}, {run.n_reused} reused" if run.n_run else "all reused"
+    print(f"{args.scene}: {run.n_views} views ({done}) "
           f"in {run.seconds:.1f} s; wrote {run.manifest} and {Path(args.out) / 'views'}/")
     return 0
 

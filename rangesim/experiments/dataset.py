@@ -21,7 +21,7 @@ cap_deg, distance [min, max]), ``crease_deg``, ``edge_labels``, ``status_codes``
 ``pose`` (4x4 camera-to-world), ``seed`` (noise), ``pose_seed``, ``distance_mm``,
 ``polar_deg`` (from the cap axis), ``elevation_deg``, ``azimuth_deg``, ``valid_fraction``
 and ``features`` (the scene's analytic circles and segments projected into the view:
-ellipses with centre, axes, angle, visible fraction; segments with end points, visible
+ellipses with centre, axes, angle (radians, from +x towards +y), visible fraction; segments with end points, visible
 fraction).
 
 Views are resumable and deterministic like sweep tasks: a rerun skips views whose record
@@ -43,8 +43,14 @@ from rangesim.core.errors import RangesimError
 from rangesim.core.progress import Progress
 from rangesim.core.version import __version__
 from rangesim.experiments.executors import Executor
-from rangesim.experiments.grid import derive_seed, task_key
-from rangesim.experiments.poses import DEFAULT_CAP_DEG, check_pose_table, resolve_pose_table, sample_view
+from rangesim.experiments.grid import code_fingerprint, derive_seed, task_key
+from rangesim.experiments.poses import (
+    DEFAULT_CAP_DEG,
+    check_distance_in_range,
+    check_pose_table,
+    resolve_pose_table,
+    sample_view,
+)
 from rangesim.experiments.results import write_json
 from rangesim.io.atomic import atomic_path
 
@@ -216,7 +222,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     pose_table = check_pose_table(table, source="dataset")
     scene_obj = load_task_scene(scene_path)
     cap = resolve_pose_table(pose_table, scene_obj, sensor_obj)
-    _check_distance_in_range(cap, scene_obj, sensor_obj)
+    check_distance_in_range(cap, scene_obj, sensor_obj, source="dataset")
 
     sensor_data = sensor_obj.to_dict()
     scene_id = {"file": scene_path.name, "sha1": scene_digest(scene_path)}
@@ -225,7 +231,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
         pose_id = {"scene": scene_id, "pose": pose_table, "view": i}
         pose_seed = derive_seed(seed, pose_id)
         noise_seed = derive_seed(seed, {**pose_id, "sensor": sensor_data})
-        key = task_key({"format": DATASET_FORMAT, "seed": seed, **pose_id, "sensor": sensor_data,
+        key = task_key({"format": DATASET_FORMAT, "code": code_fingerprint(), "seed": seed, **pose_id, "sensor": sensor_data,
                         "crease_deg": crease_deg, "scan_format": fmt})
         payloads.append({"index": i, "key": key, "scene_path": str(scene_path.resolve()), "sensor": sensor_data,
                          "pose": pose_table, "pose_seed": pose_seed, "noise_seed": noise_seed,
@@ -252,7 +258,7 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
         payload, error = min(failures, key=lambda f: f[0]["index"])
         text = str(error) if isinstance(error, RangesimError) else f"{type(error).__name__}: {error}"
         raise RangesimError(f"{len(failures)} of {len(todo)} views failed; first (view {payload['index']}): "
-                            f"{text}; finished views are kept, rerun to retry the others", source=out)
+                            f"{text}; finished views are kept, a rerun (once the cause is fixed) does only the others", source=out)
     records = []
     for p in payloads:
         path = views_dir / f"{_stem(p['index'], p['key'])}.json"
@@ -276,24 +282,6 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     _remove_stale_views(views_dir, [_stem(p["index"], p["key"]) for p in payloads], fmt)
     return DatasetRun(out, manifest_path, views, len(todo), views - len(todo), time.perf_counter() - start,
                       where, records, sorted(empty))
-
-
-def _check_distance_in_range(cap: dict[str, Any], scene, sensor) -> None:
-    """Refuse a distance range that puts the whole part outside the working range in every view.
-
-    The part (the first object) reaches ``radius`` mm around the target; at a camera distance
-    ``d`` its depths lie within ``d - radius .. d + radius``. If even the nearest camera sees it
-    only beyond ``range.far``, or the farthest only before ``range.near``, every view is empty.
-    """
-    part = scene.objects[0].mesh
-    target = np.asarray(cap["target"], dtype=np.float64)
-    radius = float(np.linalg.norm(part.vertices - target, axis=1).max())
-    lo, hi = (float(x) for x in cap["distance"])
-    near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
-    if lo - radius > far or hi + radius < near:
-        raise RangesimError(
-            f"distance {lo:g}-{hi:g} mm puts the whole part (radius {radius:.0f} mm around the target) outside "
-            f"{sensor.name}'s working range {near:g}-{far:g} mm: every view would be empty", source="dataset")
 
 
 def _remove_stale_views(views_dir: Path, stems: list[str], fmt: str) -> None:

@@ -48,9 +48,21 @@ def init_worker() -> None:
     _SINGLE_THREADED = True
     for name in THREAD_VARIABLES:
         os.environ[name] = "1"
+    # a worker's warnings on one line, as the command line prints its own (not Python's two
+    # lines with the source file and the code)
+    import warnings
+
+    warnings.showwarning = _one_line_warning
     import drjit as dr
 
     dr.set_thread_count(1)
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
+    import sys
+
+    text = " ".join(str(message).split())
+    print(f"rangesim: warning: {text}", file=sys.stderr if file is None else file)
 
 
 def single_threaded() -> bool:
@@ -81,6 +93,10 @@ def parse_scheduler(text: str | None) -> tuple[str, Any]:
         return "local", int(n)
     if text.startswith(("tcp://", "tls://")) and len(text) > 6:
         return "tcp", text
+    if text.startswith("inproc://"):
+        # its workers are threads of this process, which each task would make single-threaded
+        raise RangesimError(f"--scheduler {text!r} is an in-process Dask cluster, which rangesim does not run on: "
+                            "start it with processes=True (or protocol='tcp') and pass its tcp:// address")
     raise RangesimError(f"--scheduler must be local:N or tcp://HOST:PORT, got {text!r}")
 
 
@@ -158,7 +174,8 @@ class Executor:
 
         if self.kind == "local":
             self._cluster = LocalCluster(n_workers=int(self.address), threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+                                         host="127.0.0.1", dashboard_address=None,
+                                         silence_logs=logging.CRITICAL)  # a failed task is reported once, by us
             self._client = Client(self._cluster)
         else:
             try:

@@ -5,8 +5,9 @@ repeat), each with a key and seeds derived from its parameters.
   (sorted keys, no spaces): the scene file's name and content hash, the object overrides,
   the full sensor (every key, after the overrides), the pose table, the view and repeat
   index, the sweep seed, the detectors with their thresholds, the tolerance, the crease
-  angle, the SNR window and :data:`TASK_FORMAT`. Equal parameters give equal keys on any
-  machine, in any order; a task's files are ``tasks/<key>.json`` (and ``scans/<key>.exr``).
+  angle, the SNR window, :data:`TASK_FORMAT` and the code's fingerprint
+  (:func:`code_fingerprint`: a resumed run after a code update redoes its tasks). Equal
+  parameters and code give equal keys on any machine, in any order; a task's files are ``tasks/<key>.json`` (and ``scans/<key>.exr``).
 * **seeds**: a ``numpy.random.SeedSequence`` of the sweep seed and the SHA-1 of the
   parameters that make the thing seeded. The pose seed covers the scene, its object
   overrides, the pose table and the view index, not the sensor: every sensor setting of a
@@ -16,6 +17,7 @@ repeat), each with a key and seeds derived from its parameters.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import dataclass
@@ -31,6 +33,26 @@ from rangesim.experiments.sweep_file import SweepSpec, split_overrides
 TASK_FORMAT = 1
 #: hex digits of a task key (80 bits: collisions are not a concern at any sweep size)
 KEY_DIGITS = 20
+
+
+@functools.lru_cache(maxsize=None)
+def code_fingerprint() -> str:
+    """SHA-1 (16 hex digits) of the rangesim package's Python sources, file by file in path order.
+
+    Part of every task key (sweeps and datasets): a resumed run after a code update (a detector
+    changed, a noise model refitted) must not reuse the rows or views the old code made, which
+    ``__version__`` alone does not tell apart. Read once per process (about 200 files, a few ms).
+    """
+    import hashlib
+
+    import rangesim
+
+    root = Path(rangesim.__file__).resolve().parent
+    digest = hashlib.sha1()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 def canonical_json(obj: Any) -> str:
@@ -130,8 +152,8 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
                     for repeat in range(spec.repeats):
                         scan_id = {**pose_id, "sensor": sensor_data, "repeat": repeat}
                         noise_seed = derive_seed(spec.seed, scan_id)
-                        key = task_key({"format": TASK_FORMAT, "seed": spec.seed, "scan": scan_id,
-                                        "evaluation": evaluation})
+                        key = task_key({"format": TASK_FORMAT, "code": code_fingerprint(), "seed": spec.seed,
+                                        "scan": scan_id, "evaluation": evaluation})
                         columns = {"scene": scene.label, "sensor": sensor_ref.label, **combo,
                                    "view": view, "repeat": repeat, "seed": noise_seed}
                         payload = {

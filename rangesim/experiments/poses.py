@@ -148,6 +148,24 @@ def check_pose_table(table: Mapping[str, Any], source: Any = None) -> dict[str, 
     return out
 
 
+def check_distance_in_range(cap: Mapping[str, Any], scene: Any, sensor: Any, source: Any = None) -> None:
+    """Refuse a distance range that puts the whole part outside the working range in every view.
+
+    The part (the first object) reaches ``radius`` mm around the target; at a camera distance
+    ``d`` its depths lie within ``d - radius .. d + radius``. If even the nearest camera sees it
+    only beyond ``range.far``, or the farthest only before ``range.near``, every view is empty.
+    """
+    part = scene.objects[0].mesh
+    target = np.asarray(cap["target"], dtype=np.float64)
+    radius = float(np.linalg.norm(part.vertices - target, axis=1).max())
+    lo, hi = (float(x) for x in cap["distance"])
+    near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
+    if lo - radius > far or hi + radius < near:
+        raise RangesimError(
+            f"distance {lo:g}-{hi:g} mm puts the whole part (radius {radius:.0f} mm around the target) outside "
+            f"{sensor.name}'s working range {near:g}-{far:g} mm: every view would be empty", source=source)
+
+
 def axis_from_angles(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     """Unit world direction at an elevation above the xy plane and an azimuth from +x to +y."""
     el, az = math.radians(elevation_deg), math.radians(azimuth_deg)

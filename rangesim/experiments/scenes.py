@@ -93,6 +93,30 @@ def scene_digest(path: str | Path) -> str:
     return combined.hexdigest()
 
 
+def _file_stamps(path: Path) -> list[tuple[str, int, int]]:
+    """(path, mtime ns, size) of a scene file and of every mesh file its objects name, cheaply
+    (no file is read but the scene's TOML); missing files stamp as (path, 0, -1)."""
+    from rangesim.scene.scene import expand_data_path
+
+    def stamp(p: Path) -> tuple[str, int, int]:
+        try:
+            st = p.stat()
+            return str(p), st.st_mtime_ns, st.st_size
+        except OSError:
+            return str(p), 0, -1
+
+    stamps = [stamp(path)]
+    if path.suffix.lower() == ".toml":
+        try:
+            tables = read_toml(path).get("object", [])
+        except RangesimError:
+            return stamps  # the scene's own loader names the problem
+        tables = [tables] if isinstance(tables, dict) else tables
+        stamps += [stamp((path.parent / expand_data_path(str(t["mesh"]))).resolve()) for t in tables
+                   if isinstance(t, dict) and "mesh" in t]
+    return stamps
+
+
 def apply_object_overrides(path: str | Path, overrides: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The scene file's data with object keys replaced and mesh paths made absolute.
 
@@ -156,11 +180,10 @@ def load_task_scene(path: str | Path, overrides: dict[str, dict[str, Any]] | Non
 
     path = Path(path).resolve()
     overrides = overrides or {}
-    try:
-        mtime = path.stat().st_mtime_ns
-    except OSError:
-        mtime = 0
-    cache_key = json.dumps([str(path), mtime, overrides], sort_keys=True, default=str)
+    # keyed on the scene file and every mesh it names (path, mtime, size): a mesh changed under
+    # an unchanged scene file gets new task keys (scene_digest), and must not be served its old
+    # geometry by a long-lived process (a notebook's workers=0 run, a Dask cluster's workers)
+    cache_key = json.dumps([_file_stamps(path), overrides], sort_keys=True, default=str)
     if cache_key in _CACHE:
         _CACHE.move_to_end(cache_key)
         return _CACHE[cache_key]

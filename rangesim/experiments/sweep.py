@@ -112,6 +112,7 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
     tasks = plan_sweep(spec, keep_scans=keep_scans)
+    _check_parts_in_range(tasks, spec.path)
     todo = _todo(tasks, out, keep_scans)
     executor = Executor(workers, scheduler, max_tasks=len(todo))  # checks the options before any file
     failures: list[tuple[SweepTask, BaseException]] = []
@@ -148,7 +149,7 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
         shown = ", ".join(f"{k}={v}" for k, v in task.columns.items() if k != "seed")
         raise RangesimError(
             f"{len(failures)} of {len(todo)} tasks failed; first ({shown}): {_describe_error(error)}; "
-            f"finished tasks are kept, rerun to retry the others", source=spec.path)
+            f"finished tasks are kept, a rerun (once the cause is fixed) does only the others", source=spec.path)
     table = build_table(tasks, out)
     files = write_table(table, out)
     if plots and len(table):
@@ -161,6 +162,30 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
                     time.perf_counter() - start, where, files, replaced)
 
 
+def _check_parts_in_range(tasks: list[SweepTask], source: Any) -> None:
+    """Refuse, before any scan, a pose table whose distances put the part outside the sensor's
+    working range in every view (as ``make_dataset`` does): each such task would score an empty
+    scan. Checked once per scene, object overrides, sensor and pose table."""
+    from rangesim.experiments.poses import check_distance_in_range, resolve_pose_table
+    from rangesim.experiments.scenes import load_task_scene
+    from rangesim.sensor import load_sensor
+
+    seen = set()
+    for task in tasks:
+        p = task.payload
+        if p["pose"] is None:
+            continue
+        key = json.dumps([p["scene_path"], p["objects"], p["sensor"], p["pose"]], sort_keys=True, default=str)
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            scene, sensor = load_task_scene(p["scene_path"], p["objects"]), load_sensor(p["sensor"])
+        except RangesimError:
+            continue  # a bad override value fails its own tasks, named, when they run
+        check_distance_in_range(resolve_pose_table(p["pose"], scene, sensor), scene, sensor, source=source)
+
+
 def _other_sweep(provenance: Path, spec: SweepSpec) -> str | None:
     """``name (file)`` of the sweep an output folder's ``sweep.json`` describes when it is
     not ``spec`` (another name or sweep file); None for a new folder or the same sweep."""
@@ -168,14 +193,16 @@ def _other_sweep(provenance: Path, spec: SweepSpec) -> str | None:
         old = json.loads(provenance.read_text())
     except (OSError, ValueError):
         return None
-    if not isinstance(old, dict) or (old.get("name"), old.get("sweep")) == (spec.name, str(spec.path)):
+    # the file as typed then, or resolved (written so since): ../s1.toml and /abs/s1.toml are one sweep
+    if not isinstance(old, dict) or (old.get("name") == spec.name
+                                     and old.get("sweep") in (str(spec.path), str(Path(spec.path).resolve()))):
         return None
     return f"{old.get('name')!r} ({old.get('sweep')})"
 
 
 def _provenance(spec: SweepSpec, n_tasks: int) -> dict[str, Any]:
     return {
-        "sweep": str(spec.path), "name": spec.name, "description": spec.description,
+        "sweep": str(Path(spec.path).resolve()), "name": spec.name, "description": spec.description,
         "rangesim_version": __version__, "tasks": n_tasks,
         "scenes": [{"label": s.label, "path": s.path, "sha1": s.sha1} for s in spec.scenes],
         "sensors": [{"label": s.label, "sensor": s.data} for s in spec.sensors],

@@ -115,6 +115,9 @@ def plot_f1_vs_snr(table, path: str | Path, *, swept: Sequence[str] = (), title:
                 if not x.size:
                     continue
                 f1 = g["f1"].to_numpy(dtype=float)
+                f1 = f1[np.isfinite(f1)]  # NaN: a scan with nothing to find (no true edge pixel)
+                if not f1.size:
+                    continue
                 stats.append((float(np.median(x)), *np.percentile(f1, [25, 50, 75])))
             if not stats:
                 continue
@@ -140,10 +143,19 @@ def plot_f1_vs_snr(table, path: str | Path, *, swept: Sequence[str] = (), title:
         ax.set_xlabel("edge SNR (median over the true edge pixels of a scan)")
         ax.set_ylabel(f"F1 ({tolerance_px:g} px tolerance)")
         ax.set_title(f"{scene}, {sensor}", fontsize=10)
-        ax.legend(loc="lower right", fontsize=8, title="detector: median, quartiles", title_fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="lower right", fontsize=8, title="detector: median, quartiles", title_fontsize=8)
+        else:
+            ax.text(0.5, 0.5, "no scan with a true edge pixel", ha="center", va="center", transform=ax.transAxes)
     n_scans = table.groupby(["scene", "sensor"] + [c for c in ("view", "repeat", "seed") if c in table.columns]).ngroups
     fig.suptitle(f"{title + ': ' if title else ''}F1 against edge SNR ({n_scans} scans)", fontsize=11)
     return _save(fig, path, dpi)
+
+
+def _quartiles(f1: np.ndarray) -> np.ndarray:
+    """25 / 50 / 75 % of the finite F1 values (NaN: a scan with nothing to find), NaN if none."""
+    f1 = f1[np.isfinite(f1)]
+    return np.percentile(f1, [25, 50, 75]) if f1.size else np.full(3, np.nan)
 
 
 def plot_f1_vs_param(table, key: str, path: str | Path, *, swept: Sequence[str] = (), title: str = "",
@@ -159,8 +171,7 @@ def plot_f1_vs_param(table, key: str, path: str | Path, *, swept: Sequence[str] 
     ax = fig.add_subplot(1, 1, 1)
     for det in detectors:
         d = table[table["detector"] == det]
-        q = np.array([np.percentile(d.loc[d[key] == v, "f1"].to_numpy(dtype=float), [25, 50, 75])
-                      if (d[key] == v).any() else [np.nan] * 3 for v in values])
+        q = np.array([_quartiles(d.loc[d[key] == v, "f1"].to_numpy(dtype=float)) for v in values])
         ax.fill_between(xs, q[:, 0], q[:, 2], color=colors[det], alpha=0.18, linewidth=0)
         ax.errorbar(xs, q[:, 1], yerr=[q[:, 1] - q[:, 0], q[:, 2] - q[:, 1]], fmt="none", ecolor=colors[det],
                     alpha=0.6, capsize=2, linewidth=1)
@@ -183,7 +194,8 @@ def plot_f1_vs_param(table, key: str, path: str | Path, *, swept: Sequence[str] 
     pooled = "views" + (", repeats" if "repeat" in table.columns and table["repeat"].nunique() > 1 else "")
     pooled += "".join(f", {o}" for o in others)
     ax.set_title(f"median and quartiles over {pooled}", fontsize=9)
-    ax.legend(loc="best", fontsize=8)
+    if np.isfinite(table["f1"].to_numpy(dtype=float)).any():
+        ax.legend(loc="best", fontsize=8)
     fig.suptitle(f"{title + ': ' if title else ''}F1 against {key}", fontsize=11)
     return _save(fig, path, dpi)
 
