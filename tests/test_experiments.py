@@ -662,3 +662,53 @@ def test_one_sweep_by_two_paths_is_the_same_sweep(sweep_dir, serial_run, monkeyp
     monkeypatch.chdir(sweep_dir)
     again = run_sweep("sweep.toml", sweep_dir / "serial", workers=0, progress=False, plots=False)
     assert again.replaced is None and again.n_run == 0
+
+
+DRIVER = '''
+import time
+from rangesim.experiments.executors import Executor
+
+def slow(x):
+    time.sleep(120)
+    return x
+
+if __name__ == "__main__":
+    with Executor(1, None, max_tasks=1) as ex:
+        for _ in ex.run(slow, [1]):
+            pass
+'''
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_pool_workers_exit_when_the_driver_is_killed(tmp_path):
+    """A sweep driver killed with SIGKILL left its pool worker blocked on a pipe for good."""
+    script = tmp_path / "driver.py"
+    script.write_text(DRIVER)
+    driver = subprocess.Popen([sys.executable, str(script)], cwd=tmp_path)
+    workers: list[int] = []
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline:
+            out = subprocess.run(["pgrep", "-f", "-P", str(driver.pid), "spawn_main"], capture_output=True, text=True)
+            workers = [int(p) for p in out.stdout.split()]
+            if workers:
+                break
+            time.sleep(0.2)
+        assert workers, "the pool worker did not start"
+        time.sleep(2.0)  # the worker has run its initializer and taken the task
+        os.kill(driver.pid, signal.SIGKILL)
+        driver.wait()
+        deadline = time.time() + 10
+        alive = workers
+        while alive and time.time() < deadline:
+            alive = [p for p in workers if Path(f"/proc/{p}").exists()
+                     and "State:\tZ" not in Path(f"/proc/{p}/status").read_text()]
+            time.sleep(0.2)
+        assert not alive
+    finally:
+        driver.kill()
+        for p in workers:
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass

@@ -53,9 +53,28 @@ def init_worker() -> None:
     import warnings
 
     warnings.showwarning = _one_line_warning
+    _exit_with_parent()
     import drjit as dr
 
     dr.set_thread_count(1)
+
+
+def _exit_with_parent() -> None:
+    """Linux: this worker gets SIGTERM when the process that started it dies (a driver killed
+    with SIGKILL left its pool workers blocked on a pipe for good, holding their memory)."""
+    import ctypes
+    import signal
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # pragma: no cover - no prctl: the old behaviour
+        return
+    if os.getppid() == 1:  # the parent died before the call: nobody would send the signal
+        os._exit(1)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
