@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -245,6 +246,10 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
     executor = Executor(workers, scheduler, max_tasks=len(todo))
     where = executor.describe() if todo else "nowhere (every view was finished)"
     if todo:
+        # the folder is made (and must take files) before any view is rendered, not after the first
+        views_dir.mkdir(parents=True, exist_ok=True)
+        if not os.access(views_dir, os.W_OK):
+            raise RangesimError("cannot write here (permission denied)", source=views_dir)
         with executor, Progress(views, "dataset", unit="view", initial=views - len(todo), enabled=progress) as bar:
             for i, result, error in executor.run(run_dataset_view, todo):
                 if error is not None:
