@@ -196,3 +196,35 @@ def test_scene_objects_with_one_name_are_refused(tmp_path):
     sweep.write_text('scenes = ["dup.toml"]\n[grid]\n"noise.sigma_px" = [0, 0.2]\n')
     with pytest.raises(RangesimError, match="sweep.toml: scenes: .*both named 'a'"):  # when loaded, before any scan
         load_sweep(sweep)
+
+
+def test_scene_objects_from_a_users_probe(tmp_path):
+    """A model keeps its millimetres in a cm or inch scene (it came out 10x / 25.4x too big),
+    model params get the checks --param gets, primitive tessellation keys are checked, and a
+    geometry key of another kind is refused (it was ignored)."""
+    def write(body):
+        path = tmp_path / "s.toml"
+        path.write_text(body)
+        return path
+
+    mm = rs.load_scene(write('units = "mm"\n[[object]]\nmodel = "green_piece"\n')).objects[0].mesh.extents
+    for unit in ("cm", "in"):
+        ext = rs.load_scene(write(f'units = "{unit}"\n[[object]]\nmodel = "green_piece"\ntranslate = [1, 0, 0]\n'
+                                  )).objects[0].mesh.extents
+        np.testing.assert_allclose(ext, mm, rtol=1e-9)
+    bad = {
+        '[[object]]\nmodel = "green_piece"\nparams = {segments = 0}\n': r"\[\[object\]\] 0\.params: segments must lie in 3\.\.",
+        '[[object]]\nmodel = "green_piece"\nparams = {segments = 2.5}\n': r"params: segments must be an integer",
+        '[[object]]\nprimitive = "cylinder"\nradius = 1\nheight = 2\nsections = 2\n': r"sections' must be a whole number in 3\.\.",
+        '[[object]]\nprimitive = "cylinder"\nradius = 1\nheight = 2\nsections = "many"\n': r"sections' must be a whole",
+        '[[object]]\nprimitive = "cylinder"\nradius = [1, 2]\nheight = 2\n': r"\[\[object\]\] 0 \(object0\): primitive 'radius' must be one number",
+        '[[object]]\nprimitive = "sphere"\nradius = 1\nsubdivisions = 40\n': r"subdivisions' must be a whole number in 0\.\.8",
+        '[[object]]\nprimitive = "sphere"\nradius = 1\nsubdivisions = -1\n': r"subdivisions' must be a whole number",
+        '[[object]]\nprimitive = "sphere"\nradius = 1\nsize = [1, 1, 1]\n': r"size does not apply to a sphere",
+        '[[object]]\nprimitive = "box"\nsize = [1, 1, 1]\nradius = 3\n': r"radius does not apply to a box",
+        '[[object]]\nmodel = "green_piece"\nsize = [1, 1, 1]\n': r"size does not apply to a model",
+    }
+    for body, message in bad.items():
+        with pytest.raises(rs.RangesimError, match=message) as info:
+            rs.load_scene(write(body))
+        assert "\n" not in str(info.value)

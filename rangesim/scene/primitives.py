@@ -23,6 +23,33 @@ def _positive(spec: dict[str, Any], key: str, default=None, source="scene") -> f
     return arr
 
 
+#: the geometry keys of each primitive (a key of another kind is refused, not ignored)
+PRIMITIVE_KEYS = {"box": ("size",), "cylinder": ("radius", "height", "sections"),
+                  "sphere": ("radius", "subdivisions"), "plane": ("size",)}
+#: every primitive geometry key (none of them applies to a mesh or a model)
+GEOMETRY_KEYS = frozenset(k for keys in PRIMITIVE_KEYS.values() for k in keys)
+#: tessellation limits: a cylinder of 3 sections is a prism (2 is flat); an icosphere of
+#: subdivision s has 20 4^s faces (8: 1.3 million, about 200 MB with its Mitsuba copy)
+SECTIONS = (3, 65536)
+SUBDIVISIONS = (0, 8)
+
+
+def _scalar(spec: dict[str, Any], key: str, source: Any) -> float:
+    value = _positive(spec, key, source=source)
+    if value.shape != ():
+        raise RangesimError(f"primitive '{key}' must be one number, got {spec[key]!r}", source=source)
+    return float(value)
+
+
+def _count(spec: dict[str, Any], key: str, default: int, bounds: tuple[int, int], source: Any) -> int:
+    value = spec.get(key, default)
+    lo, hi = bounds
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer)) or value != int(value) \
+            or not lo <= value <= hi:
+        raise RangesimError(f"primitive '{key}' must be a whole number in {lo}..{hi}, got {value!r}", source=source)
+    return int(value)
+
+
 def make_primitive(kind: str, spec: dict[str, Any], source="scene") -> trimesh.Trimesh:
     """Mesh of a primitive solid centred on the origin.
 
@@ -42,14 +69,14 @@ def make_primitive(kind: str, spec: dict[str, Any], source="scene") -> trimesh.T
         return trimesh.creation.box(extents=size)
     if kind == "cylinder":
         return trimesh.creation.cylinder(
-            radius=float(_positive(spec, "radius", source=source)),
-            height=float(_positive(spec, "height", source=source)),
-            sections=int(spec.get("sections", 64)),
+            radius=_scalar(spec, "radius", source),
+            height=_scalar(spec, "height", source),
+            sections=_count(spec, "sections", 64, SECTIONS, source),
         )
     if kind == "sphere":
         return trimesh.creation.icosphere(
-            subdivisions=int(spec.get("subdivisions", 4)),
-            radius=float(_positive(spec, "radius", source=source)),
+            subdivisions=_count(spec, "subdivisions", 4, SUBDIVISIONS, source),
+            radius=_scalar(spec, "radius", source),
         )
     if kind == "plane":
         size = _positive(spec, "size", source=source)

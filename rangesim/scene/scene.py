@@ -18,7 +18,7 @@ from rangesim.core.tomlfile import check_keys, read_toml
 from rangesim.core.units import UNITS_MM
 from rangesim.scene.materials import check_material
 from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh, validate_mesh
-from rangesim.scene.primitives import make_primitive
+from rangesim.scene.primitives import GEOMETRY_KEYS, PRIMITIVE_KEYS, make_primitive
 
 OBJECT_KEYS = {
     "name", "mesh", "model", "primitive", "params", "translate", "rotate_deg", "scale",
@@ -297,6 +297,12 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
     kinds = [key for key in ("mesh", "model", "primitive") if key in t]
     if len(kinds) != 1:
         raise RangesimError(f"{where} ({name}) needs exactly one of mesh, model, primitive", source=path)
+    kind = str(t["primitive"]) if "primitive" in t else kinds[0]
+    foreign = sorted(set(t) & GEOMETRY_KEYS - set(PRIMITIVE_KEYS.get(kind, ())))
+    if foreign:  # a key of another kind (size on a sphere, radius on a mesh) is a mistake, not a no-op
+        takes = ", ".join(PRIMITIVE_KEYS.get(kind, ())) or "none of them"
+        raise RangesimError(f"{where} ({name}): {', '.join(foreign)} does not apply to a {kind} "
+                            f"(its geometry keys: {takes})", source=path)
     if "mesh" in t:
         mesh_path = (path.parent / expand_data_path(str(t["mesh"]))).resolve()
         mesh, origin = load_mesh(mesh_path), str(mesh_path)
@@ -304,9 +310,13 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
         built = _build_model(t, where, path)
         mesh, origin = built.mesh, f"model:{t['model']}"
     else:
-        mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
-    # the object's own units (for a mesh file), else the scene's
-    object_mm = _unit_scale(t["units"], where, path) if "units" in t else scene_mm
+        try:
+            mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
+        except RangesimError as exc:
+            raise RangesimError(f"{where} ({name}): {str(exc).removeprefix(f'{path}: ')}", source=path) from None
+    # the object's own units, else a model's millimetres (built-in models are made in mm:
+    # positions follow the scene's unit, the part does not), else the scene's
+    object_mm = _unit_scale(t["units"], where, path) if "units" in t else 1.0 if "model" in t else scene_mm
     scale = _numbers(t.get("scale", 1.0), f"{where}.scale", path)
     if not np.all(np.isfinite(scale)) or np.any(scale <= 0) or scale.shape not in ((), (3,)):
         raise RangesimError(f"{where}.scale must be a positive number or 3 of them", source=path)
@@ -334,7 +344,7 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
 
 def _build_model(t: dict, where: str, path: Path):
     """A built-in parametric model (``model = "green_piece"``, optional ``params`` table)."""
-    from rangesim.cad.models import MODELS, model_names
+    from rangesim.cad.models import MODELS, check_model_params, model_names
 
     if not isinstance(t["model"], str) or t["model"] not in MODELS:
         raise RangesimError(
@@ -343,6 +353,11 @@ def _build_model(t: dict, where: str, path: Path):
     params = t.get("params", {})
     if not isinstance(params, dict):
         raise RangesimError(f"{where}.params must be a table", source=path)
+    try:  # the checks rangesim model's --param gets: ranges, integers, the memory estimate
+        check_model_params(t["model"], params)
+    except RangesimError as exc:
+        text = str(exc).removeprefix(f"{t['model']}: ").replace("--param ", "")
+        raise RangesimError(f"{where}.params: {text}", source=path) from None
     try:
         return MODELS[t["model"]](**params)
     except RangesimError as exc:
