@@ -154,3 +154,17 @@ def test_volumetric_model_and_cli(tmp_path):
     bad = parser.parse_args(["volumes", "renault_piece", "--out", str(tmp_path / "x.txt")])
     with pytest.raises(RangesimError):
         bad.func(bad)
+
+
+def test_part_tree_picture_colours_cutters_by_role():
+    """Blue is material and red the cutters, as the picture's legend says: a step or a slot
+    (functions other than hole, thread, dent, scratch) was drawn blue though a difference
+    takes it away."""
+    from rangesim.viz.volumes import cutter_ids
+
+    tree = rs.cad.machined_part(6).tree  # a step, a slot, through holes, cylinders on the plate
+    cut = cutter_ids(tree)
+    by_name = {n.name: id(n) in cut for n in tree.walk()}
+    assert by_name["step"] and by_name["slot"] and by_name["through_hole_1"]
+    assert not by_name["machined_part"] and not by_name["body"] and not by_name["plate"]
+    assert not by_name["cylinder_1"] and not by_name["lying_cylinder_1"]

@@ -64,6 +64,19 @@ def _frame(ax, points: np.ndarray, elev: float = 25, azim: float = -60) -> None:
     ax.set_axis_off()
 
 
+def cutter_ids(tree) -> set[int]:
+    """``id`` of every node a difference takes away: each child of a difference after the
+    first, and all below it (drawn red, as the legend says, whatever its function: a step or
+    a slot cuts as a hole does)."""
+    cutters: set[int] = set()
+    for node in tree.walk():  # parents before their children
+        if id(node) in cutters:
+            cutters.update(id(c) for c in node.children)
+        elif node.operation == "difference":
+            cutters.update(id(c) for c in node.children[1:])
+    return cutters
+
+
 def save_part_tree(tree, path: str | Path, cell_in: float = 1.25, dpi: int = 130) -> Path:
     """Draw a part tree (:class:`~rangesim.cad.part.PartNode`): each node's solid in a tree layout.
 
@@ -101,16 +114,17 @@ def save_part_tree(tree, path: str | Path, cell_in: float = 1.25, dpi: int = 130
         return (x + 0.5) * cell_in, fig_h - 0.4 - (d + 0.5) * cell_in * 1.7
 
     symbol = {"union": "∪", "difference": "−", "solid": ""}
+    cutters = cutter_ids(tree)
     for node in tree.walk():
         cx, cy = centre(node)
         for c in node.children:
             ccx, ccy = centre(c)
-            back.plot([cx, ccx], [cy - 0.66 * cell_in, ccy + 0.66 * cell_in], color="0.6", lw=0.8, zorder=0)
+            back.plot([cx, ccx], [cy - 0.82 * cell_in, ccy + 0.66 * cell_in], color="0.6", lw=0.8, zorder=0)
         w = 0.9 * cell_in
         ax = fig.add_axes(((cx - w / 2) / fig_w, (cy - w / 2 - 0.08 * cell_in) / fig_h, w / fig_w, w / fig_h),
                           projection="3d")
         mesh = manifold_to_trimesh(node.solid)
-        colour = "#c86464" if node.function in ("hole", "thread", "dent", "scratch") else "#6f8fbf"
+        colour = "#c86464" if id(node) in cutters else "#6f8fbf"
         _draw_mesh(ax, mesh, colour, max_faces=2500)
         _frame(ax, mesh.vertices)
         op = f" ({symbol[node.operation]})" if node.operation != "solid" else ""
@@ -118,7 +132,7 @@ def save_part_tree(tree, path: str | Path, cell_in: float = 1.25, dpi: int = 130
         # figure texts draw over every axes: a tall solid's panel no longer covers its caption
         fig.text(cx / fig_w, (cy + 0.5 * cell_in) / fig_h, f"{node.name}{op}", ha="center", va="bottom",
                  fontsize=8, fontweight="bold" if node.operation != "solid" else "normal")
-        fig.text(cx / fig_w, (cy - 0.52 * cell_in) / fig_h, f"{node.function}, {vol:,.0f} mm\u00b3", ha="center",
+        fig.text(cx / fig_w, (cy - 0.52 * cell_in) / fig_h, f"{node.function}\n{vol:,.0f} mm\u00b3", ha="center",
                  va="top", fontsize=7.5, color="0.25")
     back.text(0.1, fig_h - 0.1, f"Part tree of {tree.name}: − difference (first child minus the others), "
               "∪ union; blue: material, red: cutters", fontsize=8.5, va="top")

@@ -10,7 +10,8 @@ def deformed_ellipsoid(semi_axes: tuple[float, float, float] = (60.0, 20.0, 15.0
                        taper: float = 0.4, subdivisions: int = 4) -> tuple[trimesh.Trimesh, callable]:
     """An icosphere scaled to an ellipsoid (long axis x), tapered along x and bent in z.
 
-    The centre line is z = bend * x^2 (taper scales y, z about it by 1 + taper * x / a).
+    The centre line is z = bend * x^2 (taper scales y, z about it by 1 + taper * x / (2 a): 1 -+ taper / 2 at
+    the ends).
 
     Returns
     -------
