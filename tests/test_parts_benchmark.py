@@ -126,3 +126,22 @@ def test_dedupe_keeps_the_better_fit_of_one_rim():
     kept = bench._dedupe([ghost, rim, inner, far])
     assert kept == [rim, inner, far]                                         # order kept
     assert bench._dedupe([rim, ghost]) == [rim]
+
+
+def test_design_overrides_are_checked():
+    """A user's override once built rims 439 mm off the plate, a blind hole deeper than the plate
+    (its floor circle 35 mm below the part), and raised LinAlgError for a negative radius."""
+    for kw, words in (({"holes": [(500.0, 0.0, 3.0, None)]}, "does not lie on the"),
+                      ({"holes": [(0.0, 0.0, 3.0, 50.0)]}, "depth 50.0 must lie in 0.."),
+                      ({"holes": [(0.0, 0.0, -3.0, None)]}, "radius must be positive"),
+                      ({"bosses": [(0.0, 0.0, 3.0, -1.0)]}, "height must be positive"),
+                      ({"lying": [(0.0, 0.0, 3.0, 500.0, "x")]}, "does not lie on the"),
+                      ({"slot": (0.0, 0.0, 10.0, 5.0, 3.0, "z")}, "along 'x' or 'y'")):
+        with pytest.raises(RangesimError, match=words):
+            machined_part(3, **kw)
+    for seed in (-1, 2.7, True):
+        with pytest.raises(RangesimError, match="seed must be a whole number"):
+            machined_part(seed)
+    # an override that fits is built, with its rims
+    part = machined_part(3, holes=[(0.0, 0.0, 3.0, 5.0)])
+    assert {c.name for c in part.features.circles} >= {"blind_hole_1_top", "blind_hole_1_floor"}
