@@ -476,6 +476,11 @@ def generalized_cylinders(mesh: trimesh.Trimesh, resolution: float, parts: Any =
                           end_offset: float = 0.03, adjust_passes: int = 3) -> list[GeneralizedCylinder]:
     """A generalized-cylinder model of a surface: one cylinder per sub-part, with junctions.
 
+    Limitation: a section plane that cuts a sub-part into several pieces keeps the piece
+    nearest the axis (right for the far arm of a bent part, wrong for a plate pierced by a
+    hole, whose section there is two pieces: half the area, the axis pulled off the centre
+    line); give such parts by their part tree (``parts``: the holes as cutters).
+
     Parameters
     ----------
     mesh : trimesh.Trimesh
