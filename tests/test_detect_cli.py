@@ -146,3 +146,29 @@ def test_out_pointing_at_a_file_is_an_error(synthetic, tmp_path, capsys):
     assert code == 2
     assert err.strip().count("\n") == 0 and "Traceback" not in err
     assert target.read_text() == "not a directory"
+
+
+def test_detect_refuses_what_it_cannot_score(synthetic, tmp_path, capsys):
+    """From a new user's probe: a scan with no valid pixel went through with every score 1.0;
+    a scene file edited since the scan was scored against silently (F1 0); scores.json now says
+    which convention it counts by."""
+    import dataclasses
+
+    scan_path, scene_path = synthetic
+    scan = rs.load_scan(scan_path)
+    empty = dataclasses.replace(scan, valid=np.zeros(scan.shape, bool))
+    empty_path = rs.save_scan(empty, tmp_path / "empty.exr")
+    code, _, err = _detect(capsys, empty_path, "--method", "gradient", "--out", tmp_path / "e")
+    assert code == 2 and "no valid pixel" in err and "Traceback" not in err and not (tmp_path / "e").exists()
+    assert main(["features", str(empty_path), "--out", str(tmp_path / "f")]) == 2
+    # the scene the scan names, edited since: refused, not scored
+    edited = tmp_path / "scene.toml"
+    edited.write_text(SCENE_TOML.replace("translate = [0, 0, 25]", "translate = [150, 120, 25]"))
+    moved = dataclasses.replace(scan, meta={**scan.meta, "scene": str(edited)})
+    moved_path = rs.save_scan(moved, tmp_path / "moved.exr")
+    code, _, err = _detect(capsys, moved_path, "--method", "gradient", "--out", tmp_path / "m")
+    assert code == 2 and "no longer matches" in err
+    # the scene as it was: scored, and the report names its convention
+    code, _, _ = _detect(capsys, scan_path, "--method", "gradient", "--out", tmp_path / "ok")
+    report = json.loads((tmp_path / "ok" / "scores.json").read_text())
+    assert code == 0 and report["ignore_data_boundary"] is False

@@ -645,7 +645,7 @@ def test_sweep_refuses_views_that_cannot_reach_the_part(sweep_dir, tmp_path):
 
 
 def test_a_scan_with_nothing_to_find_scores_nan():
-    from rangesim.experiments.tasks import _undefined_as_nan
+    from rangesim.evaluate._edge_scores import undefined_as_nan as _undefined_as_nan
 
     row = {"precision": 1.0, "recall": 1.0, "f1": 1.0, "fom": 1.0, "jump_precision": 1.0, "jump_recall": 1.0,
            "jump_f1": 1.0}

@@ -65,6 +65,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
     check_out_files(out, names)
     scan, segment_labels = load_scan_with_labels(path, args.conf, sensor=args.sensor)
     require_grid(scan, path)
+    if not np.any(scan.valid):  # as rangesim scan refuses to write one without --keep-empty
+        raise RangesimError("no valid pixel: nothing to detect (every score would be 1 for finding nothing)",
+                            source=path)
     scene = args.scene
     if scene is not None:
         from rangesim.cli.common import load_scene_arg
@@ -73,8 +76,27 @@ def cmd_detect(args: argparse.Namespace) -> int:
         require_synthetic(scan, path, args.scene)
         scene = load_scene_arg(args.scene)
         require_matching_scene(scan, scene, path, args.scene)
+    elif scan.xyz_true is not None and scan.K is not None and Path(str(scan.meta.get("scene", ""))).is_file():
+        # the scene file the scan names is scored against only if it still makes this scan (it may
+        # have been edited since: every score was 0 with no word)
+        from rangesim.cli.scene_match import MIN_SCENE_MATCH, scene_match_share
+        from rangesim.scene import load_scene
+
+        named = str(scan.meta["scene"])
+        scene = load_scene(named)
+        share = scene_match_share(scan, scene)
+        if share < MIN_SCENE_MATCH:
+            raise RangesimError(
+                f"the scene the scan names ({named}) no longer matches it: cast from the scan's pose it hits the "
+                f"scan's true surface on {100 * share:.1f} % of its pixels (edited since the scan?); give --scene",
+                source=path)
     truth = scan_truth(scan, scene, segment_labels, crease_deg=args.crease_deg)
     results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
+    if truth is not None:  # nothing to find (no true edge pixel): no score, as in sweeps (NaN, not 1)
+        from rangesim.evaluate._edge_scores import undefined_as_nan
+
+        for r in results.values():
+            undefined_as_nan(r["scores"], "", r["scores"]["n_pred"], r["scores"]["n_gt"], ("fom",))
 
     make_out_dir(out)
     for method, result in results.items():
@@ -91,6 +113,8 @@ def cmd_detect(args: argparse.Namespace) -> int:
         save_edge_overlay(scan, truth.edge_map(), out / "ground_truth.png", title=f"ground truth ({truth.kind})")
         report = {
             "scan": str(path), "truth": truth.kind, "tolerance_px": args.tolerance, "crease_deg": args.crease_deg,
+            # every prediction counted: rs.evaluate.score_edges(..., ignore_data_boundary=False) gives these
+            "ignore_data_boundary": False,
             "methods": {m: {"seconds": r["seconds"], **r["scores"]} for m, r in results.items()},
         }
         if args.sensor is not None:

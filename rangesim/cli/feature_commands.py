@@ -44,6 +44,8 @@ def cmd_features(args: argparse.Namespace) -> int:
     from rangesim.cli.edge_commands import require_grid
 
     require_grid(scan, Path(args.scan))
+    if not np.any(scan.valid):
+        raise RangesimError("no valid pixel: no edges, no features to find", source=args.scan)
     scene = args.scene
     given_model = None
     if scene is not None:

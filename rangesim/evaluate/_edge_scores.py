@@ -270,3 +270,16 @@ def edge_scores(
         per_label[EDGE_LABEL_NAMES[label]] = s
     out["per_label"] = per_label
     return out
+
+
+def undefined_as_nan(row: dict[str, Any], prefix: str, n_pred: int, n_gt: int, also: tuple[str, ...] = ()) -> None:
+    """NaN for the scores nothing defines, so that medians and plots leave them out: with no true
+    edge pixel (an empty scan, a view that misses the part) nothing was there to find, and the
+    scorer's 1.0 for "nothing to find, nothing found" is no detector's merit; with no predicted
+    pixel, precision."""
+    if n_gt == 0:
+        for name in ("precision", "recall", "f1", *also):
+            if prefix + name in row:
+                row[prefix + name] = float("nan")
+    elif n_pred == 0 and prefix + "precision" in row:
+        row[prefix + "precision"] = float("nan")

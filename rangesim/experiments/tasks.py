@@ -71,6 +71,7 @@ def run_sweep_task(payload: dict[str, Any]) -> dict[str, Any]:
         times ``scan_s``, ``truth_s``, ``detector_s`` (detection without scoring);
         ``scan``: the RangeScan if ``keep_scan``, else None.
     """
+    from rangesim.evaluate._edge_scores import undefined_as_nan
     from rangesim.evaluate.runs import run_detectors, scan_truth
     from rangesim.experiments.scenes import load_task_scene
     from rangesim.experiments.snr import edge_snr
@@ -96,27 +97,14 @@ def run_sweep_task(payload: dict[str, Any]) -> dict[str, Any]:
         row = {**common, "detector": method}
         for name in ("precision", "recall", "f1", "fom", "n_pred", "n_gt", "matched"):
             row[name] = s[name]
-        _undefined_as_nan(row, "", s["n_pred"], s["n_gt"], ("fom",))
+        undefined_as_nan(row, "", s["n_pred"], s["n_gt"], ("fom",))
         for label, ls in s.get("per_label", {}).items():
             for name in LABEL_SCORES:
                 row[f"{label}_{name}"] = ls[name]
-            _undefined_as_nan(row, f"{label}_", ls.get("n_pred", 1), ls["n_gt"])
+            undefined_as_nan(row, f"{label}_", ls.get("n_pred", 1), ls["n_gt"])
         row.update(scan_s=t1 - t0, truth_s=t2 - t1, detector_s=r["seconds"])
         rows.append(_plain_row(row))
     return {"key": payload["key"], "rows": rows, "scan": scan if payload.get("keep_scan") else None}
-
-
-def _undefined_as_nan(row: dict[str, Any], prefix: str, n_pred: int, n_gt: int, also: tuple[str, ...] = ()) -> None:
-    """NaN for the scores nothing defines, so that medians and plots leave them out: with no true
-    edge pixel (an empty scan, a view that misses the part) nothing was there to find, and the
-    scorer's 1.0 for "nothing to find, nothing found" is no detector's merit; with no predicted
-    pixel, precision."""
-    if n_gt == 0:
-        for name in ("precision", "recall", "f1", *also):
-            if prefix + name in row:
-                row[prefix + name] = float("nan")
-    elif n_pred == 0 and prefix + "precision" in row:
-        row[prefix + "precision"] = float("nan")
 
 
 def _plain_row(row: dict[str, Any]) -> dict[str, Any]:
