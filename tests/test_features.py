@@ -235,3 +235,18 @@ def test_feature_edge_cases_from_a_users_probe():
 
     text = F.relations_to_json(F.relations([Segment((0, 0), (10, 0), 10, None, 10, 0)], [Circle((np.nan, 1), 3, 1, 1, 0)]))
     assert "NaN" not in text and json.loads(text)[0]["value"] is None
+
+
+def test_segment_lengths_are_measured_on_the_surface_the_edge_bounds(tmp_path):
+    """A 60 mm box edge seen against the table came out 83 mm long: its fitted end point rounded
+    onto a table pixel beyond the occluding edge; the run's own end pixels lie on the box."""
+    from rangesim.core.geometry import look_at
+    from tests.conftest import make_sensor
+
+    (tmp_path / "s.toml").write_text(
+        'units = "mm"\n[[object]]\nname = "box"\nprimitive = "box"\nsize = [60, 60, 30]\ntranslate = [0, 0, 15]\n'
+        'rotate_deg = [0, 0, 30]\n[[object]]\nname = "table"\nprimitive = "plane"\nsize = [1200, 1200]\n')
+    scan = rs.scan(tmp_path / "s.toml", make_sensor(**{"noise.sigma_px": 0.0}),
+                   pose=look_at((0.0, -260.0, 300.0), (0.0, 0.0, 15.0), up=(0, 0, 1)), seed=0)
+    found = [s for s in F.lines(rs.edges.gradient(scan), scan=scan, min_length=15) if s.length_mm is not None]
+    assert found and max(s.length_mm for s in found) <= 62.0
