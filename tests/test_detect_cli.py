@@ -191,3 +191,36 @@ def test_scene_check_is_per_object(tmp_path, capsys):
     assert scene_match_share(scan, rs.load_scene(made)) > 0.99
     code, _, err = _detect(capsys, path, "--method", "gradient", "--scene", turned, "--out", tmp_path / "d")
     assert code == 2 and "does not match this scan" in err
+
+
+def test_detect_and_diff_details_from_a_users_probe(synthetic, tmp_path, capsys):
+    import dataclasses
+
+    scan_path, scene_path = synthetic
+    scan = rs.load_scan(scan_path)
+    # a detector's refusal names the file (it named only "scan.depth")
+    bad = scan.depth.copy()
+    bad[scan.valid] = -bad[scan.valid]
+    neg = rs.save_scan(dataclasses.replace(scan, depth=bad, xyz=scan.xyz * np.array([1, 1, -1], np.float32)),
+                       tmp_path / "neg.npz")
+    code, _, err = _detect(capsys, neg, "--method", "gradient", "--out", tmp_path / "n")
+    assert code == 2 and err.startswith(f"rangesim: error: {neg}") and "Traceback" not in err
+    # truth is kept only where the detectors can read a depth (valid without a depth: a hole)
+    holed = dataclasses.replace(scan, depth=np.where(np.arange(scan.shape[1]) < 20, np.nan, scan.depth).astype(np.float32))
+    truth = rs.evaluate.visible_truth(holed, rs.load_scene(scene_path))
+    assert not truth[:, :20].any()
+    # diff of two views warns that it compares different surface points
+    other = rs.save_scan(dataclasses.replace(scan, pose=scan.pose @ np.diag([1.0, 1.0, 1.0, 1.0])
+                                             + np.array([[0, 0, 0, 50.0], [0] * 4, [0] * 4, [0] * 4])),
+                         tmp_path / "other.exr")
+    assert main(["diff", str(scan_path), str(other), "--out", str(tmp_path / "d.png")]) == 0
+    assert "another pose" in capsys.readouterr().err
+
+
+def test_feature_precision_needs_feature_truth():
+    """A scene without analytic features (primitives) judged 5 correct box edges precision 0."""
+    from rangesim.features._lines import Segment
+
+    found = {"segments": [Segment((0.0, 0.0), (30.0, 0.0), 30.0, None, 30, 0.1)]}
+    s = rs.evaluate.feature_scores(found, {"circles": [], "segments": []})
+    assert np.isnan(s["segments"]["precision"]) and np.isnan(s["round"]["precision"])

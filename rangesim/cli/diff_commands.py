@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from rangesim.cli.common import check_suffix, positive, writing
 
 
@@ -24,6 +26,14 @@ def cmd_diff(args: argparse.Namespace) -> int:
         raise RangesimError(f"the scans differ in size: {args.scan_a} is {a.shape[1]:,} x {a.shape[0]:,} px, "
                             f"{args.scan_b} is {b.shape[1]:,} x {b.shape[0]:,} (W x H); diff compares two scans "
                             "of one view", source=args.scan_b)
+    gap = float(np.linalg.norm(np.asarray(a.pose)[:3, 3] - np.asarray(b.pose)[:3, 3]))
+    turn = float(np.degrees(np.arccos(np.clip((np.trace(np.asarray(a.pose)[:3, :3].T @ np.asarray(b.pose)[:3, :3]) - 1) / 2,
+                                              -1.0, 1.0))))
+    if gap > 1e-3 or turn > 1e-3:  # the same pixel then looks at other surface points
+        import warnings
+
+        warnings.warn(f"{args.scan_b} was taken from another pose than {args.scan_a} ({gap:.1f} mm and {turn:.1f} "
+                      "degrees apart): the pixel-by-pixel difference compares different surface points", stacklevel=1)
     labels = tuple(args.labels) if args.labels else (Path(args.scan_a).stem, Path(args.scan_b).stem)
     with writing(out):
         stats = save_scan_difference(a, b, out, labels=labels, limit_mm=args.limit)

@@ -91,7 +91,10 @@ def cmd_detect(args: argparse.Namespace) -> int:
                 f"scan's true surface on {100 * share:.1f} % of its pixels (edited since the scan?); give --scene",
                 source=path)
     truth = scan_truth(scan, scene, segment_labels, crease_deg=args.crease_deg)
-    results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
+    try:
+        results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
+    except RangesimError as exc:  # a detector's refusal names the scan's field: name the file too
+        raise RangesimError(str(exc), source=path) from None
     if truth is not None:  # nothing to find (no true edge pixel): no score, as in sweeps (NaN, not 1)
         from rangesim.evaluate._edge_scores import undefined_as_nan
 

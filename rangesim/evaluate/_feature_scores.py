@@ -118,7 +118,8 @@ def feature_scores(
         ``round`` and ``segments`` sub-dicts: ``recall``, ``precision``, ``matched``,
         ``n_found``, ``n_truth``, ``center_error_px`` / ``radius_error_px`` (mean, max) and
         mm equivalents, ``endpoint_error_px``; ``matches`` lists (found index, truth name, error).
-        ``recall`` is NaN when no true feature is scored and ``precision`` NaN when none was
+        ``recall`` is NaN when no true feature is scored and ``precision`` NaN when the scene
+        has no feature of the kind at all (nothing to judge the found ones by) or when none was
         found (undefined: a features list is short, and a 1.0 there would read as a result;
         :func:`~rangesim.evaluate.edge_scores` counts pixels and calls those cases 1.0).
 
@@ -158,7 +159,8 @@ def feature_scores(
     fp = np.array([_footprint(scan, tr[j].center, tr[j].axes[0]) for i, j in pairs])
     res.update(
         matched=len(pairs), recall=len(pairs) / len(tr) if tr else float("nan"),
-        precision=len(pairs) / len(fr) if fr else float("nan"),
+        # a scene with no round feature at all (primitives, a plain mesh) judges nothing found
+        precision=len(pairs) / len(fr) if fr and truth.get("circles") else float("nan"),
         center_error_px={"mean": float(ce.mean()) if len(ce) else None, "max": float(ce.max()) if len(ce) else None},
         radius_error_px={"mean": float(re.mean()) if len(re) else None, "max": float(re.max()) if len(re) else None},
     )
@@ -185,7 +187,7 @@ def feature_scores(
         pairs, ee = [], np.zeros(0)
     res.update(
         matched=len(pairs), recall=len(pairs) / len(ts_) if ts_ else float("nan"),
-        precision=len(pairs) / len(fs_) if fs_ else float("nan"),
+        precision=len(pairs) / len(fs_) if fs_ and truth.get("segments") else float("nan"),
         endpoint_error_px={"mean": float(ee.mean()) if len(ee) else None, "max": float(ee.max()) if len(ee) else None},
         matches=[(i, ts_[j].name, float(e)) for (i, j), e in zip(pairs, ee)],
     )

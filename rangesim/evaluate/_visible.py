@@ -59,7 +59,9 @@ def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: An
     (False, True)
     """
     labels = ground_truth_edges(scan, scene, crease_deg, **options)
-    labels[~np.asarray(scan.valid, dtype=bool)] = EdgeLabel.NONE
+    # measured = valid with a depth, as the detectors read it (a pixel marked valid without a
+    # depth is a hole to them; truth kept there was unfindable)
+    labels[~(np.asarray(scan.valid, dtype=bool) & np.isfinite(np.asarray(scan.depth, dtype=np.float64)))] = EdgeLabel.NONE
     return labels
 
 
