@@ -1,4 +1,6 @@
-"""Edges over a scan: convex white, concave grey, jump red, rim orange, on the dimmed shaded scan."""
+"""Edges over a scan: convex white, concave grey, jump red, rim orange, on the dimmed shaded scan
+(depth in viridis, which holds no red or orange, so the jump and rim lines stay visible on any
+part of it; the statuses of the pixels without a depth in the legend)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,7 +11,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.core.rangescan import RangeScan
 from rangesim.edges.edgemap import LABEL_NAMES, RIM
 from rangesim.viz.figure import save_labelled_image
-from rangesim.viz.preview import depth_rgb
+from rangesim.viz.preview import depth_rgb, status_legend
 
 #: one colour per edge type, shared by every edge picture
 EDGE_COLORS: dict[int, tuple[float, float, float]] = {
@@ -21,11 +23,14 @@ EDGE_COLORS: dict[int, tuple[float, float, float]] = {
 }
 #: how much the scan under the edges is dimmed, so white and grey edges stand out
 BACKGROUND_DIM = 0.45
+#: the depth colours under the edges: no red or orange in it (turbo's far end is red-brown, on
+#: which the red jump and orange rim lines of a bunny or a table vanished)
+BACKGROUND_CMAP = "viridis"
 
 
 def edge_overlay_rgb(scan: RangeScan, edge_map) -> np.ndarray:
     """(H, W, 3) picture: the shaded scan, dimmed, with edge pixels coloured by type."""
-    rgb = depth_rgb(scan) * BACKGROUND_DIM
+    rgb = depth_rgb(scan, cmap=BACKGROUND_CMAP) * BACKGROUND_DIM
     for label, colour in EDGE_COLORS.items():
         rgb[edge_map.mask & (edge_map.labels == int(label))] = colour
     return rgb
@@ -45,7 +50,7 @@ def edge_legend(edge_map) -> list[tuple[tuple[float, float, float], str]]:
 def save_edge_overlay(scan: RangeScan, edge_map, path: str | Path, *, title: str | None = None,
                       dpi: int = 150) -> Path:
     """Write the edges of ``edge_map`` over ``scan`` as a PNG with a legend of pixel counts."""
-    legend = edge_legend(edge_map)
+    legend = edge_legend(edge_map) + status_legend(scan, dim=BACKGROUND_DIM)
     h, w = scan.shape
     default = f"{edge_map.method or 'edges'} — {w}x{h} px, {int(edge_map.mask.sum()):,} edge pixels"
     return save_labelled_image(edge_overlay_rgb(scan, edge_map), path, title=title or default,

@@ -288,6 +288,15 @@ def _status_label(code: int, mode: str | None = None) -> str:
         return f"status {code}"
 
 
+def status_legend(scan: RangeScan, dim: float = 1.0) -> list[tuple[RGB, str]]:
+    """(colour, "<status>: <n> px (<p> %)") of every status among the pixels without a depth,
+    for a picture's legend; ``dim`` scales the colours as the picture drew them."""
+    total = scan.shape[0] * scan.shape[1]
+    return [(tuple(dim * v for v in status_color(c)),
+             f"{_status_label(c, scan.meta.get('mode'))}: {n:,} px ({_percent(n, total)})")
+            for c, n in _status_counts(scan).items()]
+
+
 def _percent(n: int, total: int) -> str:
     """``n / total`` as a percentage that never shows a non-zero count as "0.0 %"."""
     p = 100.0 * n / max(total, 1)
@@ -387,10 +396,7 @@ def save_preview(
     view = _thinned(scan)
     lo, hi = depth_limits(view) if limits is None else (float(limits[0]), float(limits[1]))
     rgb = depth_rgb(view, cmap=cmap, limits=(lo, hi), shade=shade)
-    legend = [
-        (status_color(c), f"{_status_label(c, scan.meta.get('mode'))}: {n:,} px ({_percent(n, h * w)})")
-        for c, n in _status_counts(scan).items()
-    ]
+    legend = status_legend(scan)
     valid_d = view.depth[_valid_depth_mask(view)]
     below, above = bool((valid_d < lo).any()), bool((valid_d > hi).any())
     extend = {(False, False): "neither", (True, False): "min", (False, True): "max"}.get(
