@@ -173,7 +173,20 @@ def _support(xy: np.ndarray, c: np.ndarray, r: float) -> tuple[np.ndarray, float
     rho = np.hypot(d[:, 0], d[:, 1])
     on = np.abs(rho - r) <= 1.0
     ang = np.arctan2(d[on, 1], d[on, 0])
-    cov, start, end = angular_coverage(ang, round(2 * np.pi * r))
+    n_bins = round(2 * np.pi * r)
+    cov, start, end = angular_coverage(ang, n_bins)
+    if len(ang) > 1:
+        # the run goes on across the gap between two neighbouring pixels (8-adjacent): a thin
+        # curve's diagonal steps put them sqrt(2) px apart, leaving an empty 1 px bin every few
+        # pixels (a clean 180 degree arc of radius 30 px ran 61 degrees); a missing pixel
+        # (neighbours 2 px apart) still breaks it, so clutter near a circle is not joined up
+        o = np.argsort(ang)
+        a, p = ang[o], xy[on][o]
+        nxt = np.roll(np.arange(len(a)), -1)
+        adjacent = np.abs(p[nxt] - p).max(axis=1) <= 1.0 + 1e-6
+        gap = np.mod(a[nxt] - a, 2 * np.pi)
+        mid = a[adjacent] + gap[adjacent] / 2
+        _, start, end = angular_coverage(np.concatenate([ang, mid]), n_bins)
     rms = float(np.sqrt(np.mean((rho[on] - r) ** 2))) if on.any() else np.inf
     return on, cov, start, end, rms
 

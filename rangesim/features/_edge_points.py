@@ -147,18 +147,13 @@ def angular_coverage(angles: np.ndarray, n_bins: int) -> tuple[float, float, flo
         circle, whose pixels lie up to sqrt(2) px apart along it, covers 0.86-0.94).
     start, end : float
         Start and end angles (radians, counter-clockwise in image x-y, i.e. from +x towards
-        +y) of the longest run of occupied bins, a lone empty bin between two occupied ones
-        counted as occupied (the gap of a diagonal step).
+        +y) of the longest run of occupied bins.
     """
     n_bins = max(int(n_bins), 8)
     idx = np.floor((np.mod(angles, 2 * np.pi)) / (2 * np.pi) * n_bins).astype(int) % n_bins
     occ = np.zeros(n_bins, bool)
     occ[idx] = True
     cov = float(occ.mean())
-    # the run is not broken by a lone empty bin between two occupied ones: the pixels of an
-    # 8-connected curve lie up to sqrt(2) px apart along it, so a thin diagonal stretch leaves
-    # one such bin in every two or three (a clean 180 degree arc of radius 30 px ran 61 degrees)
-    occ |= np.roll(occ, 1) & np.roll(occ, -1)
     if occ.all():
         return 1.0, 0.0, 2 * np.pi
     if not occ.any():
