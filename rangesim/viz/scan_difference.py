@@ -76,14 +76,15 @@ def save_scan_difference(a: RangeScan, b: RangeScan, path: str | Path, *, labels
     if limit_mm is None:
         limit_mm = max(0.05, stats["p95_abs_mm"]) if stats["both"] else 1.0
     h, w = a.shape
-    fig = Figure(figsize=(15, 5.2 * h / w + 1.0))
+    fig = Figure(figsize=(15, 5.2 * h / w + 1.3), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, 3)
     for ax, scan, label in zip(axes[:2], (a, b), labels):
         ax.imshow(depth_rgb(scan, limits=limits), interpolation="nearest")
         ax.set_title(f"{label}: {int(scan.valid.sum()):,} valid px")
     # the depth scale of both panels, and what the unmeasured pixels' colours mean
-    fig.colorbar(ScalarMappable(Normalize(*limits), "turbo"), ax=axes[1], fraction=0.046, pad=0.02,
+    # one bar for both depth panels, which then keep one size (a bar beside the second alone shrank it)
+    fig.colorbar(ScalarMappable(Normalize(*limits), "turbo"), ax=list(axes[:2]), fraction=0.046, pad=0.02, shrink=0.75,
                  label="depth z [mm]")
     codes = sorted({int(c) for scan in (a, b) for c in np.unique(scan.status[~scan.valid])})
     if codes:
@@ -97,8 +98,8 @@ def save_scan_difference(a: RangeScan, b: RangeScan, path: str | Path, *, labels
     both = np.isfinite(difference)
     diff_rgb[both] = colormaps["RdBu_r"](norm(difference[both]))[:, :3]
     axes[2].imshow(diff_rgb, interpolation="nearest")
-    axes[2].set_title(f"{labels[1]} - {labels[0]}: median |d| {stats['median_abs_mm']:.3f} mm, "
-                      f"p95 {stats['p95_abs_mm']:.3f} mm", fontsize=10)
+    axes[2].set_title(f"{labels[1]} - {labels[0]}\nmedian |d| {stats['median_abs_mm']:.3f} mm, "
+                      f"p95 {stats['p95_abs_mm']:.3f} mm", fontsize=10)  # two lines: one ran over the bar beside it
     # arrows where differences go beyond the limit (by default its 95th percentile: 5 % do)
     beyond = np.abs(difference[both]) > limit_mm
     fig.colorbar(ScalarMappable(norm, "RdBu_r"), ax=axes[2], fraction=0.046, pad=0.02, label="depth difference [mm]",
@@ -106,9 +107,8 @@ def save_scan_difference(a: RangeScan, b: RangeScan, path: str | Path, *, labels
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.text(0.5, 0.02, f"grey in the difference: measured by only one ({stats['only_a']:,} {labels[0]} only, "
-             f"{stats['only_b']:,} {labels[1]} only) or neither", ha="center", fontsize=9)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.supxlabel(f"grey in the difference: measured by only one ({stats['only_a']:,} {labels[0]} only, "
+                  f"{stats['only_b']:,} {labels[1]} only) or neither", fontsize=9)
     path = Path(path)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
