@@ -11,7 +11,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.core.rangescan import RangeScan
 from rangesim.edges.edgemap import LABEL_NAMES, RIM
 from rangesim.viz.figure import save_labelled_image
-from rangesim.viz.preview import depth_rgb, status_legend
+from rangesim.viz.preview import depth_limits, depth_rgb, status_legend
 
 #: one colour per edge type, shared by every edge picture
 EDGE_COLORS: dict[int, tuple[float, float, float]] = {
@@ -50,11 +50,21 @@ def edge_legend(edge_map) -> list[tuple[tuple[float, float, float], str]]:
 def save_edge_overlay(scan: RangeScan, edge_map, path: str | Path, *, title: str | None = None,
                       dpi: int = 150) -> Path:
     """Write the edges of ``edge_map`` over ``scan`` as a PNG with a legend of pixel counts."""
+    from matplotlib import colormaps
+    from matplotlib.colors import ListedColormap
+
+    from rangesim.viz.figure import ColorbarSpec
+
     legend = edge_legend(edge_map) + status_legend(scan, dim=BACKGROUND_DIM)
     h, w = scan.shape
     default = f"{edge_map.method or 'edges'} — {w}x{h} px, {int(edge_map.mask.sum()):,} edge pixels"
+    colorbar = None
+    if np.any(scan.valid & np.isfinite(scan.depth)):  # the depth scale, dimmed as the picture draws it
+        lo, hi = depth_limits(scan)
+        dimmed = ListedColormap(colormaps[BACKGROUND_CMAP](np.linspace(0, 1, 256))[:, :3] * BACKGROUND_DIM)
+        colorbar = ColorbarSpec(dimmed, lo, hi, "depth z [mm]")
     return save_labelled_image(edge_overlay_rgb(scan, edge_map), path, title=title or default,
-                               legend=legend, dpi=dpi)
+                               legend=legend, colorbar=colorbar, dpi=dpi)
 
 
 def save_edge_panels(scan: RangeScan, edge_maps: dict, path: str | Path, *, truth=None,
