@@ -224,3 +224,24 @@ def test_feature_precision_needs_feature_truth():
     found = {"segments": [Segment((0.0, 0.0), (30.0, 0.0), 30.0, None, 30, 0.1)]}
     s = rs.evaluate.feature_scores(found, {"circles": [], "segments": []})
     assert np.isnan(s["segments"]["precision"]) and np.isnan(s["round"]["precision"])
+
+
+def test_edge_files_describe_themselves_and_another_scans_leave(synthetic, tmp_path, capsys):
+    """A reused folder kept another scan's maps of the methods not run now beside the new ones;
+    the NPZ files now say which scan and method made them, with the parameters used."""
+    import dataclasses
+
+    scan_path, _ = synthetic
+    out = tmp_path / "d"
+    assert _detect(capsys, scan_path, "--method", "all", "--out", out)[0] == 0
+    with np.load(out / "normal_edges.npz") as npz:
+        assert str(npz["method"]) == "normal" and str(npz["scan"]) == str(Path(scan_path).resolve())
+        assert "threshold_deg" in json.loads(str(npz["params"]))
+    # the same scan, one method: the others' files stay (they are this scan's)
+    assert _detect(capsys, scan_path, "--method", "gradient", "--out", out)[0] == 0
+    assert (out / "normal_edges.npz").is_file()
+    # another scan, one method: the first scan's other maps go
+    other = rs.save_scan(dataclasses.replace(rs.load_scan(scan_path)), tmp_path / "other.exr")
+    assert _detect(capsys, other, "--method", "gradient", "--out", out)[0] == 0
+    assert not (out / "normal_edges.npz").exists() and not (out / "normal.png").exists()
+    assert (out / "gradient_edges.npz").is_file()

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_conf, check_out_files, make_out_dir, positive, write_json, writing
+from rangesim.cli.common import check_conf, check_out_files, json_safe, make_out_dir, positive, write_json, writing
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.io.atomic import atomic_path
@@ -102,9 +103,26 @@ def cmd_detect(args: argparse.Namespace) -> int:
             undefined_as_nan(r["scores"], "", r["scores"]["n_pred"], r["scores"]["n_gt"], ("fom",))
 
     make_out_dir(out)
+    scan_id = str(path.resolve())
+    for other in set(DETECTORS) - set(methods):
+        # a reused folder: another scan's maps of the methods not run now would sit beside these
+        old = out / f"{other}_edges.npz"
+        if old.is_file():
+            try:
+                with np.load(old) as npz:
+                    same = "scan" in npz.files and str(npz["scan"]) == scan_id
+            except (OSError, ValueError):
+                same = False
+            if not same:
+                old.unlink(missing_ok=True)
+                (out / f"{other}.png").unlink(missing_ok=True)
     for method, result in results.items():
         edge_map = result["edge_map"]
-        arrays = {"mask": edge_map.mask, "labels": edge_map.labels, "strength": edge_map.strength}
+        # self-describing: which scan and method made it, with the parameters it used (the
+        # noise-adapted thresholds), as JSON text
+        arrays = {"mask": edge_map.mask, "labels": edge_map.labels, "strength": edge_map.strength,
+                  "method": np.str_(method), "scan": np.str_(scan_id),
+                  "params": np.str_(json.dumps(json_safe(edge_map.params or {}), sort_keys=True))}
         for name in ("direction", "offset"):
             if getattr(edge_map, name) is not None:
                 arrays[name] = getattr(edge_map, name)
