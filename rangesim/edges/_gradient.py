@@ -1031,9 +1031,9 @@ def gradient(
         Gaussian pre-smoothing of the depth, pixels, >= 0 (0: none). Noisy scans need it: the
         response's noise is ~1.4 sigma_z / footprint unsmoothed. Default (None): 0 on
         noise-free scans, else ``clip(4 * noise, 1, 3)`` px for a depth noise of ``noise``
-        footprints (1 px at the White Scanner preset's 0.25, and for the 0.04 of its peak
-        quantisation alone: smoothing goes with the noise-raised threshold wherever noise is
-        measurable, :data:`~rangesim.edges._noise.NOISE_MEASURABLE`), or less where the default
+        footprints (1 px at the White Scanner preset's 0.25; also under
+        :data:`~rangesim.edges._noise.NOISE_FLOOR` where the noise, unsmoothed, would raise the
+        threshold above 15 degrees: the 0.04 footprints of its peak quantisation alone), or less where the default
         threshold then lets gentler creases through (:func:`crease_sigma`: ~1.75 px
         instead of 3 at the INRIA preset's 0.8, where 3 px kept a quarter of a crease's
         bend and dropped every crease within 6 px of a jump or shadow; on the machined
