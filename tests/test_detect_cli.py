@@ -245,3 +245,20 @@ def test_edge_files_describe_themselves_and_another_scans_leave(synthetic, tmp_p
     assert _detect(capsys, other, "--method", "gradient", "--out", out)[0] == 0
     assert not (out / "normal_edges.npz").exists() and not (out / "normal.png").exists()
     assert (out / "gradient_edges.npz").is_file()
+
+
+def test_a_bare_mesh_in_cm_keeps_its_units_for_the_truth(tmp_path, capsys):
+    """``rangesim scan part.stl --units cm``: the scan named the .stl, and detect rebuilt its
+    truth from it in millimetres, 10x too small (now refused by the scene check, before
+    silently scored against it): the scan records the mesh's units and the truth uses them."""
+    import trimesh
+
+    trimesh.creation.box((4.0, 3.0, 2.0)).export(tmp_path / "part.stl")
+    scan_path = tmp_path / "p.exr"
+    assert main(["scan", str(tmp_path / "part.stl"), "--units", "cm", "--sensor", "white_scanner", "--set",
+                 "camera.width=96", "--set", "camera.height=90", "--out", str(scan_path), "--quiet"]) == 0
+    assert rs.load_scan(scan_path).meta["scene_units"] == "cm"
+    code, out, _ = _detect(capsys, scan_path, "--method", "gradient", "--out", tmp_path / "d")
+    report = json.loads((tmp_path / "d" / "scores.json").read_text())
+    assert code == 0 and report["truth"] == "geometry" and report["methods"]["gradient"]["f1"] > 0.9
+    assert main(["features", str(scan_path), "--out", str(tmp_path / "f"), "--quiet"]) == 0

@@ -58,9 +58,9 @@ def mesh_problem(path: Path) -> None:
 
 def load_scene_arg(source: str, units: str | None = None, option: str = "--units"):
     """A scene from a scene .toml or a bare mesh file (with ``--units``), broken meshes named clearly."""
-    from rangesim.cad.meshes import MESH_SUFFIXES, load_mesh
-    from rangesim.core.units import UNITS_MM
-    from rangesim.scene import Scene, SceneObject, load_scene
+    from rangesim.cad.meshes import MESH_SUFFIXES
+    from rangesim.scene import load_scene
+    from rangesim.scene.scene import load_mesh_scene
 
     path = Path(source)
     is_mesh = path.suffix.lower() in MESH_SUFFIXES
@@ -70,11 +70,7 @@ def load_scene_arg(source: str, units: str | None = None, option: str = "--units
     if not is_mesh:
         return load_scene(path)
     mesh_problem(path)
-    if units is None or UNITS_MM[units] == 1.0:
-        return load_scene(path)
-    mesh = load_mesh(path)
-    mesh.apply_scale(UNITS_MM[units])
-    return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path.resolve()))
+    return load_mesh_scene(path, units)
 
 
 def make_out_dir(path: Path, option: str = "--out") -> None:

@@ -81,10 +81,10 @@ def cmd_detect(args: argparse.Namespace) -> int:
         # the scene file the scan names is scored against only if it still makes this scan (it may
         # have been edited since: every score was 0 with no word)
         from rangesim.cli.scene_match import MIN_SCENE_MATCH, scene_match_share
-        from rangesim.scene import load_scene
+        from rangesim.evaluate.runs import scene_of_scan
 
         named = str(scan.meta["scene"])
-        scene = load_scene(named)
+        scene = scene_of_scan(scan)
         share = scene_match_share(scan, scene)
         if share < MIN_SCENE_MATCH:
             raise RangesimError(

@@ -56,8 +56,10 @@ def cmd_features(args: argparse.Namespace) -> int:
         given_model = load_scene_arg(scene)
         require_matching_scene(scan, given_model, args.scan, scene)
     if scene is None and scan.xyz_true is not None:
-        source = scan.meta.get("scene")
-        scene = str(source) if source and Path(str(source)).is_file() else None
+        from rangesim.evaluate.runs import scene_of_scan
+
+        given_model = scene_of_scan(scan)  # (a bare mesh in its own units, as it was scanned)
+        scene = given_model.source if given_model is not None else None
     # rims are fitted whole: keep the creases a jump would otherwise clear around it
     options = {"jump_clearance": 0} if args.edges == "gradient" else {}
     edge_map = DETECTORS[args.edges](scan, **options)

@@ -102,9 +102,7 @@ def scan_truth(scan, scene: Any = None, segment_labels: np.ndarray | None = None
     """
     if scan.xyz_true is not None:
         if scene is None:
-            source = scan.meta.get("scene")
-            if source and Path(str(source)).is_file():
-                scene = str(source)
+            scene = scene_of_scan(scan)
         if scene is not None:
             from rangesim.scene import load_scene
 
@@ -115,6 +113,20 @@ def scan_truth(scan, scene: Any = None, segment_labels: np.ndarray | None = None
         boundary = region_boundaries(segment_labels, scan.valid)
         return EdgeTruth(np.where(boundary, np.uint8(EdgeLabel.JUMP), np.uint8(0)), "regions")
     return None
+
+
+def scene_of_scan(scan):
+    """The scene a synthetic scan names in its metadata (``meta["scene"]``, a bare mesh file read
+    in ``meta["scene_units"]`` where it was not in mm), loaded; None when the file is gone."""
+    source = scan.meta.get("scene")
+    if not source or not Path(str(source)).is_file():
+        return None
+    from rangesim.scene.scene import MESH_SUFFIXES, load_mesh_scene, load_scene
+
+    path = Path(str(source))
+    if path.suffix.lower() in MESH_SUFFIXES:
+        return load_mesh_scene(path, scan.meta.get("scene_units"))
+    return load_scene(path)
 
 
 def run_detectors(scan, methods, truth: EdgeTruth | None = None, tolerance_px: float = 2.0,

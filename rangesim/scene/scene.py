@@ -86,11 +86,16 @@ class Scene:
         Default camera-to-world pose; None lets ``scan`` choose one that frames the objects.
     source : str
         The scene file, or a description of where the scene came from.
+    source_units : str or None
+        The units a bare mesh file ``source`` was read in when not millimetres
+        (:func:`load_mesh_scene`); scans record it as ``meta["scene_units"]``, so that the
+        scene can be rebuilt from the file for their ground truth.
     """
 
     objects: list[SceneObject]
     view: np.ndarray | None = None
     source: str = "scene"
+    source_units: str | None = None
     _mitsuba: Any = field(default=None, repr=False, compare=False)
 
     @property
@@ -152,6 +157,26 @@ class Scene:
         """Radius (mm) of the sphere around the bounding-box centre enclosing every vertex."""
         centre = self.bounds.mean(axis=0)
         return float(max(np.linalg.norm(o.mesh.vertices - centre, axis=1).max() for o in self.objects))
+
+
+def load_mesh_scene(path: str | Path, units: str | None = None) -> Scene:
+    """A one-object scene of a bare mesh file read in ``units`` (mm, cm, m, in; None: mm).
+
+    Parameters
+    ----------
+    path : str or Path
+        Any mesh file trimesh reads.
+    units : str, optional
+        The file's units; the scene is in millimetres.
+    """
+    path = Path(path)
+    if units is None or UNITS_MM.get(units) == 1.0:
+        return load_scene(path)
+    if units not in UNITS_MM:
+        raise RangesimError(f"unknown units {units!r}; use one of {', '.join(UNITS_MM)}", source=path)
+    mesh = load_mesh(path)
+    mesh.apply_scale(UNITS_MM[units])
+    return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path.resolve()), source_units=units)
 
 
 def load_scene(source) -> Scene:

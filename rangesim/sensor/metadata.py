@@ -42,5 +42,7 @@ def scan_meta(scene, sensor, seed: int, mode: str, **extra: Any) -> dict[str, An
         "variant": mitsuba().variant(),
         "units": "mm",
     }
+    if getattr(scene, "source_units", None):  # a bare mesh file read in other units than mm
+        meta["scene_units"] = scene.source_units
     meta.update(extra)
     return meta
