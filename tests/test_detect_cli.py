@@ -262,3 +262,18 @@ def test_a_bare_mesh_in_cm_keeps_its_units_for_the_truth(tmp_path, capsys):
     report = json.loads((tmp_path / "d" / "scores.json").read_text())
     assert code == 0 and report["truth"] == "geometry" and report["methods"]["gradient"]["f1"] > 0.9
     assert main(["features", str(scan_path), "--out", str(tmp_path / "f"), "--quiet"]) == 0
+
+
+def test_nothing_to_find_prints_and_writes_no_score(tmp_path, capsys):
+    """A plane seen from above holds no true edge pixel: scores.json has null, not 1.0, and the
+    printed table a dash."""
+    (tmp_path / "plane.toml").write_text('units = "mm"\n[[object]]\nname = "table"\nprimitive = "plane"\n'
+                                         'size = [2000, 2000]\n[view]\nposition = [0, 0, 400]\n'
+                                         'look_at = [0, 0, 0]\nup = [0, 1, 0]\n')
+    scan = rs.scan(tmp_path / "plane.toml", make_sensor(**{"noise.sigma_px": 0.0}), seed=0)
+    path = rs.save_scan(scan, tmp_path / "plane.exr")
+    code, out, _ = _detect(capsys, path, "--method", "gradient", "--out", tmp_path / "d")
+    report = json.loads((tmp_path / "d" / "scores.json").read_text())
+    assert code == 0 and report["methods"]["gradient"]["n_gt"] == 0
+    assert report["methods"]["gradient"]["recall"] is None and report["methods"]["gradient"]["f1"] is None
+    assert "      -" in out.splitlines()[-2]

@@ -152,9 +152,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
     print(f"{'method':<15}{'edges':>9}{'seconds':>9}" + ("" if truth is None else f"{'P':>7}{'R':>7}{'F1':>7}{'FOM':>7}"))
     for method, r in results.items():
         line = f"{method:<15}{int(r['edge_map'].mask.sum()):>9,}{r['seconds']:>9.3f}"
-        if truth is not None:
+        if truth is not None:  # a score nothing defines (no true edge pixel, nothing found) prints "-"
             s = r["scores"]
-            line += f"{s['precision']:>7.3f}{s['recall']:>7.3f}{s['f1']:>7.3f}{s['fom']:>7.3f}"
+            line += "".join(f"{s[k]:>7.3f}" if s[k] == s[k] else f"{'-':>7}" for k in ("precision", "recall", "f1", "fom"))
         print(line)
     print(f"wrote {out}/")
     return 0
