@@ -58,6 +58,22 @@ def dump_scene_toml(data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _mesh_files(path: Path) -> list[Path]:
+    """The mesh files a scene ``.toml``'s ``[[object]]`` tables name, resolved, in order; none
+    for another file or a TOML the scene loader will refuse (it names the problem)."""
+    from rangesim.scene.scene import expand_data_path
+
+    if path.suffix.lower() != ".toml":
+        return []
+    try:
+        tables = read_toml(path).get("object", [])
+    except RangesimError:
+        return []
+    tables = [tables] if isinstance(tables, dict) else tables
+    return [(path.parent / expand_data_path(str(t["mesh"]))).resolve() for t in tables
+            if isinstance(t, dict) and "mesh" in t]
+
+
 def scene_digest(path: str | Path) -> str:
     """SHA-1 (hex) of what a scene file makes: the file's bytes and, for a scene ``.toml``, the
     bytes of every mesh file its ``[[object]]`` tables name (in order), so that results keyed on
@@ -71,20 +87,9 @@ def scene_digest(path: str | Path) -> str:
     """
     import hashlib
 
-    from rangesim.scene.scene import expand_data_path
-
     path = Path(path)
-    raw = path.read_bytes()
-    own = hashlib.sha1(raw).hexdigest()
-    if path.suffix.lower() != ".toml":
-        return own
-    try:
-        tables = read_toml(path).get("object", [])
-    except RangesimError:
-        return own  # the scene's own loader names the problem
-    tables = [tables] if isinstance(tables, dict) else tables
-    meshes = [(path.parent / expand_data_path(str(t["mesh"]))).resolve() for t in tables
-              if isinstance(t, dict) and "mesh" in t]
+    own = hashlib.sha1(path.read_bytes()).hexdigest()
+    meshes = _mesh_files(path)
     if not meshes:
         return own
     combined = hashlib.sha1(own.encode())
@@ -96,8 +101,6 @@ def scene_digest(path: str | Path) -> str:
 def _file_stamps(path: Path) -> list[tuple[str, int, int]]:
     """(path, mtime ns, size) of a scene file and of every mesh file its objects name, cheaply
     (no file is read but the scene's TOML); missing files stamp as (path, 0, -1)."""
-    from rangesim.scene.scene import expand_data_path
-
     def stamp(p: Path) -> tuple[str, int, int]:
         try:
             st = p.stat()
@@ -105,16 +108,7 @@ def _file_stamps(path: Path) -> list[tuple[str, int, int]]:
         except OSError:
             return str(p), 0, -1
 
-    stamps = [stamp(path)]
-    if path.suffix.lower() == ".toml":
-        try:
-            tables = read_toml(path).get("object", [])
-        except RangesimError:
-            return stamps  # the scene's own loader names the problem
-        tables = [tables] if isinstance(tables, dict) else tables
-        stamps += [stamp((path.parent / expand_data_path(str(t["mesh"]))).resolve()) for t in tables
-                   if isinstance(t, dict) and "mesh" in t]
-    return stamps
+    return [stamp(p) for p in (path, *_mesh_files(path))]
 
 
 def apply_object_overrides(path: str | Path, overrides: dict[str, dict[str, Any]]) -> dict[str, Any]:
