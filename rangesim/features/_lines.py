@@ -141,8 +141,8 @@ def lines(
     pa, pd = _line_peaks(acc, ang, dist, 3, 3, max(threshold or min_length / 2, 1), max_lines)
     used = np.zeros(len(xy), bool)
     cos_tol = np.cos(np.deg2rad(angle_tol_deg))
-    out: list[tuple[np.ndarray, np.ndarray, int, float]] = []
-    last_pixels: list[tuple[np.ndarray, np.ndarray]] = []
+    # (start, end, points, rms, its two end pixels)
+    out: list[tuple[np.ndarray, np.ndarray, int, float, np.ndarray]] = []
     for a, d in zip(pa, pd):
         n = np.array([np.cos(a), np.sin(a)])  # skimage: d = x cos a + y sin a
         off = pixels @ n - d  # the band about the peak, of the pixels it was voted by; fits to xy
@@ -166,19 +166,18 @@ def lines(
             rms = float(np.sqrt(np.mean(res ** 2)))
             if rms > band_px:
                 continue
-            out.append((m + s.min() * u, m + s.max() * u, len(run), rms))
-            # its own end pixels: an edge pixel lies on the surface the edge bounds (a jump's
-            # near side), while the fitted end point may round onto the background beyond it
-            last_pixels.append((p[np.argmin(s)], p[np.argmax(s)]))
+            # with its own end pixels, where its length in mm is measured: an edge pixel lies on the
+            # surface the edge bounds (a jump's near side), a fitted end point may round beyond it
+            out.append((m + s.min() * u, m + s.max() * u, len(run), rms, p[[np.argmin(s), np.argmax(s)]]))
             used[idx[run]] = True
     mm = None
     if scan is not None and len(out):
-        ends3d = back_project(scan, np.array(last_pixels, float).reshape(-1, 2)).reshape(-1, 2, 3)
+        ends3d = back_project(scan, np.concatenate([e for *_, e in out])).reshape(-1, 2, 3)
         mm = np.linalg.norm(ends3d[:, 1] - ends3d[:, 0], axis=1)
     segs = [
         Segment((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), float(np.hypot(*(b - a))),
                 None if mm is None or not np.isfinite(mm[k]) else float(mm[k]), n, rms)
-        for k, (a, b, n, rms) in enumerate(out)
+        for k, (a, b, n, rms, _) in enumerate(out)
     ]
     segs.sort(key=lambda s: -s.length)
     return segs
