@@ -43,8 +43,6 @@ def code_fingerprint() -> str:
     changed, a noise model refitted) must not reuse the rows or views the old code made, which
     ``__version__`` alone does not tell apart. Read once per process (about 200 files, a few ms).
     """
-    import hashlib
-
     import rangesim
 
     root = Path(rangesim.__file__).resolve().parent

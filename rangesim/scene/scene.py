@@ -324,7 +324,9 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
         raise RangesimError(f"{where} ({name}) needs exactly one of mesh, model, primitive", source=path)
     kind = str(t["primitive"]) if "primitive" in t else kinds[0]
     foreign = sorted(set(t) & GEOMETRY_KEYS - set(PRIMITIVE_KEYS.get(kind, ())))
-    if foreign and (kind in PRIMITIVE_KEYS or kind in ("mesh", "model")):  # (an unknown primitive: its own error)  # a key of another kind (size on a sphere, radius on a mesh) is a mistake, not a no-op
+    # a key of another kind (size on a sphere, radius on a mesh) is a mistake, not a no-op; an
+    # unknown primitive gets its own error below
+    if foreign and (kind in PRIMITIVE_KEYS or kind in ("mesh", "model")):
         takes = ", ".join(PRIMITIVE_KEYS.get(kind, ())) or "none of them"
         raise RangesimError(f"{where} ({name}): {', '.join(foreign)} does not apply to a {kind} "
                             f"(its geometry keys: {takes})", source=path)

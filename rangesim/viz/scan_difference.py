@@ -82,8 +82,8 @@ def save_scan_difference(a: RangeScan, b: RangeScan, path: str | Path, *, labels
     for ax, scan, label in zip(axes[:2], (a, b), labels):
         ax.imshow(depth_rgb(scan, limits=limits), interpolation="nearest")
         ax.set_title(f"{label}: {int(scan.valid.sum()):,} valid px")
-    # the depth scale of both panels, and what the unmeasured pixels' colours mean
-    # one bar for both depth panels, which then keep one size (a bar beside the second alone shrank it)
+    # the depth scale: one bar for both panels, which then keep one size (a bar beside the
+    # second alone shrank it); and what the unmeasured pixels' colours mean
     fig.colorbar(ScalarMappable(Normalize(*limits), "turbo"), ax=list(axes[:2]), fraction=0.046, pad=0.02, shrink=0.75,
                  label="depth z [mm]")
     codes = sorted({int(c) for scan in (a, b) for c in np.unique(scan.status[~scan.valid])})

@@ -114,11 +114,10 @@ def plot_f1_vs_snr(table, path: str | Path, *, swept: Sequence[str] = (), title:
                 x = x[np.isfinite(x) & (x > 0)]
                 if not x.size:
                     continue
-                f1 = g["f1"].to_numpy(dtype=float)
-                f1 = f1[np.isfinite(f1)]  # NaN: a scan with nothing to find (no true edge pixel)
-                if not f1.size:
+                q = _quartiles(g["f1"].to_numpy(dtype=float))
+                if np.isnan(q[0]):  # every scan with nothing to find (no true edge pixel)
                     continue
-                stats.append((float(np.median(x)), *np.percentile(f1, [25, 50, 75])))
+                stats.append((float(np.median(x)), *q))
             if not stats:
                 continue
             s = np.array(sorted(stats))
