@@ -223,6 +223,7 @@ def _mask_normals(mask, rows, cols, wxx, wyy, wxy):  # pragma: no cover - compil
                         sxx += wxx[i, j]
                         syy += wyy[i, j]
                         sxy += wxy[i, j]
-        tangent = 0.5 * np.arctan2(2 * sxy, sxx - syy)
-        out[n] = (tangent + np.pi) % np.pi - np.pi / 2
+        # (tangent + pi) mod pi - pi / 2, with the modulo as one exact subtraction (Sterbenz)
+        v = 0.5 * np.arctan2(2 * sxy, sxx - syy) + np.pi
+        out[n] = (v - np.pi if v >= np.pi else v) - np.pi / 2
     return out

@@ -505,20 +505,6 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
 # -- outer outlines -----------------------------------------------------------------------------
 
 @numba.njit(**_JIT)
-def _run_at(rs, re, r0, r1, x):  # pragma: no cover - compiled
-    """The run of a row (runs ``r0 .. r1 - 1``, ``rs``/``re`` their first and last columns)
-    holding column ``x``."""
-    lo, hi = r0, r1 - 1
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        if rs[mid] <= x:
-            lo = mid
-        else:
-            hi = mid - 1
-    return lo
-
-
-@numba.njit(**_JIT)
 def outline_points(pix, g):  # pragma: no cover - compiled
     """The points of :func:`~._arc_ellipses.outline_hypotheses`' outlines.
 
@@ -546,7 +532,12 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     # runs of each row, background and foreground alternating (the first and the last are
     # background: the margin), from the points' footprints [x - g, x + g] on the rows y - g ..
     # y + g merged, row by row: the work follows the points, not the box's pixels
-    o = np.argsort((pix[:, 1] + oy) * W + (pix[:, 0] + ox))
+    key = (pix[:, 1] + oy) * W + (pix[:, 0] + ox)
+    o = np.arange(N)
+    for i in range(1, N):
+        if key[i] < key[i - 1]:  # not in raster order already (as edge_points gives them)
+            o = np.argsort(key)
+            break
     pstart = np.zeros(H + 1, np.int64)
     for i in range(N):
         pstart[pix[i, 1] + oy + 1] += 1
@@ -558,6 +549,10 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     rf = np.empty(cap, np.bool_)
     row0 = np.empty(H + 1, np.int64)
     heads = np.empty(2 * g + 1, np.int64)
+    ends = np.empty(2 * g + 1, np.int64)
+    xs = np.empty(N, np.int64)  # the points' columns in raster order
+    for k in range(N):
+        xs[k] = pix[o[k], 0] + ox
     n_runs = 0
     for y in range(H):
         row0[y] = n_runs
@@ -565,15 +560,15 @@ def outline_points(pix, g):  # pragma: no cover - compiled
         for k in range(2 * g + 1):
             yy = y - g + k
             heads[k] = pstart[yy] if 0 <= yy < H else 0
+            ends[k] = pstart[yy + 1] if 0 <= yy < H else 0
         x_end = -1  # the last foreground column so far (-1: none yet)
         x_beg = 0
         bg_end = -1
         while True:
             best, bx = -1, 0
             for k in range(2 * g + 1):
-                yy = y - g + k
-                if 0 <= yy < H and heads[k] < pstart[yy + 1]:
-                    xk = pix[o[heads[k]], 0] + ox
+                if heads[k] < ends[k]:
+                    xk = xs[heads[k]]
                     if best < 0 or xk < bx:
                         best, bx = k, xk
             if best >= 0:
@@ -646,17 +641,31 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     lab = np.empty(N, np.int64)
     on = np.zeros(N, np.bool_)
     count = np.zeros(n_groups, np.int64)
-    for i in range(N):
-        x, y = pix[i, 0] + ox, pix[i, 1] + oy
-        lab[i] = gnum[rroot[_run_at(rs, re, row0[y], row0[y + 1], x)]]
-        for dy, dx in ((-g - 1, 0), (g + 1, 0), (0, -g - 1), (0, g + 1)):
-            yy, xx = y + dy, x + dx
-            r = _run_at(rs, re, row0[yy], row0[yy + 1], xx)
-            if not rf[r] and rroot[r] == outer[lab[i]]:
-                on[i] = True
-                break
-        if on[i]:
-            count[lab[i]] += 1
+    # the points in raster order (o): the runs holding a point and its 4-neighbours g + 1 px
+    # away, by pointers that only move right along the rows y - g - 1, y and y + g + 1 (the
+    # margin keeps those rows inside the box)
+    for y in range(H):
+        a, u, d = row0[y], row0[y - g - 1], row0[y + g + 1]
+        for k in range(pstart[y], pstart[y + 1]):
+            i, x = o[k], xs[k]
+            while re[a] < x:
+                a += 1
+            while re[u] < x:
+                u += 1
+            while re[d] < x:
+                d += 1
+            lab[i] = gnum[rroot[a]]
+            root = outer[lab[i]]
+            # x - g - 1 lies in the point's own run or the background run before it (the run
+            # starts at x - g at the latest); x + g + 1 likewise after it
+            left = a if rs[a] <= x - g - 1 else a - 1
+            right = a if re[a] >= x + g + 1 else a + 1
+            for r in (u, d, left, right):
+                if not rf[r] and rroot[r] == root:
+                    on[i] = True
+                    break
+            if on[i]:
+                count[lab[i]] += 1
     # by group (stable), groups without outline points left out
     gid = np.full(n_groups, -1, np.int64)
     G = 0
