@@ -8,7 +8,7 @@ timed interleaved in one process (median of the runs), with recall, precision an
   crest outlines (real circles, not scored rims) set aside in a second scoring; and on
   circles nearly tangent inside others (``tangent_pairs``), with ``split_tangent`` on and off;
 - ellipses (model-free path): ``rs.features.ellipses(mask, remove_explained=False)`` (the
-  default, and each hypothesis generator: the tilings and the chains,
+  default, and each hypothesis generator: the tilings, the chains and the outlines alone,
   :data:`rangesim.features._arc_ellipses.HYPOTHESES`) against ``cv2.fitEllipse`` on each
   contour of ``cv2.findContours`` (linked edge pixels) and ``cv2.ximgproc.findEllipses``
   (opencv-contrib), on the tilted Green Piece, with a second timing in CPU time of this thread
@@ -244,7 +244,7 @@ def crest_outlines(scan, scene) -> list[TrueRound]:
 
 def free_ellipses_with(hypotheses: str, mask: np.ndarray) -> list:
     """``rs.features.ellipses(mask)`` (no model) with the hypothesis generator ``hypotheses``
-    ("tilings" or "chains")."""
+    ("tilings", "chains" or "outlines")."""
     return F.ellipses(mask, remove_explained=False, hypotheses=hypotheses)
 
 
@@ -499,16 +499,19 @@ def bench_ellipses(scene, views, repeat: int) -> None:
         t, out = interleaved({"ours": lambda m=mask: F.ellipses(m, remove_explained=False),
                               "tilings": lambda m=mask: free_ellipses_with("tilings", m),
                               "chains": lambda m=mask: free_ellipses_with("chains", m),
+                              "outlines": lambda m=mask: free_ellipses_with("outlines", m),
                               "fit": lambda m=mask: cv_fit_ellipses(m),
                               "find": lambda m=mask: cv_find_ellipses(m)}, repeat)
         t_cpu, _ = interleaved({"ours": lambda m=mask: F.ellipses(m, remove_explained=False),
                                 "tilings": lambda m=mask: free_ellipses_with("tilings", m),
                                 "chains": lambda m=mask: free_ellipses_with("chains", m),
+                                "outlines": lambda m=mask: free_ellipses_with("outlines", m),
                                 "fit": lambda m=mask: cv_fit_ellipses(m)}, 25, clock=time.thread_time)
         inp = f"Green Piece tilted, {label} ({int(mask.sum())} edge px)"
         for key, name in (("ours", "rangesim ellipses (no model, default)"),
                           ("tilings", "rangesim ellipses (no model, tilings)"),
                           ("chains", "rangesim ellipses (no model, chains)"),
+                          ("outlines", "rangesim ellipses (no model, outlines)"),
                           ("fit", "cv2.findContours + fitEllipse"), ("find", "cv2.ximgproc.findEllipses")):
             s = feature_scores({"ellipses": out[key]}, truth, center_tol_px=2.0)["round"]
             s = {"recall": s["recall"], "precision": s["precision"], "centre": s["center_error_px"],

@@ -133,11 +133,11 @@ def test_hole_rims_of_an_untuned_machined_part():
     assert np.mean(np.array(hits) <= 1.0) >= 0.75, hits
 
 
-@pytest.mark.parametrize("hypotheses", ["tilings", "chains"])
+@pytest.mark.parametrize("hypotheses", ["tilings", "chains", "outlines"])
 @pytest.mark.parametrize("axes", [(150.0, 90.0), (180.0, 170.0), (100.0, 30.0), (6.0, 4.5)])
 def test_sizes_from_small_rims_to_large_ellipses(axes, hypotheses):
     """Large ellipses (arcs longer than the tiles) and small rims (a few pixels) alike, with
-    either hypothesis generator."""
+    each hypothesis generator."""
     m = np.zeros((420, 420), bool)
     draw_ellipse(m, (210.3, 209.6), axes, 0.4, gaps=[(1.0, 1.4)])
     found = F.ellipses(m, remove_explained=False, min_points=12, axes_range=(2.5, 250), hypotheses=hypotheses)
@@ -157,9 +157,10 @@ def test_rim_around_thread_crests(monkeypatch):
         shrink = 2.0 * k
         draw_ellipse(m, (center[0] + 0.6 * shrink, center[1]), (axes[0] - shrink, axes[1] - shrink), angle,
                      gaps=[(2.6, 6.3)])
-    found = F.ellipses(m, remove_explained=False)
-    d, da = _match(found, center, axes)
-    assert d <= 0.3 and da <= 0.5, (d, da)
+    for hypotheses in ("tilings", "outlines"):
+        found = F.ellipses(m, remove_explained=False, hypotheses=hypotheses)
+        d, da = _match(found, center, axes)
+        assert d <= 0.3 and da <= 0.5, (hypotheses, d, da)
     # the arc pieces alone miss it: the outline is what finds it
     import rangesim.features._arc_ellipses as A
 
@@ -460,6 +461,27 @@ def test_the_public_call_picks_the_hypotheses(chains, monkeypatch):
         [e.center for e in asked_chains]
     with pytest.raises(ValueError, match="hypotheses"):
         F.ellipses(m, hypotheses="contours")
+
+
+def test_outlines_fit_each_edge_group_as_fitellipse_would(scene_mask):
+    """``hypotheses="outlines"``: one fit per edge group's outer outline (after one trimmed
+    refit), grown and claimed as the other generators' fits. On the clutter map every ellipse
+    is its own group's outline (a crossing line is trimmed away) and found as the tilings find
+    it, nothing else; an ellipse inside a rectangle that touches it is not on any group's outer
+    outline, so this generator misses it where the tilings find it."""
+    found = F.ellipses(scene_mask, remove_explained=False, hypotheses="outlines")
+    assert len(found) == len(TRUE)
+    for center, axes, _ in TRUE:
+        d, da = _match(found, center, axes)
+        assert d <= 0.3 and da <= 0.5, (center, d, da)
+    m = np.zeros((120, 140), bool)
+    draw_ellipse(m, (60.3, 59.6), (25.0, 16.0), 0.0)
+    top = int(np.rint(59.6 - 16.0))  # the rectangle's top side touches the ellipse's top
+    for p, q in (((20, top), (110, top)), ((110, top), (110, 100)), ((110, 100), (20, 100)), ((20, 100), (20, top))):
+        draw_segment(m, p, q)
+    assert F.ellipses(m, remove_explained=False, hypotheses="outlines") == []
+    d, da = _match(F.ellipses(m, remove_explained=False, hypotheses="tilings"), (60.3, 59.6), (25.0, 16.0))
+    assert d <= 0.3 and da <= 0.3, (d, da)
 
 
 def test_a_segment_along_a_curve_explains_no_points():

@@ -4,7 +4,8 @@ Hypotheses come (by default, :data:`HYPOTHESES` "tilings") from the pieces of sm
 curves inside square tiles of several sizes (tiles that shift by half their size, so that
 every arc lies whole in some tile at some scale) and from the outer outlines of the groups of
 edge pixels; or ("chains") from the edge pixels traced into ordered chains and cut into arc
-pieces (:mod:`._ellipse_chains`), with the outlines. Each hypothesis that is a good ellipse
+pieces (:mod:`._ellipse_chains`), with the outlines; or ("outlines") from the outlines alone,
+one fit per group of edge pixels as ``cv2.fitEllipse`` on a contour. Each hypothesis that is a good ellipse
 on its piece is grown over all the edge points near it whose edge direction agrees,
 refitted, and kept when it covers enough of its own perimeter. Each edge point is claimed by
 one ellipse (strongest first): a candidate left with too little unclaimed support is
@@ -40,7 +41,11 @@ from rangesim.features._ellipse_kernels import (
 #: held-out synthetic maps), but lost a rim and gained a false one on the machined parts' check
 #: seeds, and find ghost ellipses in dense random clutter (half the pixels of a mask set) where
 #: the tilings find none, so they are not the default (``rs.features.ellipses(...,
-#: hypotheses="chains")`` asks for them)
+#: hypotheses="chains")`` asks for them). "outlines": only :func:`outline_hypotheses`, one per
+#: group of edge pixels: about cv2.fitEllipse's time on the tilted Green Piece (1.1-1.2x), with
+#: its recall (the rims that are their own group's outer outline) and none of its false
+#: ellipses; an ellipse whose group's outline is something else (inside a pocket whose wall it
+#: touches) is missed
 HYPOTHESES = "tilings"
 #: the chain hypotheses' claims go by coverage less this times the RMS residual (px): two grown
 #: copies of one rim, one pulled 1-3 px towards a thread's crests, cover alike, and the closer
@@ -270,9 +275,10 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     (a candidate whose unclaimed inliers cover less than ``min_support`` is dropped; the
     returned inliers of an accepted ellipse are all of them, claimed before or not).
 
-    ``hypotheses``: "tilings" or "chains" (default :data:`HYPOTHESES`); ``outlines``: add the
-    outline hypotheses (default: always with the tilings, with the chains when
-    :data:`CHAIN_OUTLINES`); ``bands``: the growth bands, px (default :data:`BANDS`).
+    ``hypotheses``: "tilings", "chains" or "outlines" (default :data:`HYPOTHESES`);
+    ``outlines``: add the outline hypotheses (default: always with the tilings and, being all
+    there is, with "outlines"; with the chains when :data:`CHAIN_OUTLINES`); ``bands``: the
+    growth bands, px (default :data:`BANDS`).
 
     ``pixels`` (N, 2) int: the points' pixels (default ``xy``), which link the points into
     curves and groups; the conics are fitted to ``xy`` (edge points to a fraction of a pixel).
@@ -295,8 +301,11 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     elif hypotheses == "tilings":
         curve = smooth_curves(xy if pixels is None else pixels, theta)
         conics, n = arc_hypotheses(xy, curve, axes_range=axes_range, min_ratio=min_ratio)
+    elif hypotheses == "outlines":
+        conics, n = np.zeros((0, 6)), np.zeros(0, np.int64)
+        outlines = True
     else:
-        raise RangesimError(f"hypotheses must be 'chains' or 'tilings', not {hypotheses!r}")
+        raise RangesimError(f"hypotheses must be 'tilings', 'chains' or 'outlines', not {hypotheses!r}")
     if (hypotheses == "tilings" or CHAIN_OUTLINES) if outlines is None else outlines:
         c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
         if hypotheses == "chains":  # the outlines first: a rim's outline beats its arcs joined to crests
