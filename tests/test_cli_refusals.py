@@ -74,6 +74,20 @@ def test_twin_meshes_with_nan_vertices_or_no_triangles_are_refused_by_name(tmp_p
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["compare", "calibrate"])
+def test_a_structured_light_sensor_is_refused_for_a_mesh_twin(tmp_path, capsys, command):
+    # compare once twinned a laser-stripe recording with kinect_v1's numbers in the stripe model, exit 0
+    rec = tmp_path / "rec.npz"
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)
+    mesh = tmp_path / "plate.stl"
+    trimesh.creation.box(extents=(60.0, 60.0, 2.0)).export(mesh)
+    out = tmp_path / ("c.toml" if command == "calibrate" else "d")
+    extra = ["--geometry-only"] if command == "calibrate" else ["--no-fit"]
+    _refused(capsys, [command, rec, "--mesh", mesh, "--sensor", "kinect_v1", "--out", out, *extra],
+             "kinect_v1", "structured-light", "laser-stripe")
+    assert not out.exists()
+
+
 def test_calibrate_views_refuses_no_overlap_in_the_library(tmp_path):
     from rangesim.twin.joint import calibrate_views
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -236,3 +237,24 @@ def test_registration_error_grows_as_tan_incidence():
                                    atol=1e-6)
     assert stds["flat"] < 1e-6
     assert stds["tilted"] == pytest.approx(0.2 * np.tan(np.radians(60)), rel=0.12)
+
+
+def test_joint_calibration_warns_about_a_view_whose_pose_is_off():
+    """One recording of two posed wrong (here: its part 60 mm aside, so half the grid holds it)
+    hides in the joint IoU; the calibration says which view overlaps only in part, and says
+    nothing when every view is posed right."""
+    from rangesim.twin.joint import calibrate_views
+
+    mesh = _box_on_plane()
+    good = twin(grid_recording(), mesh, theta_deg=20.0, alpha_deg=0.0, min_cos=0.05, quiet=True, seed=1)
+    aside = mesh.copy()
+    aside.apply_translation((60.0, 0.0, 0.0))
+    off = twin(grid_recording(), aside, theta_deg=20.0, alpha_deg=0.0, min_cos=0.05, quiet=True, seed=2)
+    with pytest.warns(RuntimeWarning) as caught:
+        calibrate_views([good, off], mesh, "cyberware_3030", names=["posed", "shifted"], fit_noise=False)
+    messages = [str(w.message) for w in caught]
+    assert any("recording 'shifted' overlap only in part" in m for m in messages), messages
+    assert not any("'posed'" in m for m in messages)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        calibrate_views([good, good], mesh, "cyberware_3030", names=["posed", "again"], fit_noise=False)

@@ -21,6 +21,7 @@ All metrics are computed on the common grid (same H x W, same frame):
 """
 from __future__ import annotations
 
+import warnings
 from typing import Any, Iterable
 
 import numpy as np
@@ -64,8 +65,14 @@ def edge_agreement(recorded: RangeScan, twin_scan: RangeScan, detectors: Iterabl
 
     out = {}
     for name in (detectors if detectors is not None else DETECTORS):
-        rec_map = DETECTORS[name](recorded)
-        twin_map = DETECTORS[name](twin_scan)
+        # the twin shares the recording's grid: a detector's note on it (pcl_organized on a
+        # scanner-frame grid) is said once, not once per scan
+        with warnings.catch_warnings(record=True) as notes:
+            warnings.simplefilter("always")
+            rec_map = DETECTORS[name](recorded)
+            twin_map = DETECTORS[name](twin_scan)
+        for text, category in dict.fromkeys((str(n.message), n.category) for n in notes):
+            warnings.warn(text, category, stacklevel=2)
         pred, gt = np.asarray(twin_map.mask, bool), np.asarray(rec_map.mask, bool)
         s = edge_scores(pred, gt, tolerance_px)
         out[name] = {

@@ -237,6 +237,10 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
     iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
     check_overlap(iou, "the best twin's valid-mask IoU", plural=True)
     geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos, "camera_views": views}
+    if len(stages) > 1:  # one view off (a pose left out) hides in the joint figure
+        for st, name in zip(stages, names):
+            view_iou = search_geometry([st], fixed=geometry, refine=False)[0]
+            check_overlap(view_iou, "its twin's valid-mask IoU at the joint fit", view=name)
     views = _views(stages, geometry)
     measurable = sum(int(np.count_nonzero(v["cells"])) for v in views)
     if measurable < MIN_MEASURABLE_CELLS:

@@ -93,11 +93,17 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
 
 
 def _as_sensor(sensor: Any):
-    if sensor is None or not isinstance(sensor, (str, Path, dict)):
-        return sensor
-    from rangesim.sensor import load_sensor
+    if sensor is not None and isinstance(sensor, (str, Path, dict)):
+        from rangesim.sensor import load_sensor
 
-    return load_sensor(sensor)
+        sensor = load_sensor(sensor)
+    if getattr(sensor, "mode", None) == "structured_light":
+        # the stage twins a laser-stripe scan (sheet, camera views, stripe noise): a projector's
+        # numbers would silently drive that model
+        raise RangesimError(f"sensor {sensor.name!r} is a structured-light sensor; the twin of a recording with "
+                            "a mesh is a laser-stripe scanner's: give a laser-stripe preset (a labelled "
+                            "Kinect-type frame is twinned without a mesh)")
+    return sensor
 
 
 def _sensor_defaults(sensor: Any) -> dict[str, float]:
