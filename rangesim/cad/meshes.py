@@ -30,9 +30,12 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     Raises
     ------
     RangesimError
-        Missing or unreadable file, a file with no triangles, non-finite vertices.
+        Missing or unreadable file, a file with no triangles, non-finite vertices, no
+        triangle of non-zero area, coordinates too large to weld.
     """
     path = Path(path)
+    if path.is_dir():
+        raise RangesimError("is a directory, not a mesh file", source=path)
     if not path.is_file():
         raise RangesimError("no such mesh file", source=path)
     cache = mesh_cache_dir()
@@ -43,8 +46,8 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
 
 #: environment variable naming the folder of the on-disk cache of validated meshes (unset: no cache)
 CACHE_ENV = "RANGESIM_MESH_CACHE"
-#: bump when validation changes what it produces, so stale cache entries are not used
-CACHE_VERSION = 1
+#: bump when validation changes what it produces or refuses, so stale cache entries are not used
+CACHE_VERSION = 2
 
 
 def mesh_cache_dir() -> Path | None:
@@ -92,30 +95,40 @@ def _cached_load(path: Path, cache: Path) -> trimesh.Trimesh:
 
 
 def _read_and_validate(path: Path) -> trimesh.Trimesh:
+    from rangesim.io.mesh_check import diagnose_mesh_file
+
+    # Where trimesh fails, or reads a broken file as nothing or as garbage, the file's bytes
+    # name the real problem (truncated, empty, 0-based OBJ indices, ...) where it can be told:
+    # one message for every path that loads a mesh (bare file, scene TOML, load_scene).
     try:
         # process=False keeps the face order of the file, so face indices in scans match it
         loaded = trimesh.load(path, process=False)
     except Exception as exc:
-        from rangesim.io.mesh_check import diagnose_mesh_file
-
-        problem = diagnose_mesh_file(path)  # name the real problem (truncated, empty, ...) where it can be told
+        problem = diagnose_mesh_file(path, full=True)
         raise RangesimError(problem or f"cannot read mesh ({type(exc).__name__}: {exc})", source=path) from exc
     if isinstance(loaded, trimesh.Scene):
         geometries = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
-        if not geometries:
-            raise RangesimError("file holds no triangle mesh", source=path)
+        if not geometries:  # trimesh's answer to a truncated, empty or 0-triangle STL
+            raise RangesimError(diagnose_mesh_file(path, full=True) or "file holds no triangle mesh", source=path)
         loaded = trimesh.util.concatenate(geometries)
     if not isinstance(loaded, trimesh.Trimesh):
         raise RangesimError(
             f"file holds a {type(loaded).__name__}, not a triangle mesh", source=path
         )
-    return validate_mesh(loaded, source=path)
+    try:
+        return validate_mesh(loaded, source=path)
+    except RangesimError:
+        problem = diagnose_mesh_file(path, full=True)  # e.g. OBJ `f 0 1 2`, read as a degenerate face
+        if problem is None:
+            raise
+        raise RangesimError(problem, source=path) from None
 
 
 def check_mesh_arrays(mesh: Any, source: str | Path | None = "mesh") -> tuple[np.ndarray, np.ndarray]:
     """The mesh's vertices (V, 3) float64 and faces (F, 3) int64, refused with a one-line message
-    naming ``source`` when there are no triangles, a face is no triangle, a vertex is not finite
-    or an index is out of range.
+    naming ``source`` when there are no triangles, a face is no triangle, a vertex is not finite,
+    an index is out of range or no triangle has an area (every face degenerate: nothing to scan).
+    A mesh with some degenerate faces among others passes.
     """
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
@@ -128,7 +141,44 @@ def check_mesh_arrays(mesh: Any, source: str | Path | None = "mesh") -> tuple[np
         raise RangesimError(f"{bad} vertices have NaN or infinite coordinates", source=source)
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise RangesimError("face indices out of range of the vertex list", source=source)
+    if _first_with_area(np.ascontiguousarray(vertices), np.ascontiguousarray(faces)) < 0:
+        n = len(faces)
+        which = "its only face is" if n == 1 else f"all {n:,} faces are"
+        raise RangesimError(f"mesh holds no triangle of non-zero area: {which} degenerate "
+                            "(repeated or collinear vertices)", source=source)
     return vertices, faces
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_with_area(v, f):  # pragma: no cover - compiled
+    """Index of the first face of ``f`` (F, 3) with a non-zero area, -1 when all are degenerate.
+
+    A face is degenerate when an edge from its first vertex is zero or the sine between the
+    two is below 1e-12 (scale-free: a tiny part counts as much as a large one). The edges are
+    scaled to a largest component of 1 first, so no square overflows. Stops at
+    the first face with an area: one face for a usual mesh.
+    """
+    for i in range(f.shape[0]):
+        a, b, c = f[i, 0], f[i, 1], f[i, 2]
+        ux, uy, uz = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1], v[b, 2] - v[a, 2]
+        wx, wy, wz = v[c, 0] - v[a, 0], v[c, 1] - v[a, 1], v[c, 2] - v[a, 2]
+        su = max(abs(ux), abs(uy), abs(uz))
+        sw = max(abs(wx), abs(wy), abs(wz))
+        if su == 0.0 or sw == 0.0:
+            continue
+        if not (su < np.inf and sw < np.inf):
+            return i  # an edge beyond float64 (coordinates near 1e308): surely not zero
+        ux, uy, uz, wx, wy, wz = ux / su, uy / su, uz / su, wx / sw, wy / sw, wz / sw
+        cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        if cx * cx + cy * cy + cz * cz > 1e-24 * (ux * ux + uy * uy + uz * uz) * (wx * wx + wy * wy + wz * wz):
+            return i
+    return -1
+
+
+#: largest |coordinate| (file units) trimesh's vertex welding handles: it rounds coordinates
+#: times 10^digits (tol.merge 1e-8: 1e8) to int64, which overflows beyond 9.2e10 and welds
+#: distinct vertices into one (half of that, for a margin)
+WELD_LIMIT = 0.5 * np.iinfo(np.int64).max / 10.0 ** trimesh.util.decimal_to_digits(trimesh.tol.merge)
 
 
 def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh.Trimesh:
@@ -142,7 +192,8 @@ def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh
     Raises
     ------
     RangesimError
-        No triangles, non-finite vertex coordinates, or face indices out of range.
+        No triangles, non-finite vertex coordinates, face indices out of range, no triangle
+        of non-zero area, or coordinates too large to weld (:data:`WELD_LIMIT`).
     """
     vertices, faces = check_mesh_arrays(mesh, source)
     clean = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
@@ -151,6 +202,10 @@ def validate_mesh(mesh: trimesh.Trimesh, source: str | Path = "mesh") -> trimesh
     # A mesh already closed on its own indices shares every edge's vertices: nothing to weld.
     closed = is_closed(faces)
     if not closed:
+        reach = max(float(vertices.max()), -float(vertices.min()))
+        if reach > WELD_LIMIT:
+            raise RangesimError(f"coordinates reach {reach:.3g} file units: too large to weld exactly "
+                                f"(beyond {WELD_LIMIT:.1e}); check the units", source=source)
         clean.merge_vertices()
         faces = np.asarray(clean.faces)
         closed = is_closed(faces)

@@ -2,9 +2,11 @@
 
 trimesh reports a truncated binary STL as "no triangle mesh" and a PLY body cut short as a
 reshape error; :func:`diagnose_mesh_file` looks at the bytes and names the real problem
-(empty file, truncated binary STL with the triangle count its header promises, a PLY
-without ``end_header`` or with a body shorter than its header says, a GLB without its
-magic, an OFF file without its first line).
+(empty file, a directory, truncated binary STL with the triangle count its header promises,
+a file named .stl that is no STL, a PLY without ``end_header`` or with a body shorter than
+its header says, a GLB without its magic, an OFF file without its first line). With
+``full=True`` it also reads the whole body of the text formats: an ASCII PLY or OFF with
+fewer vertices or faces than its header says, an OBJ face index outside its vertex list.
 """
 from __future__ import annotations
 
@@ -14,10 +16,15 @@ from pathlib import Path
 import numpy as np
 
 from rangesim.core.errors import RangesimError
-from rangesim.io.ply_header import PLY_TYPES, read_ply_header
+from rangesim.io.ply_header import PLY_TYPES, PlyElement, PlyHeader, read_ply_header
 
 #: bytes looked at for text formats (a header, the first lines)
 _PEEK = 1 << 20
+#: bytes a text file is made of (ASCII printable and whitespace)
+_TEXT_BYTES = frozenset(range(0x20, 0x7F)) | frozenset(b"\t\n\r")
+#: how other mesh formats start, for a file named .stl that is none
+_OTHER_MAGIC = (b"ply", b"glTF", b"OFF", b"COFF")
+_PLURAL = {"vertex": "vertices"}
 
 
 def _stl(raw: bytes, size: int) -> str | None:
@@ -31,18 +38,131 @@ def _stl(raw: bytes, size: int) -> str | None:
     if count == 0:
         return "binary STL with 0 triangles"
     if size < expected:
+        # a text file's "triangle count" is four letters (>= 538 million triangles): no binary
+        # STL cut short, but another file under an .stl name
+        if raw.startswith(_OTHER_MAGIC) or set(raw[80:84]) <= _TEXT_BYTES:
+            if head.startswith(b"solid"):
+                return None  # ASCII STL without facets: trimesh's "no triangle mesh" says it
+            first = (raw.lstrip()[:40].splitlines() or [b""])[0].decode("latin-1")
+            return (f"not an STL file (starts with {first!r}): neither a binary STL (its size does not "
+                    "match its triangle count) nor an ASCII one ('solid ...')")
         return (f"truncated binary STL: its header says {count:,} triangles ({expected:,} bytes), "
                 f"the file has {size:,} bytes")
     return None
 
 
-def _ply(raw: bytes, size: int, path: Path) -> str | None:
+def _counts(expected: dict[str, int], found: dict[str, int]) -> str:
+    """'expected 8 vertices and 12 faces, found 8 vertices and 3 faces'."""
+    def words(counts: dict[str, int]) -> str:
+        return " and ".join(f"{n:,} {_PLURAL.get(name, name + 's')}" for name, n in counts.items())
+
+    return f"expected {words(expected)}, found {words(found)}"
+
+
+def _ply_ascii(path: Path, header: PlyHeader) -> str | None:
+    """A truncated ASCII PLY body: fewer complete rows than the header's element counts."""
+    expected = {e.name: e.count for e in header.elements}
+    found = dict.fromkeys(expected, 0)
+    with open(path, "rb") as f:
+        f.seek(header.data_offset)
+        lines = (line.split() for line in f)
+        for element in header.elements:
+            if element.count == 0:
+                continue
+            for words in lines:
+                if not words:
+                    continue
+                if not _ply_row_complete(words, element):
+                    break  # a row cut short (the file's last): not counted
+                found[element.name] += 1
+                if found[element.name] == element.count:
+                    break
+            if found[element.name] < element.count:
+                return f"truncated ASCII PLY: {_counts(expected, found)}"
+    return None
+
+
+def _ply_row_complete(words: list[bytes], element: PlyElement) -> bool:
+    """True when a row of an ASCII PLY holds a value for each property (a list: its count and items)."""
+    at = 0
+    for prop in element.properties:
+        if prop.list_count is None:
+            at += 1
+            continue
+        try:
+            at += 1 + int(words[at])
+        except (IndexError, ValueError):
+            return False
+    return len(words) >= at
+
+
+def _off(path: Path) -> str | None:
+    """A truncated OFF body: fewer complete vertex or face lines than its count line says."""
+    with open(path, "rb") as f:
+        # trimesh reads OFF line by line: comments stripped, blank lines skipped, the counts
+        # after the OFF keyword on its own line or on the next
+        lines = (w for w in (line.split(b"#")[0].split() for line in f) if w)
+        first = next(lines, [b""])
+        counts = first[1:] or next(lines, [])
+        try:
+            n_vertices, n_faces = int(counts[0]), int(counts[1])
+        except (IndexError, ValueError):
+            return "OFF file has no vertex/face count line"
+        expected = {"vertex": n_vertices, "face": n_faces}
+        found = dict.fromkeys(expected, 0)
+        for words in lines:
+            kind = "vertex" if found["vertex"] < n_vertices else "face"
+            if kind == "face" and found["face"] == n_faces:
+                break
+            try:
+                complete = len(words) >= (3 if kind == "vertex" else 1 + int(words[0]))
+            except ValueError:
+                complete = False
+            if not complete:
+                break
+            found[kind] += 1
+    if found != expected:
+        return f"truncated OFF: {_counts(expected, found)}"
+    return None
+
+
+def _obj(path: Path) -> str | None:
+    """An OBJ face index outside the vertex list (OBJ counts from 1; negative: from the last vertex so far)."""
+    n_vertices, worst = 0, None  # worst: (index, line number) of the largest positive index
+    with open(path, "rb") as f:
+        for number, line in enumerate(f, start=1):
+            words = line.split()
+            if not words:
+                continue
+            if words[0] == b"v":
+                n_vertices += 1
+            elif words[0] == b"f":
+                for word in words[1:]:
+                    try:
+                        index = int(word.split(b"/")[0])
+                    except ValueError:
+                        continue
+                    if index == 0:
+                        return (f"face index out of range of the vertex list: line {number} has index 0 "
+                                "(OBJ indices start at 1)")
+                    if index < 0 and -index > n_vertices:
+                        return (f"face index out of range of the vertex list: line {number} has index {index}, "
+                                f"{n_vertices:,} vertices before it")
+                    if worst is None or index > worst[0]:
+                        worst = (index, number)
+    if worst is not None and worst[0] > n_vertices:
+        return (f"face index out of range of the vertex list: line {worst[1]} refers to vertex {worst[0]:,}, "
+                f"the file has {n_vertices:,} vertices")
+    return None
+
+
+def _ply(raw: bytes, size: int, path: Path, full: bool) -> str | None:
     try:
         header = read_ply_header(raw, path)
     except RangesimError as exc:
         return str(exc).removeprefix(f"{path}: ")
     if header.format == "ascii":
-        return None
+        return _ply_ascii(path, header) if full else None
     need = 0
     for element in header.elements:
         if element.has_lists:
@@ -60,9 +180,20 @@ def _ply(raw: bytes, size: int, path: Path) -> str | None:
     return None
 
 
-def diagnose_mesh_file(path: str | Path) -> str | None:
-    """The problem with a mesh file in one line (without the file name), or None if none is found."""
+def diagnose_mesh_file(path: str | Path, full: bool = False) -> str | None:
+    """The problem with a mesh file in one line (without the file name), or None if none is found.
+
+    Parameters
+    ----------
+    path : str or Path
+        The mesh file.
+    full : bool
+        Also read the whole body of an OBJ, OFF or ASCII PLY (truncation, face indices out of
+        range): for after a reader failed, not before every load (it reads the file once more).
+    """
     path = Path(path)
+    if path.is_dir():
+        return "is a directory, not a mesh file"
     try:
         size = path.stat().st_size
         with open(path, "rb") as f:
@@ -80,7 +211,10 @@ def diagnose_mesh_file(path: str | Path) -> str | None:
     if suffix == ".stl":
         return _stl(raw + raw_tail if raw_tail else raw, size)
     if suffix == ".ply":
-        return _ply(raw, size, path)
+        try:
+            return _ply(raw, size, path, full)
+        except OSError as exc:
+            return exc.strerror or str(exc)
     if suffix == ".glb":
         if not raw.startswith(b"glTF"):
             return "not a binary glTF file (no 'glTF' magic)"
@@ -92,4 +226,11 @@ def diagnose_mesh_file(path: str | Path) -> str | None:
     text = raw.decode("latin-1")
     if suffix == ".off" and not text.lstrip().upper().startswith(("OFF", "COFF", "NOFF", "STOFF")):
         return "not an OFF file (no 'OFF' first line)"
+    try:
+        if full and suffix == ".off":
+            return _off(path)
+        if full and suffix == ".obj":
+            return _obj(path)
+    except OSError as exc:
+        return exc.strerror or str(exc)
     return None
