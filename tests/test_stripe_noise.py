@@ -154,15 +154,24 @@ def test_detectors_take_the_predicted_noise_where_the_data_underestimates_it():
 
 
 @pytest.mark.parametrize("sampling", [(1.0, 1.0), (0.3, 0.5)])
-def test_border_distance_at_asked_cells_is_the_exact_distance_transform(sampling):
-    """The k-d tree answer at a few cells equals the full Euclidean distance transform there
-    (the border half a cell beyond the last measurable cell)."""
+def test_border_distance_is_along_the_row_at_any_asked_cells(sampling):
+    """The distance to the nearest unmeasurable cell of the same row (the border half a cell
+    beyond it), as a loop over each row finds it; the rows' scan at a few asked cells gives the
+    same."""
     rng = np.random.default_rng(4)
     m = np.ones((60, 80), bool)
     m[rng.random(m.shape) < 0.01] = False  # scattered holes
     m[20:35, 10:30] = False  # a shadow
     m[:, :3] = False
+    m[50, :] = True  # a row with no border at all
     full = sn.border_distance(m, sampling=sampling)
+    loop = np.full(m.shape, np.inf)
+    for i in range(m.shape[0]):
+        bad = np.flatnonzero(~m[i])
+        for j in range(m.shape[1]):
+            loop[i, j] = 0.0 if not m[i, j] else (max(np.abs(bad - j).min() * sampling[1] - 0.5 * sampling[1], 0.0)
+                                                  if bad.size else np.inf)
+    np.testing.assert_allclose(full, loop.ravel(), atol=1e-12)
     cells = rng.choice(np.flatnonzero(m.ravel()), 300, replace=False)
     np.testing.assert_allclose(sn.border_distance_at(m, cells, sampling), full[cells], atol=1e-12)
     ask = np.zeros(m.size, bool)
@@ -170,3 +179,23 @@ def test_border_distance_at_asked_cells_is_the_exact_distance_transform(sampling
     part = sn.border_distance(m, sampling=sampling, where=ask)
     np.testing.assert_allclose(part[cells], full[cells], atol=1e-12)
     assert np.isinf(part[~ask & m.ravel()]).all() and (part[~m.ravel()] == 0).all()
+
+
+def test_truncated_stripe_error_only_where_an_outline_crosses_the_row():
+    """A square plate facing the camera, only the partial-stripe term on (a 2 mm stripe): its
+    left and right outlines cut the stripe's width profile (which lies along the row) and move
+    the peaks there by about a millimetre; its top and bottom outlines run along the row, cut
+    nothing, and get no more than the inside does (they once got as much as the sides: the
+    distance was to any border)."""
+    sensor = make_sensor(**{"noise.edge_gain": 1.0, "laser.stripe_width": 2.0, "noise.min_signal": 0.0})
+    scan = rs.scan([plane(80.0)], sensor, pose=top_down_pose(350.0), seed=0)
+    rows, cols = np.flatnonzero(scan.valid.any(1)), np.flatnonzero(scan.valid.any(0))
+    r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
+    err = scan.depth - scan.xyz_true[..., 2]
+    inner, along = slice(r0 + 3, r1 - 2), slice(c0 + 3, c1 - 2)
+    inside = float(scan.sigma[inner, along].max())  # the sides' tails, three footprints in
+    assert inside < 0.02
+    for c in (c0, c1):  # the sides: every outline pixel moved, with the predicted spread
+        assert scan.sigma[inner, c].min() > 0.5 and np.sqrt(np.mean(err[inner, c] ** 2)) > 0.5
+    for r in (r0, r1):  # top and bottom: what the inside gets
+        assert scan.sigma[r, along].max() <= inside + 1e-6 and np.sqrt(np.mean(err[r, along] ** 2)) < 0.02

@@ -257,4 +257,5 @@ def test_joint_calibration_warns_about_a_view_whose_pose_is_off():
     assert not any("'posed'" in m for m in messages)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        calibrate_views([good, good], mesh, "cyberware_3030", names=["posed", "again"], fit_noise=False)
+        fit = calibrate_views([good, good], mesh, "cyberware_3030", names=["posed", "again"], fit_noise=False)
+    assert "[twin]" in fit["toml"] and "[structured_light]" not in fit["toml"]  # no projector in a stripe preset

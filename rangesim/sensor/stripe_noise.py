@@ -43,7 +43,10 @@ Imaged stripe width. A sheet of FWHM ``s`` (mm) falling on a surface at laser in
    the stripe's footprint, the imaged stripe is truncated (Curless and Levoy 1995). A
    Gaussian profile of std sigma_s = s / (2.355 cos i) on the surface cut at distance delta
    from its centre has its centroid moved by sigma_s phi(t) / Phi(t), t = delta / sigma_s
-   (the mean of a truncated normal); the peak estimator keeps a fraction g of it:
+   (the mean of a truncated normal); the peak estimator keeps a fraction g of it. The
+   profile lies along the row (the sweep's direction, the axis the peak is located on), so
+   delta is the distance along the row (:func:`border_distance`): a border running along the
+   row (where the stripe's line ends) cuts no profile and moves no peak:
 
        sigma_edge = g m sigma_s phi(t) / Phi(t)   pixels  (correlated like speckle),
 
@@ -483,36 +486,50 @@ def draw_detected(rng, shape: tuple[int, int], probability: np.ndarray,
     return xp.ndtr(_draws(rng).field(shape, corr_px)) < probability
 
 
+def _row_border_distance(m: np.ndarray, spacing: float) -> np.ndarray:
+    """(R, W) distance along each row of ``m`` (R, W) bool to its nearest unmeasurable cell,
+    half a cell beyond it (+inf where the row holds none on either side; 0 on those cells)."""
+    R, W = m.shape
+    j = np.arange(W)
+    left = np.maximum.accumulate(np.where(m, -1, j), axis=1)  # the last unmeasurable cell at or before j
+    right = np.minimum.accumulate(np.where(m, W, j)[:, ::-1], axis=1)[:, ::-1]  # the first at or after
+    with np.errstate(invalid="ignore"):
+        steps = np.minimum(np.where(left >= 0, j - left, np.inf), np.where(right < W, right - j, np.inf))
+    return np.where(m, np.maximum(steps * spacing - 0.5 * spacing, 0.0), 0.0)
+
+
 def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0, 1.0),
                     where: np.ndarray | None = None) -> np.ndarray:
-    """Distance from each cell to the nearest outline or shadow border, flat (H * W,).
+    """Distance from each cell to the nearest outline or shadow border **along its row**, flat (H * W,).
+
+    The stripe's width profile lies along the row (the axis the peak is located on, the
+    sweep's direction): a border crossing the row cuts it, one running along the row (the
+    end of the stripe's line) does not, so only the distance along the row counts
+    (Curless and Levoy's truncated stripe).
 
     ``measurable`` (H, W) bool: cells whose surface the stripe reaches (not a miss, shadow
     or out of range). The border lies half a cell beyond the last measurable cell, so a
     cell next to it gets half a cell's spacing. ``sampling``: cell spacing (rows, columns)
-    in the output's unit. Cells with no border anywhere get +inf.
+    in the output's unit (the columns' is used). Cells whose row holds no unmeasurable cell
+    get +inf.
 
     ``where`` (H * W,) bool, optional: only these cells are needed (the other measurable
-    cells get +inf, the unmeasurable ones 0). They are answered exactly by
-    :func:`border_distance_at`, which costs a small fraction of the full distance transform
-    when few cells are asked for.
+    cells get +inf, the unmeasurable ones 0); :func:`border_distance_at` answers them.
 
     Examples
     --------
     >>> m = np.ones((5, 7), bool); m[:, 0] = False
     >>> border_distance(m)[:7].tolist()
     [0.0, 0.5, 1.5, 2.5, 3.5, 4.5, 5.5]
-    >>> ask = np.zeros(35, bool); ask[3] = True
-    >>> float(border_distance(m, where=ask)[3])
-    2.5
+    >>> m = np.ones((5, 7), bool); m[0] = False   # a border along the rows cuts no stripe
+    >>> border_distance(m)[7:14].tolist()
+    [inf, inf, inf, inf, inf, inf, inf]
     """
     m = np.asarray(measurable, bool)
     if m.all():
         return np.full(m.size, np.inf)
-    half = 0.5 * min(sampling)
     if where is None:
-        dist = ndimage.distance_transform_edt(m, sampling=sampling)
-        return np.maximum(dist - half, 0.0).reshape(-1)
+        return _row_border_distance(m, float(sampling[1])).reshape(-1)
     out = np.full(m.size, np.inf)
     out[np.flatnonzero(~m.reshape(-1))] = 0.0
     ask = np.flatnonzero(np.asarray(where, bool).reshape(-1) & m.reshape(-1))
@@ -524,29 +541,16 @@ def border_distance_at(measurable: np.ndarray, cells: np.ndarray,
                        sampling: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
     """:func:`border_distance` of the measurable cells ``cells`` only (flat indices), (K,).
 
-    Exact: a k-d tree over the border cells (the unmeasurable cells next to a measurable one,
-    where every nearest unmeasurable cell lies), queried on all cores; its cost follows the
-    border and the cells asked, not the grid (no full-size array is made).
+    Only the rows holding an asked cell are scanned (a few rows' work when few cells are
+    asked; no full-size array is made).
     """
-    from scipy.spatial import cKDTree
-
     m = np.asarray(measurable, bool)
     cells = np.asarray(cells, np.int64)
     if cells.size == 0 or m.all():
         return np.full(cells.size, np.inf)
-    # unmeasurable cells with a measurable 8-neighbour (slice ORs: a fraction of binary_dilation's time)
-    near = m.copy()
-    for rows, cols in (((slice(1, None), slice(None)), (slice(None, -1), slice(None))),
-                       ((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
-                       ((slice(1, None), slice(1, None)), (slice(None, -1), slice(None, -1))),
-                       ((slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None)))):
-        near[rows] |= m[cols]
-        near[cols] |= m[rows]
-    bi, bj = np.nonzero(~m & near)
-    tree = cKDTree(np.c_[bi * sampling[0], bj * sampling[1]])
-    qi, qj = np.divmod(cells, m.shape[1])
-    d, _ = tree.query(np.c_[qi * sampling[0], qj * sampling[1]], workers=-1)
-    return np.maximum(d - 0.5 * min(sampling), 0.0)
+    rows, cols = np.divmod(cells, m.shape[1])
+    needed, at = np.unique(rows, return_inverse=True)
+    return _row_border_distance(m[needed], float(sampling[1]))[at, cols]
 
 
 @dataclass

@@ -302,6 +302,8 @@ def sensor_toml(sensor: Any, report: dict[str, Any] | None = None) -> str:
     for table, values in d.items():
         if not isinstance(values, dict) or not values:
             continue
+        if table == "structured_light" and d["mode"] != "structured_light":
+            continue  # the projector's defaults: a laser-stripe scanner has no use for them
         lines += ["", f"[{table}]"]
         lines += [f"{k} = {_toml_value(v)}" for k, v in values.items()]
     return "\n".join(lines) + "\n"
