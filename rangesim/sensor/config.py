@@ -26,6 +26,14 @@ MODES = ("geometric", "rendered", "structured_light")
 #: sub-frame estimators of the rendered mode's spacetime peak
 PEAK_FITS = ("gaussian", "parabolic")
 
+#: the largest structured_light.exposure_e (electrons at a dot's peak) and ambient (relative to
+#: that peak): a pixel's full well holds 1e4-1e5 electrons, so these leave any image saturated,
+#: and they keep the Poisson means well under NumPy's limit (about 9e18)
+MAX_EXPOSURE_E = 1e9
+MAX_AMBIENT = 1e3
+#: the most disparities (in image widths) a structured-light sensor's working range may span
+MAX_SPAN_WIDTHS = 4
+
 #: every table and key a sensor accepts, with defaults (None: required)
 SCHEMA: dict[str, dict[str, Any]] = {
     "camera": {
@@ -75,7 +83,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "peak": "gaussian",  # sub-frame peak estimator: gaussian or parabolic
     },
     # structured-light mode only (mode = "structured_light"): see rangesim.sensor.structured_light.
-    # The projector sits at laser.baseline on the camera's +x axis and shares the camera's intrinsics.
+    # The projector sits at laser.baseline on the camera's x axis (either sign) and shares the camera's intrinsics.
     "structured_light": {
         "pattern_seed": 0,  # the projected pseudo-random dot pattern (fixed per device)
         "dot_density": 0.1,  # dots per projector pixel
@@ -295,6 +303,8 @@ def _validate(params: dict[str, dict[str, Any]], source, mode: str = "geometric"
     _number(params, "camera", "read_noise_e", source, nonneg=True)
     _validate_render(params, source)
     _validate_structured_light(params, source)
+    if mode == "structured_light":
+        _validate_disparities(params, source)
 
 
 def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> None:
@@ -306,11 +316,22 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
         raise RangesimError(f"structured_light.dot_density must be at most 1 dot per pixel, got {sl['dot_density']}",
                             source=source)
     _number(params, "structured_light", "ambient", source, nonneg=True)
+    # beyond these the image is saturated (or the pattern drowned) anyway, and NumPy's
+    # Poisson draw refuses means above about 9e18 electrons
+    if sl["exposure_e"] > MAX_EXPOSURE_E:
+        raise RangesimError(f"structured_light.exposure_e must lie in (0, {MAX_EXPOSURE_E:.0e}] electrons, "
+                            f"got {sl['exposure_e']:g}", source=source)
+    if sl["ambient"] > MAX_AMBIENT:
+        raise RangesimError(f"structured_light.ambient must lie in [0, {MAX_AMBIENT:g}] (relative to a dot's peak), "
+                            f"got {sl['ambient']:g}", source=source)
     _number(params, "structured_light", "window", source, positive=True, integer=True)
     if sl["window"] < 3 or sl["window"] % 2 == 0:
         raise RangesimError(f"structured_light.window must be an odd integer >= 3, got {sl['window']}", source=source)
     _number(params, "structured_light", "subpixel_steps", source, positive=True, integer=True)
     _number(params, "structured_light", "min_score", source, upper=1)
+    if sl["min_score"] < -1:  # a ZNCC is never below -1: a lower threshold would silently switch the test off
+        raise RangesimError(f"structured_light.min_score must lie in [-1, 1) (a normalised cross-correlation), "
+                            f"got {sl['min_score']:g}", source=source)
     _number(params, "structured_light", "uniqueness", source, nonneg=True)
     if not isinstance(sl["lr_check"], bool):
         raise RangesimError(f"structured_light.lr_check must be true or false, got {sl['lr_check']!r}", source=source)
@@ -318,6 +339,35 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
     _number(params, "structured_light", "speckle_range", source, nonneg=True)
     for key in ("match_sigma_px", "slant_linear", "slant_quadratic"):
         _number(params, "structured_light", key, source, nonneg=True)
+
+
+def _validate_disparities(params: dict[str, dict[str, Any]], source) -> None:
+    """The disparities f |b| / z of the working range must span at least one sub-pixel step and at
+    most :data:`MAX_SPAN_WIDTHS` image widths (structured-light mode; camera, laser and range
+    already checked). What fits in memory is checked when a scan starts."""
+    cam, rng = params["camera"], params["range"]
+    width, near, far = cam["width"], rng["near"], rng["far"]
+    f = width / 2 / math.tan(math.radians(cam["fov_deg"]) / 2)
+    b = params["laser"]["baseline"]
+    steps = params["structured_light"]["subpixel_steps"]
+    fb = f * abs(b)
+    d_lo, d_hi = fb / far, fb / near
+    span = d_hi - d_lo
+    implied = (f"disparities f |b| / z = {d_lo:.4g}-{d_hi:.4g} px over range.near-range.far = {near:g}-{far:g} mm "
+               f"(f = {f:.1f} px from camera.width and camera.fov_deg, laser.baseline = {b:g} mm)")
+    if span > MAX_SPAN_WIDTHS * width:
+        # far beyond any device (a Kinect searches about 0.1 image widths, the bench preset 0.3):
+        # the matcher's cost volume (pixels x disparities) and pattern grow out of all proportion
+        raise RangesimError(f"{implied}: a search over {span:,.0f} px of disparity, more than {MAX_SPAN_WIDTHS} "
+                            f"times the image's {width} columns; raise range.near or shorten laser.baseline",
+                            source=source)
+    if span * steps < 1:
+        # one 1/steps px step covers the whole range: at most one depth level lies in it
+        fix = ("lengthen laser.baseline" if d_hi < 1.0 / steps
+               else "widen range.near-range.far or lengthen laser.baseline")
+        raise RangesimError(f"{implied}: the range spans {span:.3g} px, less than one 1/{steps} px disparity step "
+                            f"(structured_light.subpixel_steps; a step is {near * near / (steps * fb):.3g}-"
+                            f"{far * far / (steps * fb):.3g} mm of depth here); {fix}", source=source)
 
 
 def _validate_render(params: dict[str, dict[str, Any]], source) -> None:

@@ -5,15 +5,20 @@ reference. On a surface whose disparity changes by ``g`` px per pixel (its dispa
 gradient), the disparity spreads by ``s = w g`` px across the window: the window's texture
 no longer sits at one disparity, and the reference stretch it is compared with is
 compressed or stretched by ``s`` px over the window. The error of the matched disparity
-then has three terms, added in quadrature (px)::
+then has these terms, added in quadrature (px)::
 
-    sigma_d^2 = sigma_0^2 + (a s)^2 + (c s^2)^2
+    sigma_d^2 = sigma_m^2 + q^2 / 12 + (a s)^2 + (c s^2)^2,   q = 1 / subpixel_steps
 
-``sigma_0`` the error on a fronto-parallel textured plane (the pattern's sampling by the
-pixels and the sub-pixel fit; the shot and speckle noise of the dots add about 0.02 px at the
-presets' exposures), ``a s`` the bias of weighting the window's texture unevenly (its
-centre of texture is not its centre), ``c s^2`` the correlation peak's widening as the
-stretch decorrelates the blocks. For a plane n . X = p (camera frame, mm) the disparity
+``sigma_m`` the matching error on a fronto-parallel textured plane (the pattern's sampling
+by the pixels and the sub-pixel fit; the shot and speckle noise of the dots add about 0.02 px
+at the presets' exposures), ``q^2 / 12`` the rounding of the sub-pixel disparity to steps of
+``q`` px (a uniform error of variance q^2 / 12 px^2, independent of the match: 0.036 px at
+1/8 px, 0.29 px at whole pixels), ``a s`` the bias of weighting the window's texture unevenly
+(its centre of texture is not its centre), ``c s^2`` the correlation peak's widening as the
+stretch decorrelates the blocks. ``structured_light.match_sigma_px`` (s0) is the measured
+fronto-parallel error at the presets' 1/8 px steps (:data:`CALIBRATION_STEPS`), rounding
+included: sigma_m^2 = s0^2 - (1/8)^2 / 12, so that another ``subpixel_steps`` swaps that
+rounding term for its own. For a plane n . X = p (camera frame, mm) the disparity
 d = f b / z is affine in the pixel, with gradient b (n_x, n_y) / p, so
 ``g = |b| sqrt(n_x^2 + n_y^2) / |n . X|`` at each surface point X with normal n. Depth follows
 as sigma_z = z^2 sigma_d / (f |b|).
@@ -27,7 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["disparity_gradient", "matching_sigma_px", "matching_sigma_mm"]
+__all__ = ["disparity_gradient", "matching_sigma_px", "matching_sigma_mm", "CALIBRATION_STEPS"]
+
+#: sub-pixel steps per pixel at which the presets' ``match_sigma_px`` was measured (its
+#: rounding part is (1 / CALIBRATION_STEPS)^2 / 12 px^2)
+CALIBRATION_STEPS = 8
 
 
 def disparity_gradient(points: np.ndarray, normals: np.ndarray, baseline: float) -> np.ndarray:
@@ -59,8 +68,21 @@ def disparity_gradient(points: np.ndarray, normals: np.ndarray, baseline: float)
 
 
 def matching_sigma_px(gradient: np.ndarray, window: int, sigma_0: float, linear: float,
-                      quadratic: float) -> np.ndarray:
+                      quadratic: float, subpixel_steps: int = CALIBRATION_STEPS) -> np.ndarray:
     """Disparity error std (px) for disparity gradients ``gradient`` (px per px); see the module docstring.
+
+    Parameters
+    ----------
+    gradient : array
+        Disparity gradient g of the surface, px per px.
+    window : int
+        Matching window, px (s = window g).
+    sigma_0 : float
+        Fronto-parallel error at 1/8 px steps, rounding included (``match_sigma_px``), px.
+    linear, quadratic : float
+        a (dimensionless) and c (per px) of the slant terms.
+    subpixel_steps : int
+        The disparity is rounded to 1 / subpixel_steps px.
 
     Examples
     --------
@@ -68,19 +90,26 @@ def matching_sigma_px(gradient: np.ndarray, window: int, sigma_0: float, linear:
     0.08
     >>> round(float(matching_sigma_px(np.array(0.5), 9, 0.08, 0.09, 0.036)), 3)  # s = 4.5 px
     0.838
+    >>> round(float(matching_sigma_px(np.array(0.0), 9, 0.08, 0.09, 0.036, subpixel_steps=1)), 3)  # + 1/12 px^2
+    0.297
     """
     s = window * np.asarray(gradient, np.float64)
-    return np.sqrt(sigma_0**2 + (linear * s) ** 2 + (quadratic * s * s) ** 2)
+    # s0 holds the 1/8 px rounding it was measured with: swap that for this step's q^2 / 12
+    matching = max(sigma_0**2 - 1.0 / (12.0 * CALIBRATION_STEPS**2), 0.0)
+    rounding = 1.0 / (12.0 * float(subpixel_steps) ** 2)
+    return np.sqrt(matching + rounding + (linear * s) ** 2 + (quadratic * s * s) ** 2)
 
 
 def matching_sigma_mm(points: np.ndarray, normals: np.ndarray, focal_px: float, baseline: float,
-                      window: int, sigma_0: float, linear: float, quadratic: float) -> np.ndarray:
+                      window: int, sigma_0: float, linear: float, quadratic: float,
+                      subpixel_steps: int = CALIBRATION_STEPS) -> np.ndarray:
     """Depth error std (mm) of a block matcher at surface ``points`` with ``normals``.
 
-    sigma_z = z^2 sigma_d / (f |b|), with sigma_d from :func:`matching_sigma_px` at the
+    sigma_z = z^2 sigma_d / (f |b|), with sigma_d (px) from :func:`matching_sigma_px` at the
     surface's :func:`disparity_gradient`. Shapes as :func:`disparity_gradient`; NaN where
     the point is.
     """
     g = disparity_gradient(points, normals, baseline)
     z = np.asarray(points, np.float64)[..., 2]
-    return z * z * matching_sigma_px(g, window, sigma_0, linear, quadratic) / (focal_px * abs(baseline))
+    sigma_d = matching_sigma_px(g, window, sigma_0, linear, quadratic, subpixel_steps)
+    return z * z * sigma_d / (focal_px * abs(baseline))

@@ -1,8 +1,10 @@
 """The structured-light scanner (PrimeSense / Kinect v1 type): a dot pattern, an IR image, block matching.
 
 Physical model, step by step (camera frame, mm; the projector is a pinhole with the camera's
-intrinsics K at L = (b, 0, 0), b = ``laser.baseline`` (either sign: a Kinect's projector sits
-on the IR camera's -x side), looking along +z: a rectified pair):
+intrinsics K at L = (b, 0, 0), b = ``laser.baseline`` (either sign; ``kinect_v1`` takes +75 mm,
+the sign its twin matches the mOSD frames best with), looking along +z: a rectified pair; the
+pattern is drawn over every projector column the matcher searches, :func:`matching_layout`,
+so the projector's field is that much wider than the camera's):
 
 1. ``rays``: one ``ray_intersect`` of all camera rays -> the surface point P of each pixel
    (camera occlusion is the primary hit itself).
@@ -27,15 +29,20 @@ on the IR camera's -x side), looking along +z: a rectified pair):
    disparity image smaller than ``speckle_window`` px, whose 4-neighbours differ by at most
    ``speckle_range`` px, are chance matches and rejected, as a device's pipeline does.
 
-So depth noise follows sigma_z = z^2 sigma_d / (f b), with sigma_d growing with the surface's
-slant (:mod:`rangesim.sensor.matching_noise`: the scan's ``sigma``), depth comes in steps of
-f b / d - f b / (d + 1/8), projector shadows are (b - x_e) h / (D - h) wide behind an edge of
+So depth noise follows sigma_z = z^2 sigma_d / (f b), with sigma_d (px) growing with the
+surface's slant and holding the rounding to 1 / ``subpixel_steps`` px
+(:mod:`rangesim.sensor.matching_noise`: the scan's ``sigma``), depth comes in steps of
+f b / d - f b / (d + 1/8) (a fronto-parallel plane within 1.5 steps of the truth at the 99th
+percentile with speckle and read noise off; with the presets' image noise up to about 2.2
+steps), projector shadows are (b - x_e) h / (D - h) wide behind an edge of
 height h in front of a surface at D (x_e the edge's offset from the camera towards the
 projector; h b / (D - h) on the axis), and depth edges fatten outwards by about half the window.
 
-Status: valid where a disparity was accepted and its depth lies in [near, far]; otherwise
-no surface (1), projector shadow (2), outside the range (4) or dropout (3, rejected match
-or speckle).
+Status: valid where a disparity was accepted and lies within half a 1/``subpixel_steps`` px
+step of the range's disparities f |b| / far .. f |b| / near (a surface inside [near, far] is
+measured; its rounded depth may lie up to half a depth step beyond the range); otherwise no
+surface (1), projector shadow (2), true surface outside the range (4) or dropout (3: rejected
+match, speckle, or a match whose disparity lies further outside the range).
 A valid pixel may lie in a true shadow (fattening): its ``xyz_true`` is the true surface.
 """
 from __future__ import annotations
@@ -51,14 +58,19 @@ from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.block_matching import block_match
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.dot_pattern import DotPattern
-from rangesim.sensor.matching_noise import matching_sigma_mm
+from rangesim.sensor.matching_noise import matching_sigma_mm, matching_sigma_px
 from rangesim.sensor.metadata import scan_meta
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.speckle_filter import filter_speckles
 
 __all__ = ["scan_structured_light", "ir_image", "disparity_range", "reference_disparity", "matching_setup",
-           "MatchingSetup"]
+           "matching_layout", "MatchingSetup"]
+
+#: largest mean (electrons) of a pixel's Poisson draw: NumPy refuses means above about 9e18;
+#: a pixel beyond it is saturated whatever its full well (a surface touching the projector,
+#: whose irradiance (z_ref / d_L)^2 has no bound)
+POISSON_MAX_E = 1e18
 
 
 def reference_disparity(sensor: Sensor) -> int:
@@ -93,18 +105,28 @@ class MatchingSetup:
         return self.pattern.reference(width, height, self.d0, self.margin)
 
 
-def matching_setup(sensor: Sensor) -> MatchingSetup:
-    """The pattern (covering every projector column the camera sees in the working range) and the reference."""
-    sl = sensor.params["structured_light"]
-    w, h = sensor.width, sensor.height
+def matching_layout(sensor: Sensor) -> tuple[int, int, int, int, int, int]:
+    """(d_min, d_max, d0, margin, x_lo, x_hi), pixels: the disparity search range, the reference's
+    disparity and extra columns each side, and the projector columns [x_lo, x_hi) the pattern covers.
+
+    What :func:`matching_setup` allocates, known before it runs (the scan's memory estimate).
+    """
+    w = sensor.width
     d_min, d_max = disparity_range(sensor)
     d0 = reference_disparity(sensor)
     margin = max(abs(d_min - d0), abs(d_max - d0)) + 2
     # projector columns seen anywhere: x_p = u - d for the image's and the reference's columns
     x_lo = -max(d_max, d0 + margin, 0) - margin - 4
     x_hi = w + max(-d_min, -(d0 - margin), 0) + margin + 4
-    pattern = DotPattern.generate(x_hi - x_lo, h, sl["dot_density"], sl["dot_sigma_px"], sl["pattern_seed"],
-                                  x_min=x_lo)
+    return d_min, d_max, d0, margin, x_lo, x_hi
+
+
+def matching_setup(sensor: Sensor) -> MatchingSetup:
+    """The pattern (covering every projector column the camera sees in the working range) and the reference."""
+    sl = sensor.params["structured_light"]
+    d_min, d_max, d0, margin, x_lo, x_hi = matching_layout(sensor)
+    pattern = DotPattern.generate(x_hi - x_lo, sensor.height, sl["dot_density"], sl["dot_sigma_px"],
+                                  sl["pattern_seed"], x_min=x_lo)
     return MatchingSetup(pattern, d_min, d_max, d0, margin)
 
 
@@ -121,7 +143,7 @@ def ir_image(rng: np.random.Generator, pattern_term: np.ndarray, ambient_term: n
     if c > 0:
         expected = expected * rng.gamma(1.0 / c**2, c**2, size=expected.shape)
     electrons = sl["exposure_e"] * (expected + np.asarray(ambient_term, np.float64))
-    electrons = rng.poisson(np.maximum(electrons, 0.0)).astype(np.float64)
+    electrons = rng.poisson(np.clip(electrons, 0.0, POISSON_MAX_E)).astype(np.float64)
     electrons += rng.normal(0.0, float(cam["read_noise_e"]), size=electrons.shape)
     return np.clip(electrons, 0.0, float(cam["full_well_e"]))
 
@@ -178,15 +200,22 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
                                   window=sl["window"], subpixel_steps=sl["subpixel_steps"],
                                   min_score=sl["min_score"], uniqueness=sl["uniqueness"], lr_check=sl["lr_check"])
     disparity = relative + d0
+    # the working range on the disparity lattice: a level within half a step of f |b| / far ..
+    # f |b| / near holds surfaces inside [near, far] (rounding moves a match by up to half a
+    # step), so a plane just inside the range is measured, at a depth up to half a step beyond it
+    half_step = 0.5 / sl["subpixel_steps"]
+    with np.errstate(invalid="ignore"):
+        towards = disparity * np.sign(b)  # positive for a point in front of the pair
+        in_window = (towards > 0) & (towards >= f * abs(b) / far - half_step) & (
+            towards <= f * abs(b) / near + half_step)
+    disparity[~in_window] = np.nan
     with np.errstate(invalid="ignore", divide="ignore"):
         z = f * b / disparity
     # 6. chance matches come as small islands of the disparity image (of the working range)
-    with np.errstate(invalid="ignore"):
-        disparity[~((z >= near) & (z <= far))] = np.nan
     z[filter_speckles(disparity, sl["speckle_window"], sl["speckle_range"])] = np.nan
     jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
     rays = np.stack([(jj - K[0, 2]) / f, (ii - K[1, 2]) / K[1, 1], np.ones_like(jj)], axis=-1)
-    matched = np.isfinite(z) & (z >= near) & (z <= far)
+    matched = np.isfinite(z)
     xyz = np.where(matched[..., None], rays * z[..., None], np.nan)
 
     status = np.full(h * w, np.uint8(Status.DROPOUT))
@@ -200,10 +229,10 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
     # whose ray hits nothing (the foreground fattened over empty space) gets the law on a
     # fronto-parallel face at its measured depth (its error is the fattening, which no noise
     # law describes; neither does sigma where the fattened foreground covers a farther surface)
+    noise = (sl["window"], sl["match_sigma_px"], sl["slant_linear"], sl["slant_quadratic"], sl["subpixel_steps"])
     with np.errstate(invalid="ignore"):
-        sigma = matching_sigma_mm(P, n, f, b, sl["window"], sl["match_sigma_px"], sl["slant_linear"],
-                                  sl["slant_quadratic"]).reshape(h, w)
-        flat = z * z * sl["match_sigma_px"] / (f * abs(b))
+        sigma = matching_sigma_mm(P, n, f, b, *noise).reshape(h, w)
+        flat = z * z * float(matching_sigma_px(0.0, *noise)) / (f * abs(b))
     sigma = np.where(np.isfinite(sigma), sigma, flat)
     sigma = np.where(status == Status.VALID, sigma, np.nan).astype(np.float32)
 

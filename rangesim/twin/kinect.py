@@ -12,7 +12,11 @@ each pixel labelled (0 no data, 1-9 table, 20-29 first object, 30-39 second, ...
    percentile of the points' heights above the table (:func:`fit_upright_object`).
 3. **Scan**: the fitted scene, in the recording's camera frame, is scanned by a structured-light
    sensor (``kinect_v1`` by default) whose field of view is the recording's (its focal length
-   fitted from the organized points: u = f x / z + c_x).
+   fitted from the organized points: u = f x / z + c_x). Points at exactly zero depth are no
+   data (OpenNI's marker, :func:`zero_depth_as_no_data`). A frame that cannot be a camera-frame
+   organized cloud (no valid point, z <= 0, points off their pixels' rays, x mirrored), or whose
+   depths lie outside the sensor's working range (e.g. millimetres stored as metres), is
+   refused with a one-line RangesimError.
 4. **Compare** (:func:`compare_kinect`): valid-mask IoU; the residual of recording and twin
    against the fitted surfaces per depth bin, with the z^2 coefficient of each (the law
    sigma_z = z^2 sigma_d / (f b)); the depth-level gaps in units of the twin's disparity step
@@ -24,7 +28,8 @@ each pixel labelled (0 no data, 1-9 table, 20-29 first object, 30-39 second, ...
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -32,17 +37,24 @@ import trimesh
 from scipy.spatial import ConvexHull
 
 from rangesim.core.conics import fit_circle
+from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.twin.realism import robust_std
 
-__all__ = ["fit_plane", "fit_upright_object", "scene_from_labels", "kinect_twin", "compare_kinect", "DEPTH_BINS"]
+__all__ = ["fit_plane", "fit_upright_object", "scene_from_labels", "kinect_twin", "compare_kinect", "DEPTH_BINS",
+           "zero_depth_as_no_data"]
 
 #: depth bins (mm) of the residual-vs-depth statistics
 DEPTH_BINS: tuple[tuple[float, float], ...] = ((500.0, 750.0), (750.0, 1000.0), (1000.0, 1500.0), (1500.0, 2500.0),
                                                (2500.0, 4000.0))
 #: the RANSAC plane's inlier distance, mm
 PLANE_TOL_MM = 8.0
+#: most rms (px) of the focal-length fit u = f x / z + c_x of a camera-frame organized cloud
+#: (the recordings fit to 1e-4 px; a cloud in another frame misses by many pixels)
+FOCAL_FIT_RMS_PX = 0.5
+#: least share of a recording's valid depths inside the sensor's working range
+IN_RANGE_SHARE = 0.1
 #: an object's footprint uses its points this high above the table (mm, and share of its height)
 OBJECT_MIN_HEIGHT_MM = 10.0
 OBJECT_MIN_HEIGHT_SHARE = 0.1
@@ -213,13 +225,72 @@ def scene_from_labels(scan: RangeScan, labels: np.ndarray, *, seed: int = 0) -> 
     return shapes
 
 
+def zero_depth_as_no_data(scan: RangeScan) -> tuple[RangeScan, int]:
+    """(the scan with its points at exactly zero depth made invalid, how many there were).
+
+    OpenNI's depth images (a Kinect's driver) store 0 where the matcher found no disparity,
+    and a cloud converted from them without PCL's NaN for such pixels holds them as (0, 0, 0);
+    no camera measures a point on its own centre, so they are the recording's no-data marker.
+    """
+    zero = scan.valid & (scan.depth == 0)
+    count = int(np.count_nonzero(zero))
+    if count == 0:
+        return scan, 0
+    warnings.warn(f"{count:,} of the recording's points lie at depth 0: read as no data (OpenNI's marker for "
+                  "a pixel without a match)", stacklevel=2)
+    nan = np.float32(np.nan)
+    return replace(scan, valid=scan.valid & ~zero, depth=np.where(zero, nan, scan.depth),
+                   xyz=np.where(zero[..., None], nan, scan.xyz),
+                   status=np.where(zero, np.uint8(Status.MISS), scan.status)), count
+
+
 def _fitted_focal(scan: RangeScan) -> float:
-    """Focal length (px) of an organized scan from its points: u = f x / z + c_x."""
+    """Focal length (px) of an organized camera-frame scan from its points: u = f x / z + c_x.
+
+    Raises a one-line RangesimError (no source: the caller names the recording) when the
+    points cannot be a camera-frame organized cloud: none valid, depths not in front of the
+    camera, points not on their pixels' rays, or x mirrored (f < 0).
+    """
     v = scan.valid & np.isfinite(scan.xyz).all(axis=2)
-    i, j = np.nonzero(v)
+    if not v.any():
+        raise RangesimError("the recording has no valid point (all NaN, or at depth 0: no data)")
     p = scan.xyz[v].astype(np.float64)
-    sol, *_ = np.linalg.lstsq(np.c_[p[:, 0] / p[:, 2], np.ones(len(p))], j + 0.5, rcond=None)
-    return float(sol[0])
+    behind = int(np.count_nonzero(p[:, 2] <= 0))
+    if behind:
+        raise RangesimError(f"{behind:,} of the recording's {len(p):,} valid points have depth z <= 0: not an "
+                            "organized cloud in the camera's frame (x right, y down, z forward)")
+    _, j = np.nonzero(v)
+    a = np.c_[p[:, 0] / p[:, 2], np.ones(len(p))]
+    if len(p) < 10 or np.ptp(a[:, 0]) == 0:
+        raise RangesimError(f"the recording has {len(p):,} valid points over {np.unique(j).size} columns: too few "
+                            "to fit its focal length")
+    sol, *_ = np.linalg.lstsq(a, j + 0.5, rcond=None)
+    f = float(sol[0])
+    rms = float(np.sqrt(np.mean((a @ sol - (j + 0.5)) ** 2)))
+    # a camera-frame organized cloud puts every point on its pixel's ray (mOSD, PCL: 1e-4 px)
+    if not (math.isfinite(f) and rms <= FOCAL_FIT_RMS_PX):
+        raise RangesimError(f"the recording's points are not on their pixels' rays (u = f x / z + c_x leaves "
+                            f"{rms:.3g} px rms): not an organized cloud in the camera's frame")
+    if f <= 0:
+        raise RangesimError(f"the recording's fitted focal length is {f:.1f} px: its x axis is mirrored (x must "
+                            "grow to the right along each row of the organized cloud)")
+    return f
+
+
+def _check_working_range(scan: RangeScan, sensor) -> None:
+    """Refuse a recording whose depths lie outside the sensor's working range (mm read as metres?)."""
+    near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
+    z = scan.depth[scan.valid].astype(np.float64)
+    inside = np.count_nonzero((z >= near) & (z <= far))
+    if inside >= IN_RANGE_SHARE * z.size:
+        return
+    lo, hi = np.percentile(z, [1, 99])
+    problem = (f"its depths lie at {lo:,.0f}-{hi:,.0f} mm (1st-99th percentile), {inside:,} of {z.size:,} inside "
+               f"{sensor.name}'s working range {near:g}-{far:g} mm")
+    scaled = z / 1000.0
+    if np.count_nonzero((scaled >= near) & (scaled <= far)) >= IN_RANGE_SHARE * z.size:
+        problem += ": depths in mm? the recording is read as metres (PCD coordinates are metres)"
+    raise RangesimError(f"the recording cannot be twinned: {problem}")
 
 
 def kinect_twin(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinect_v1", *, seed: int = 0
@@ -231,11 +302,18 @@ def kinect_twin(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinect_v
     sensor = load_sensor(sensor)
     if sensor.mode != "structured_light":
         raise RangesimError(f"sensor {sensor.name} is not a structured-light sensor (mode {sensor.mode})")
+    recorded, _ = zero_depth_as_no_data(recorded)
     h, w = recorded.shape
     f = _fitted_focal(recorded)
     fov = math.degrees(2 * math.atan(w / 2 / f))
-    sensor = sensor.with_params({"camera.width": w, "camera.height": h, "camera.fov_deg": fov})
+    try:
+        sensor = sensor.with_params({"camera.width": w, "camera.height": h, "camera.fov_deg": fov})
+    except RangesimError as exc:  # the recording's size and focal length, not the preset, are at fault
+        problem = str(exc).removeprefix(f"{exc.source}: ") if exc.source else str(exc)
+        raise RangesimError(f"{sensor.name} at the recording's {w} x {h} px and fitted focal length {f:.1f} px: "
+                            f"{problem}") from exc
     shapes = scene_from_labels(recorded, labels, seed=seed)
+    _check_working_range(recorded, sensor)
     scene = load_scene([s.mesh for s in shapes])
     twin_scan = scan(scene, sensor, pose=np.eye(4), seed=seed)
     twin_scan.meta["twin"] = {"model": "structured_light_fitted_scene", "focal_px": f, "fov_deg": fov,
@@ -273,6 +351,7 @@ def compare_kinect(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinec
     from rangesim.twin.calibration import mask_iou
     from rangesim.twin.comparison import edge_agreement
 
+    recorded, zeros = zero_depth_as_no_data(recorded)
     twin_scan, shapes = kinect_twin(recorded, labels, sensor, seed=seed)
     truth = twin_scan.xyz_true
     fb = float(twin_scan.meta["sensor"]["laser"]["baseline"]) * twin_scan.K[0, 0]
@@ -293,6 +372,7 @@ def compare_kinect(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinec
                                       "twin": _level_gaps_in_steps(twin_scan.depth[twin_scan.valid], fb)},
         "valid": {"recorded": int(recorded.valid.sum()), "twin": int(twin_scan.valid.sum()),
                   "both": int(np.count_nonzero(recorded.valid & twin_scan.valid))},
+        "zero_depth_no_data": zeros,
         "edges": edge_agreement(recorded, twin_scan, detectors, edge_maps=edge_maps),
     }
     # robust std of the twin's residuals over the recording's, as rangesim.twin.comparison reports it
