@@ -10,11 +10,10 @@ after the other into the full arrays.
 Every per-pixel step is exact across bands: a pixel's ray, its laser shadow ray, its white
 noise draws (a PCG32 stream per image pixel) and any correlated noise field (made once over
 the whole image) are the ones it gets in the whole image; the mixed-pixel window runs along
-rows. Two steps look at neighbouring rows, so each band is scanned with
-:data:`MARGIN_ROWS` extra rows on either side and cut back: the shared-edge guard (one row)
-and the distance to the nearest outline or shadow border (exact where that border lies within
-the margin; beyond it a truncated stripe's dimming is below 1e-3 for any stripe narrower than
-``MARGIN_ROWS / 3.3`` pixels). A scan in bands therefore equals the scan in one piece.
+rows, and so does the truncated stripe's distance to an outline or shadow border
+(:func:`rangesim.sensor.stripe_noise.border_distance`). One step looks at neighbouring rows,
+the shared-edge guard (one row), so each band is scanned with :data:`MARGIN_ROWS` extra rows on
+either side and cut back. A scan in bands therefore equals the scan in one piece.
 """
 from __future__ import annotations
 
