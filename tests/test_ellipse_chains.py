@@ -110,6 +110,8 @@ def test_empty_and_unknown():
     assert len(order) == 0 and list(start) == [0]
     with pytest.raises(ValueError, match="hypotheses"):
         free_ellipses(np.zeros((30, 2)), np.zeros(30), hypotheses="nope")
+    with pytest.raises(ValueError, match="outlines=False"):  # the outlines are all that generator fits
+        free_ellipses(np.zeros((30, 2)), np.zeros(30), hypotheses="outlines", outlines=False)
 
 
 def test_links_join_the_arcs_of_one_ellipse_across_gaps():

@@ -643,8 +643,10 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     count = np.zeros(n_groups, np.int64)
     # the points in raster order (o): the runs holding a point and its 4-neighbours g + 1 px
     # away, by pointers that only move right along the rows y - g - 1, y and y + g + 1 (the
-    # margin keeps those rows inside the box)
+    # margin keeps those rows inside the box for every row that holds a point)
     for y in range(H):
+        if pstart[y] == pstart[y + 1]:
+            continue  # no point on this row (the margin rows among them: their neighbours lie outside)
         a, u, d = row0[y], row0[y - g - 1], row0[y + g + 1]
         for k in range(pstart[y], pstart[y + 1]):
             i, x = o[k], xs[k]

@@ -473,7 +473,8 @@ class TwinStage:
         """What the stripe model needs of every cell (flat): candidates, S, laser cosine, border, correlation.
 
         ``status``: the geometry's codes (:meth:`status_codes`). The border is the distance
-        (mm on the grid) to the nearest cell the stripe cannot reach (no surface, shadow).
+        along the row (mm, the columns' spacing; +inf on a row without one) to the nearest cell
+        the stripe cannot reach (no surface, shadow): :func:`~rangesim.sensor.stripe_noise.border_distance`.
         """
         cos_l = self._on_grid(np.clip(self._reach("laser", params["alpha_deg"])[1], 0.0, 1.0))
         cos_c = self._on_grid(np.clip(self.camera_reach(params["theta_deg"], int(params.get("camera_views", 1)))[1],
