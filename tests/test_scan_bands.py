@@ -79,5 +79,5 @@ def test_band_rows_planning():
     sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 1000, "camera.height": 1000})
     per_row = 1000 * 500
     base = 300e6 + 1000 * 1000 * bands.RESULT_BYTES_PER_PIXEL
-    assert bands.band_rows(sensor, base + (300 + 128) * per_row, 300e6, 500) == 300
-    assert bands.band_rows(sensor, base + (bands.MIN_BAND_ROWS - 1 + 128) * per_row, 300e6, 500) is None
+    assert bands.band_rows(sensor, base + (300 + 2 * bands.MARGIN_ROWS) * per_row, 300e6, 500) == 300
+    assert bands.band_rows(sensor, base + (bands.MIN_BAND_ROWS - 1 + 2 * bands.MARGIN_ROWS) * per_row, 300e6, 500) is None

@@ -25,8 +25,9 @@ import numpy as np
 from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan
 from rangesim.sensor.config import Sensor
 
-#: extra rows scanned on each side of a band (see the module docstring)
-MARGIN_ROWS = 64
+#: extra rows scanned on each side of a band (see the module docstring): the shared-edge guard's
+#: one row and one to spare (64 while the truncated stripe's border distance looked across rows)
+MARGIN_ROWS = 2
 #: bytes per pixel of a finished RangeScan with ``xyz_true`` and ``sigma`` (58), rounded up
 RESULT_BYTES_PER_PIXEL = 64
 #: a band narrower than this is not worth scanning: refuse instead
@@ -49,7 +50,7 @@ def band_rows(sensor: Sensor, budget: float, base_bytes: float, bytes_per_pixel:
     --------
     >>> import rangesim as rs
     >>> s = rs.load_sensor("white_scanner").with_params({"camera.width": 1000, "camera.height": 1000})
-    >>> band_rows(s, 300e6 + 64e6 + 228 * 1000 * 500, 300e6, 500)
+    >>> band_rows(s, 300e6 + 64e6 + 104 * 1000 * 500, 300e6, 500)   # 100 rows and a margin of 2 on each side
     100
     """
     w, h = sensor.width, sensor.height
