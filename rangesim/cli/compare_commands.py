@@ -101,10 +101,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise RangesimError(f"--seed must not be negative, got {args.seed}")
     path = Path(args.recorded)
     check_conf(path, args.conf)
-    if args.mesh is not None and _structured_light(args.sensor):
-        raise RangesimError(f"--sensor {args.sensor} is a structured-light sensor; the twin of a recording with "
-                            "--mesh is a laser-stripe scanner's: give a laser-stripe preset, or compare a labelled "
-                            "Kinect-type frame without --mesh")
     scan, labels = load_scan_with_labels(path, args.conf, sensor=args.recorded_sensor)
     from rangesim.cli.edge_commands import describe_sensor, require_grid
 

@@ -34,6 +34,11 @@ MAX_AMBIENT = 1e3
 #: the most disparities (in image widths) a structured-light sensor's working range may span
 MAX_SPAN_WIDTHS = 4
 
+def focal_px(width: int, fov_deg: float) -> float:
+    """Focal length (px) of a pinhole camera ``width`` px wide with horizontal field ``fov_deg`` degrees."""
+    return width / 2 / math.tan(math.radians(fov_deg) / 2)
+
+
 #: every table and key a sensor accepts, with defaults (None: required)
 SCHEMA: dict[str, dict[str, Any]] = {
     "camera": {
@@ -141,7 +146,7 @@ class Sensor:
     @property
     def focal_px(self) -> float:
         """Focal length in pixels, from the horizontal field of view."""
-        return self.width / 2 / math.tan(math.radians(self.params["camera"]["fov_deg"]) / 2)
+        return focal_px(self.width, self.params["camera"]["fov_deg"])
 
     @property
     def K(self) -> np.ndarray:
@@ -347,7 +352,7 @@ def _validate_disparities(params: dict[str, dict[str, Any]], source) -> None:
     already checked). What fits in memory is checked when a scan starts."""
     cam, rng = params["camera"], params["range"]
     width, near, far = cam["width"], rng["near"], rng["far"]
-    f = width / 2 / math.tan(math.radians(cam["fov_deg"]) / 2)
+    f = focal_px(width, cam["fov_deg"])
     b = params["laser"]["baseline"]
     steps = params["structured_light"]["subpixel_steps"]
     fb = f * abs(b)
