@@ -168,9 +168,14 @@ def _axes(f) -> np.ndarray:
     return np.array([f.radius, f.radius]) if hasattr(f, "radius") else np.asarray(f.axes, float)
 
 
+#: the model-free ellipses' hypothesis generator (``--hypotheses``; None: the library's default)
+HYPOTHESES: str | None = None
+
+
 def round_features(edge_map) -> list:
     """Circles and model-free ellipses of one edge map, one per rim (:func:`_dedupe`)."""
-    return _dedupe([*rs.features.circles(edge_map, CIRCLE_RADII_PX), *rs.features.ellipses(edge_map, **ELLIPSE_SETTINGS)])
+    settings = ELLIPSE_SETTINGS if HYPOTHESES is None else {**ELLIPSE_SETTINGS, "hypotheses": HYPOTHESES}
+    return _dedupe([*rs.features.circles(edge_map, CIRCLE_RADII_PX), *rs.features.ellipses(edge_map, **settings)])
 
 
 def round_feature_counts(found: list, truth: list) -> dict[str, dict[str, Any]]:
@@ -418,7 +423,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first", type=int, default=None, help="first part seed (overrides --seeds)")
     ap.add_argument("--quick", action="store_true", help="1 part, white_scanner only")
     ap.add_argument("--json", type=Path, default=None, help="write every case and the summary here")
+    ap.add_argument("--hypotheses", choices=("tilings", "chains", "outlines"), default=None,
+                    help="the model-free ellipses' hypothesis generator (default: the library's)")
     args = ap.parse_args(argv)
+    global HYPOTHESES
+    HYPOTHESES = args.hypotheses
     sensors = ["white_scanner"] if args.quick else [s.strip() for s in args.sensors.split(",") if s.strip()]
     n = 1 if args.quick else args.parts
     if n < 1:

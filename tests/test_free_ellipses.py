@@ -321,6 +321,65 @@ def test_compiled_helpers_match_the_numpy_they_replace():
         assert np.array_equal(n, np.unique(gl[ref], return_counts=True)[1])
 
 
+def test_inner_outlines_match_ndimage_regions():
+    # outline_points' inner outlines (inner=True): after the groups' outer outlines, each
+    # background region a group encloses (4-connected regions of the dilated mask, numbered as
+    # the points meet them in raster order) with the group's points whose footprint's
+    # 4-neighbour lies in it; checked against ndimage's dilation and labels on rings that
+    # touch, nest and cross
+    from scipy import ndimage
+
+    from rangesim.features._ellipse_kernels import outline_points
+
+    rng = np.random.default_rng(11)
+    n_regions = 0
+    for _ in range(6):
+        m = np.zeros((90, 110), bool)
+        for _ in range(5):
+            draw_ellipse(m, rng.uniform(15, 95, 2) * (1, 0.8), rng.uniform((6, 3), (18, 12)), rng.uniform(0, np.pi))
+        draw_segment(m, rng.integers(5, 85, 2), rng.integers(5, 85, 2))
+        y, x = np.nonzero(m)
+        pix = np.column_stack([x, y]).astype(np.int64)
+        for g in (0, 1, 2):
+            idx, group, n = outline_points(pix, g)
+            idx_in, group_in, n_in = outline_points(pix, g, True)
+            G = len(n)
+            assert np.array_equal(idx_in[:len(idx)], idx) and np.array_equal(n_in[:G], n)
+            pad = np.zeros((m.shape[0] + 2 * g + 2, m.shape[1] + 2 * g + 2), bool)
+            pad[y + g + 1, x + g + 1] = True
+            grown = ndimage.binary_dilation(pad, np.ones((2 * g + 1,) * 2, bool))
+            groups = ndimage.label(grown, np.ones((3, 3), bool))[0]
+            spaces = ndimage.label(~grown)[0]
+            gl = groups[y + g + 1, x + g + 1]
+            outer_of = {}
+            for k in np.unique(gl):
+                gy, gx = np.nonzero(groups == k)
+                j = np.argmin(gx * grown.shape[0] + gy)
+                outer_of[k] = spaces[gy[j], gx[j] - 1]
+            regions, members = [], {}
+            for i in np.lexsort((x, y)):  # raster order
+                for dy, dx in ((-g - 1, 0), (g + 1, 0), (0, -g - 1), (0, g + 1)):
+                    s = spaces[y[i] + g + 1 + dy, x[i] + g + 1 + dx]
+                    if s and s != outer_of[gl[i]]:
+                        if s not in members:
+                            regions.append(s)
+                            members[s] = []
+                        if i not in members[s]:
+                            members[s].append(i)
+            n_regions += len(regions)
+            assert np.array_equal(n_in[G:], [len(members[s]) for s in regions])
+            if regions:
+                assert np.array_equal(idx_in[len(idx):], np.concatenate([members[s] for s in regions]))
+            assert np.array_equal(group_in[len(idx):], np.repeat(np.arange(G, G + len(regions)), n_in[G:]))
+            # points in any order: the same outlines, by the points' new indices
+            perm = rng.permutation(len(pix))
+            idx_p, group_p, n_p = outline_points(np.ascontiguousarray(pix[perm]), g, True)
+            assert np.array_equal(n_p, n_in) and np.array_equal(group_p, group_in)
+            for k in range(len(n_in)):  # within an outline, the same points
+                assert np.array_equal(np.sort(perm[idx_p[group_p == k]]), np.sort(idx_in[group_in == k]))
+    assert n_regions >= 40  # the rings enclosed regions, some of them shared by touching rings
+
+
 def test_grouped_frames_and_sampson_pairs_match_numpy():
     # fit_conics_grouped's centroids, scales and moments (float64 reduceat sums with the zero
     # row after the last group; empty groups too) and the Sampson distances, to the bits
@@ -464,11 +523,13 @@ def test_the_public_call_picks_the_hypotheses(chains, monkeypatch):
 
 
 def test_outlines_fit_each_edge_group_as_fitellipse_would(scene_mask):
-    """``hypotheses="outlines"``: one fit per edge group's outer outline (after one trimmed
-    refit), grown and claimed as the other generators' fits. On the clutter map every ellipse
-    is its own group's outline (a crossing line is trimmed away) and found as the tilings find
-    it, nothing else; an ellipse inside a rectangle that touches it is not on any group's outer
-    outline, so this generator misses it where the tilings find it."""
+    """``hypotheses="outlines"``: one fit per edge group's outline, outer and inner (after one
+    trimmed refit), grown and claimed as the other generators' fits. On the clutter map every
+    ellipse is its own group's outline (a crossing line is trimmed away) and found as the
+    tilings find it, nothing else. An ellipse inside a rectangle that touches it is not on its
+    group's outer outline but is the outline of the region it encloses: found with the inner
+    outlines, missed without them. Split by a line across its inside, no outline is the
+    ellipse: this generator misses it where the tilings find it."""
     found = F.ellipses(scene_mask, remove_explained=False, hypotheses="outlines")
     assert len(found) == len(TRUE)
     for center, axes, _ in TRUE:
@@ -479,9 +540,36 @@ def test_outlines_fit_each_edge_group_as_fitellipse_would(scene_mask):
     top = int(np.rint(59.6 - 16.0))  # the rectangle's top side touches the ellipse's top
     for p, q in (((20, top), (110, top)), ((110, top), (110, 100)), ((110, 100), (20, 100)), ((20, 100), (20, top))):
         draw_segment(m, p, q)
+    for hypotheses in ("outlines", "tilings"):
+        d, da = _match(F.ellipses(m, remove_explained=False, hypotheses=hypotheses), (60.3, 59.6), (25.0, 16.0))
+        assert d <= 0.3 and da <= 0.3, (hypotheses, d, da)
+    from rangesim.features import _arc_ellipses as A
+    xy = np.column_stack(np.nonzero(m)[::-1]).astype(float)
+    outer_only, inner_too = A.outline_hypotheses(xy), A.outline_hypotheses(xy, inner=True)
+    assert len(outer_only[0]) == 0 and len(inner_too[0]) >= 1
+    draw_segment(m, (60, 43), (60, 76))  # splits the ellipse's inside in two
     assert F.ellipses(m, remove_explained=False, hypotheses="outlines") == []
     d, da = _match(F.ellipses(m, remove_explained=False, hypotheses="tilings"), (60.3, 59.6), (25.0, 16.0))
     assert d <= 0.3 and da <= 0.3, (d, da)
+
+
+def test_outlines_without_dilation_keep_apart_what_it_joins(monkeypatch):
+    """A broken ellipse with a line 2 px beside it (a cylinder's side beside its top): dilated
+    by a pixel, the two make one group whose outline is neither, and the ellipse's inside
+    leaks through the break; the undilated outlines keep the arc its own group, so the
+    "outlines" generator (both, :data:`OUTLINE_GAPS_PX`) finds it within 0.1 px, as the
+    tilings do, and the dilated outlines alone do not."""
+    import rangesim.features._arc_ellipses as A
+    m = np.zeros((110, 130), bool)
+    draw_ellipse(m, (60.3, 50.4), (25.0, 15.0), 0.1, gaps=[(2.2, 2.6)])
+    x = int(np.ceil(60.3 + 25.2)) + 2
+    draw_segment(m, (x, 45), (x, 100))
+    assert A.OUTLINE_GAPS_PX == (1, 0)
+    for hypotheses in ("outlines", "tilings"):
+        d, da = _match(F.ellipses(m, remove_explained=False, hypotheses=hypotheses), (60.3, 50.4), (25.0, 15.0))
+        assert d <= 0.1 and da <= 0.1, (hypotheses, d, da)
+    monkeypatch.setattr(A, "OUTLINE_GAPS_PX", (1,))
+    assert F.ellipses(m, remove_explained=False, hypotheses="outlines") == []
 
 
 def test_a_segment_along_a_curve_explains_no_points():

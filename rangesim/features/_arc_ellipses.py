@@ -47,6 +47,10 @@ from rangesim.features._ellipse_kernels import (
 #: ellipses; an ellipse whose group's outline is something else (inside a pocket whose wall it
 #: touches) is missed
 HYPOTHESES = "tilings"
+#: the dilations (px every way) of the "outlines" generator's outlines: 1 bridges the gaps of a
+#: broken rim, 0 keeps apart the regions that a dilation pinches together (a boss top and its
+#: side face, a rim and a floor edge a pixel or two away)
+OUTLINE_GAPS_PX = (1, 0)
 #: the chain hypotheses' claims go by coverage less this times the RMS residual (px): two grown
 #: copies of one rim, one pulled 1-3 px towards a thread's crests, cover alike, and the closer
 #: fit goes first
@@ -238,10 +242,13 @@ def coverage(conics: np.ndarray, xy: np.ndarray, hyp: np.ndarray, pt: np.ndarray
 
 def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float = 0.5, min_inliers: float = 0.6,
                        min_arc_deg: float = 60.0, axes_range: tuple[float, float] = (4.0, 200.0),
-                       min_ratio: float = 0.2, gap_px: int = 1, pixels: np.ndarray | None = None):
+                       min_ratio: float = 0.2, gap_px: int = 1, pixels: np.ndarray | None = None,
+                       inner: bool = False):
     """Ellipses fitted to the outer outline of each group of edge pixels (as ``cv2.fitEllipse``
     on a contour): the rim around a hole's clutter (thread crests, a floor's edges) that links
-    to the rim's arcs and spoils their pieces.
+    to the rim's arcs and spoils their pieces. With ``inner``, the outlines of the regions each
+    group encloses too (``cv2.findContours``' ``RETR_LIST``): a boss top or a hole's rim whose
+    group also holds the boss's sides or a floor's edges, so that its outer outline is not it.
 
     The edge pixels, dilated by ``gap_px`` every way (bridging gaps of up to twice that), are
     grouped (8-connected); a group's
@@ -260,7 +267,7 @@ def outline_hypotheses(xy: np.ndarray, *, min_points: int = 10, max_rms: float =
     if len(xy) < min_points:
         return np.zeros((0, 6)), np.zeros(0, np.int64)
     pix = np.ascontiguousarray(xy if pixels is None else pixels).astype(np.int64)
-    idx, _, n = outline_points(pix, max(int(gap_px), 0))
+    idx, _, n = outline_points(pix, max(int(gap_px), 0), bool(inner))
     return outline_fits(np.ascontiguousarray(xy, np.float64), idx, n, int(min_points), float(max_rms),
                         float(min_inliers), float(axes_range[0]), float(axes_range[1]), float(min_ratio),
                         float(min_arc_deg))
@@ -309,7 +316,12 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     else:
         raise RangesimError(f"hypotheses must be 'tilings', 'chains' or 'outlines', not {hypotheses!r}")
     if (hypotheses == "tilings" or CHAIN_OUTLINES) if outlines is None else outlines:
-        c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
+        if hypotheses == "outlines":  # outer and inner outlines, pixels dilated and not
+            fits = [outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels, gap_px=g,
+                                       inner=True) for g in OUTLINE_GAPS_PX]
+            c2, n2 = np.concatenate([f[0] for f in fits]), np.concatenate([f[1] for f in fits])
+        else:
+            c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
         if hypotheses == "chains":  # the outlines first: a rim's outline beats its arcs joined to crests
             n2 = n2 + (n.max() if len(n) else 0) + 1
         conics, n = np.concatenate([conics, c2]), np.concatenate([n, n2])

@@ -505,7 +505,7 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
 # -- outer outlines -----------------------------------------------------------------------------
 
 @numba.njit(**_JIT)
-def outline_points(pix, g):  # pragma: no cover - compiled
+def outline_points(pix, g, inner=False):  # pragma: no cover - compiled
     """The points of :func:`~._arc_ellipses.outline_hypotheses`' outlines.
 
     The pixels dilated by a (2 g + 1) square make groups (8-connected) amid background
@@ -513,9 +513,16 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     when a 4-neighbour of its footprint lies in the group's outer region (that of the pixel
     left of the group's leftmost pixel).
 
+    With ``inner``, the inner outlines follow: for each background region that a group
+    encloses (every region a point's footprint touches but its group's outer region), the
+    group's points with a 4-neighbour of their footprint in it (what ``cv2.findContours`` with
+    ``RETR_LIST`` adds to the outer contours: a rim's inside when its group also holds the
+    sides of a boss or the edges of a floor, which spoil the group's outer outline). Regions
+    are numbered after the groups, in raster order of the first point that touches them.
+
     Returns the outline points (indices, by group), their group (0 .. n_groups - 1, groups
-    numbered in raster order of their first pixel, as ``ndimage.label`` numbers them) and
-    the number of points of each group.
+    numbered in raster order of their first pixel, as ``ndimage.label`` numbers them; then
+    the inner regions) and the number of points of each group.
     """
     N = len(pix)
     pad = g + 1
@@ -534,16 +541,22 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     # y + g merged, row by row: the work follows the points, not the box's pixels
     key = (pix[:, 1] + oy) * W + (pix[:, 0] + ox)
     o = np.arange(N)
+    in_order = True  # edge_points gives the points in raster order: no sort then
     for i in range(1, N):
-        if key[i] < key[i - 1]:  # not in raster order already (as edge_points gives them)
-            o = np.argsort(key)
+        if key[i] < key[i - 1]:
+            in_order = False
             break
+    if not in_order:  # (an argsort inside the loop's branch cost a sort's time on every call)
+        o = np.argsort(key)
     pstart = np.zeros(H + 1, np.int64)
     for i in range(N):
         pstart[pix[i, 1] + oy + 1] += 1
     for y in range(H):
         pstart[y + 1] += pstart[y]
-    cap = 64
+    # room for every run at once (a row holds at most one foreground and one background run
+    # per point of its 2 g + 1 rows, after its first background run): arrays that grow and
+    # are rebound inside the loop cost reference counting on every access
+    cap = 2 * (2 * g + 1) * N + H + 1
     rs = np.empty(cap, np.int64)
     re = np.empty(cap, np.int64)
     rf = np.empty(cap, np.bool_)
@@ -578,11 +591,6 @@ def outline_points(pix, g):  # pragma: no cover - compiled
                 continue
             # close the current foreground run (and the background before it), start another
             if x_end >= 0:
-                if n_runs + 2 > cap:
-                    cap *= 2
-                    rs2, re2, rf2 = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.bool_)
-                    rs2[:n_runs], re2[:n_runs], rf2[:n_runs] = rs[:n_runs], re[:n_runs], rf[:n_runs]
-                    rs, re, rf = rs2, re2, rf2
                 rs[n_runs], re[n_runs], rf[n_runs] = x_beg, bg_end, False
                 rs[n_runs + 1], re[n_runs + 1], rf[n_runs + 1] = bg_end + 1, x_end, True
                 n_runs += 2
@@ -591,11 +599,6 @@ def outline_points(pix, g):  # pragma: no cover - compiled
                 break
             bg_end = bx - g - 1
             x_end = bx + g
-        if n_runs + 1 > cap:
-            cap *= 2
-            rs2, re2, rf2 = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.bool_)
-            rs2[:n_runs], re2[:n_runs], rf2[:n_runs] = rs[:n_runs], re[:n_runs], rf[:n_runs]
-            rs, re, rf = rs2, re2, rf2
         rs[n_runs], re[n_runs], rf[n_runs] = x_beg, W - 1, False
         n_runs += 1
     row0[H] = n_runs
@@ -641,6 +644,12 @@ def outline_points(pix, g):  # pragma: no cover - compiled
     lab = np.empty(N, np.int64)
     on = np.zeros(N, np.bool_)
     count = np.zeros(n_groups, np.int64)
+    # the inner outlines' (point, region) pairs, in raster order of the points
+    pair_i = np.empty(4 * N if inner else 0, np.int64)
+    pair_r = np.empty(4 * N if inner else 0, np.int64)
+    n_pairs = 0
+    region = np.full(n_runs if inner else 0, -1, np.int64)  # region number by root run
+    n_regions = 0
     # the points in raster order (o): the runs holding a point and its 4-neighbours g + 1 px
     # away, by pointers that only move right along the rows y - g - 1, y and y + g + 1 (the
     # margin keeps those rows inside the box for every row that holds a point)
@@ -668,6 +677,21 @@ def outline_points(pix, g):  # pragma: no cover - compiled
                     break
             if on[i]:
                 count[lab[i]] += 1
+            if inner:
+                first = n_pairs
+                for r in (u, d, left, right):
+                    if rf[r] or rroot[r] == root:
+                        continue
+                    if region[rroot[r]] < 0:
+                        region[rroot[r]] = n_regions
+                        n_regions += 1
+                    q = region[rroot[r]]
+                    new = True
+                    for p in range(first, n_pairs):  # a region met on two sides counts once
+                        new = new and pair_r[p] != q
+                    if new:
+                        pair_i[n_pairs], pair_r[n_pairs] = i, q
+                        n_pairs += 1
     # by group (stable), groups without outline points left out
     gid = np.full(n_groups, -1, np.int64)
     G = 0
@@ -675,23 +699,30 @@ def outline_points(pix, g):  # pragma: no cover - compiled
         if count[k] > 0:
             gid[k] = G
             G += 1
-    n = np.empty(G, np.int64)
-    start = np.zeros(G + 1, np.int64)
+    T = G + n_regions
+    n = np.zeros(T, np.int64)
+    start = np.zeros(T + 1, np.int64)
     for k in range(n_groups):
         if count[k] > 0:
             n[gid[k]] = count[k]
-            start[gid[k] + 1] = count[k]
-    for k in range(G):
-        start[k + 1] += start[k]
-    idx = np.empty(start[G], np.int64)
-    group = np.empty(start[G], np.int64)
-    fill = start[:G].copy()
+    for p in range(n_pairs):
+        n[G + pair_r[p]] += 1
+    for k in range(T):
+        start[k + 1] = start[k] + n[k]
+    idx = np.empty(start[T], np.int64)
+    group = np.empty(start[T], np.int64)
+    fill = start[:T].copy()
     for i in range(N):
         if on[i]:
             k = gid[lab[i]]
             idx[fill[k]] = i
             group[fill[k]] = k
             fill[k] += 1
+    for p in range(n_pairs):  # stable: each region's points stay in raster order
+        k = G + pair_r[p]
+        idx[fill[k]] = pair_i[p]
+        group[fill[k]] = k
+        fill[k] += 1
     return idx, group, n
 
 
