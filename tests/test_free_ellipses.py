@@ -557,18 +557,18 @@ def test_outlines_without_dilation_keep_apart_what_it_joins(monkeypatch):
     """A broken ellipse with a line 2 px beside it (a cylinder's side beside its top): dilated
     by a pixel, the two make one group whose outline is neither, and the ellipse's inside
     leaks through the break; the undilated outlines keep the arc its own group, so the
-    "outlines" generator (both, :data:`OUTLINE_GAPS_PX`) finds it within 0.1 px, as the
+    "outlines" generator (both, :data:`OUTLINE_PASSES`) finds it within 0.1 px, as the
     tilings do, and the dilated outlines alone do not."""
     import rangesim.features._arc_ellipses as A
     m = np.zeros((110, 130), bool)
     draw_ellipse(m, (60.3, 50.4), (25.0, 15.0), 0.1, gaps=[(2.2, 2.6)])
     x = int(np.ceil(60.3 + 25.2)) + 2
     draw_segment(m, (x, 45), (x, 100))
-    assert A.OUTLINE_GAPS_PX == (1, 0)
+    assert A.OUTLINE_PASSES == ((1, True), (0, False))
     for hypotheses in ("outlines", "tilings"):
         d, da = _match(F.ellipses(m, remove_explained=False, hypotheses=hypotheses), (60.3, 50.4), (25.0, 15.0))
         assert d <= 0.1 and da <= 0.1, (hypotheses, d, da)
-    monkeypatch.setattr(A, "OUTLINE_GAPS_PX", (1,))
+    monkeypatch.setattr(A, "OUTLINE_PASSES", ((1, True),))
     assert F.ellipses(m, remove_explained=False, hypotheses="outlines") == []
 
 

@@ -47,10 +47,13 @@ from rangesim.features._ellipse_kernels import (
 #: ellipses; an ellipse whose group's outline is something else (inside a pocket whose wall it
 #: touches) is missed
 HYPOTHESES = "tilings"
-#: the dilations (px every way) of the "outlines" generator's outlines: 1 bridges the gaps of a
-#: broken rim, 0 keeps apart the regions that a dilation pinches together (a boss top and its
-#: side face, a rim and a floor edge a pixel or two away)
-OUTLINE_GAPS_PX = (1, 0)
+#: the "outlines" generator's passes, (dilation px every way, with the inner outlines): dilated
+#: by 1 px, the outlines bridge a broken rim's gaps and the regions a group encloses give the
+#: rims whose group's outer outline is something else (a boss top with its sides, a rim with
+#: a floor's edge); undilated, the outer outlines keep apart what a dilation joins (a rim and
+#: a line a pixel or two beside it). (Undilated inner outlines found no rim more on the
+#: machined parts' tuning and check seeds nor on the tilted Green Piece.)
+OUTLINE_PASSES = ((1, True), (0, False))
 #: the chain hypotheses' claims go by coverage less this times the RMS residual (px): two grown
 #: copies of one rim, one pulled 1-3 px towards a thread's crests, cover alike, and the closer
 #: fit goes first
@@ -316,9 +319,9 @@ def free_ellipses(xy: np.ndarray, theta: np.ndarray, *, min_points: int = 20, mi
     else:
         raise RangesimError(f"hypotheses must be 'tilings', 'chains' or 'outlines', not {hypotheses!r}")
     if (hypotheses == "tilings" or CHAIN_OUTLINES) if outlines is None else outlines:
-        if hypotheses == "outlines":  # outer and inner outlines, pixels dilated and not
+        if hypotheses == "outlines":  # outer and inner outlines, pixels dilated and not (OUTLINE_PASSES)
             fits = [outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels, gap_px=g,
-                                       inner=True) for g in OUTLINE_GAPS_PX]
+                                       inner=inner) for g, inner in OUTLINE_PASSES]
             c2, n2 = np.concatenate([f[0] for f in fits]), np.concatenate([f[1] for f in fits])
         else:
             c2, n2 = outline_hypotheses(xy, axes_range=axes_range, min_ratio=min_ratio, pixels=pixels)
