@@ -236,12 +236,16 @@ def ellipses(
     against 0.56), not the default: on the machined parts' check seeds it lost one rim of 54 on
     white_scanner and added a false one on cyberware_3030 (``benchmarks/bench_hough.py``), and
     on dense random clutter (a mask half set at random) it finds ghost ellipses, tens per
-    100 x 100, where the tilings find none. With "outlines" only each edge group's outer
-    outline is fitted (what ``cv2.fitEllipse`` on each contour sees, checked, grown and claimed
-    like the rest): 4-6x faster than the tilings, about fitEllipse's own time, and it finds
-    the ellipses that are their group's outer outline (a rim alone, or with a line crossing it
-    or crests inside it) but not one whose group is outlined by something else (a rim inside
-    a pocket whose wall it touches).
+    100 x 100, where the tilings find none. With "outlines" only outlines are fitted (what
+    ``cv2.fitEllipse`` on each contour of ``cv2.findContours(..., RETR_LIST)`` sees; checked,
+    grown and claimed like the rest): each group's outer outline and the outlines of the
+    regions it encloses, with the pixels dilated by 1 px (bridging a broken rim), and the
+    outer outlines undilated (keeping apart a rim and a line a pixel or two beside it),
+    :data:`~._arc_ellipses.OUTLINE_PASSES`. 3x faster than the tilings (1.4-1.55x
+    fitEllipse's CPU time on the tilted Green Piece) with their recall there; it misses an
+    ellipse whose inside an edge splits in two (neither region is the ellipse) and, on the
+    machined parts, some boss and cylinder tops the tilings find (hole rims alike on the
+    laser-stripe presets, fewer on the block-matched ones).
 
     Returns
     -------
