@@ -10,7 +10,7 @@ import numpy as np
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
 
-__all__ = ["EdgeMap", "RIM", "LABEL_NAMES"]
+__all__ = ["EdgeMap", "RIM", "LABEL_NAMES", "MAX_OFFSET_PX", "check_offsets"]
 
 #: ``EdgeMap.labels`` value of a *rim*: a measured pixel where the measured surface ends
 #: against pixels that saw no surface (a through-hole's rim over an absent floor, a part's
@@ -23,6 +23,26 @@ RIM = 4
 
 #: name of every label an EdgeMap can carry
 LABEL_NAMES = {**{int(k): k.name.lower() for k in EdgeLabel}, RIM: "rim"}
+
+#: the largest ``EdgeMap.offset`` component, px: an offset places the edge within its pixel's
+#: reach (the detectors give at most 0.5: half a pixel spacing at a contour, the crease
+#: response's peak within +-0.5 px); the feature finders' compiled kernels index their
+#: accumulators and grids by the moved points, so larger or non-finite offsets are refused
+MAX_OFFSET_PX = 1.0
+
+
+def check_offsets(values: np.ndarray, what: str = "EdgeMap.offset") -> None:
+    """Refuse offsets (any shape, px) that are not finite or exceed :data:`MAX_OFFSET_PX`."""
+    values = np.asarray(values)
+    if values.size == 0:
+        return
+    bad = ~np.isfinite(values)
+    if bad.any():
+        raise RangesimError(f"{what} holds {int(bad.sum())} non-finite values at edge pixels")
+    worst = float(np.abs(values).max())
+    if worst > MAX_OFFSET_PX:
+        raise RangesimError(f"{what} reaches {worst:g} px at an edge pixel: at most {MAX_OFFSET_PX:g} px "
+                            "(an offset places the edge within its pixel's reach)")
 
 
 @dataclass
@@ -82,6 +102,7 @@ class EdgeMap:
             self.offset = np.asarray(self.offset, dtype=np.float32)
             if self.offset.shape != shape + (2,):
                 raise RangesimError(f"EdgeMap.offset must have shape {shape + (2,)}")
+            check_offsets(self.offset[self.mask])  # read at edge pixels only
         # labels only on edge pixels (NONE = 0); a product is ~20x cheaper than np.where
         self.labels = self.labels * self.mask
 

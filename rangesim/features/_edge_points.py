@@ -10,6 +10,7 @@ import numpy as np
 
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
+from rangesim.edges.edgemap import check_offsets
 
 
 def edge_mask(edge_map: Any, keep: np.ndarray | None = None) -> np.ndarray:
@@ -93,7 +94,9 @@ def edge_points(edge_map: Any, keep: np.ndarray | None = None, *,
     xy = pixels.astype(np.float64)
     offset = getattr(edge_map, "offset", None)
     if offset is not None:
-        xy += np.asarray(offset).reshape(-1, 2)[flat]
+        moved = np.asarray(offset).reshape(-1, 2)[flat]
+        check_offsets(moved)  # again: the map may have been changed since it was made
+        xy += moved
     return (xy, theta, pixels) if return_pixels else (xy, theta)
 
 

@@ -12,6 +12,9 @@ from rangesim.core import params as P
 from rangesim.features._edge_points import check_scan_shape, edge_mask, edge_points, mask_normals
 from rangesim.features._line_kernels import suppress_near, window_maxima
 
+#: along a line, neighbouring pixels lie up to sqrt(2) px apart: a smaller ``max_gap`` still
+#: never cuts between them
+NEIGHBOUR_PX = 1.5
 #: default ``max_gap`` of :func:`lines`, px: 3 until the machined parts' benchmark, whose
 #: laser-stripe outlines at 25-40 degrees leave a pixel unaligned at every step of their
 #: staircase, 4-5 px apart (tuning seeds 0-7, inria_laser 20-29: 3 / 4 / 5 / 6 px found 0.485 /
@@ -76,7 +79,7 @@ def lines(
     Steps: Hough transform of the edge pixels (``skimage.transform.hough_line``, 0.5 degree
     steps), peaks (:func:`_line_peaks`: local maxima, strongest first, 3 bins apart); for each line, strongest first, the unused edge
     pixels within ``band_px`` of it that are aligned with it are split at gaps longer than
-    ``max_gap`` pixels; runs at least ``min_length`` long are refitted (total least squares)
+    ``max_gap`` pixels (never between neighbouring pixels, up to sqrt(2) px apart); runs at least ``min_length`` long are refitted (total least squares)
     and become segments; their pixels are used up. A pixel is aligned when its edge direction
     or the direction of the local line of edge pixels around it
     (:func:`~rangesim.features._edge_points.mask_normals`, 5 x 5) is within ``angle_tol_deg``
@@ -93,6 +96,7 @@ def lines(
     min_length : float, pixels
     max_gap : float, pixels
     band_px : float, pixels
+        At least 0.5 (a digitised line's pixels lie up to half a pixel about it).
     angle_tol_deg : float, degrees
     threshold : int, optional
         Least Hough votes of a line (default ``min_length / 2``).
@@ -120,8 +124,10 @@ def lines(
     .. [2] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and curves
        in pictures", Communications of the ACM 15(1), 11-15 (1972), doi:10.1145/361237.361242.
     """
-    for name, value in (("min_length", min_length), ("max_gap", max_gap), ("band_px", band_px)):
+    for name, value in (("min_length", min_length), ("max_gap", max_gap)):
         P.number(value, name, 0, unit="pixels")
+    # a digitised line's pixels lie up to half a pixel about it: a narrower band holds none
+    P.number(band_px, "band_px", 0.5, unit="pixels")
     P.number(angle_tol_deg, "angle_tol_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
     P.whole(max_lines, "max_lines", 1)
     P.number(threshold, "threshold", 0, none=True)  # 0 or None: min_length / 2
@@ -153,7 +159,7 @@ def lines(
         t = xy[idx] @ np.array([-n[1], n[0]])
         o = np.argsort(t)
         idx, t = idx[o], t[o]
-        cuts = np.nonzero(np.diff(t) > max_gap)[0] + 1
+        cuts = np.nonzero(np.diff(t) > max(max_gap, NEIGHBOUR_PX))[0] + 1
         for run in np.split(np.arange(len(idx)), cuts):
             if len(run) < 2 or t[run[-1]] - t[run[0]] < min_length - 1e-9:  # (a 30.0 px run projects to 29.999...)
                 continue

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
 from rangesim.features._lines import segment_pairs
 
 FIELDS = ("relation", "a", "b", "value", "unit")
@@ -53,9 +54,11 @@ def relations(segments: list = (), circles: list = (), ellipses: list = (), arcs
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 5.
     """
+    segs = _features(segments, "segments", ("start", "end"))
+    circles, arcs = _features(circles, "circles", ("center",)), _features(arcs, "arcs", ("center",))
+    ellipses = _features(ellipses, "ellipses", ("center", "orientation"))
     rows: list[dict] = []
     round_ = [("circle", i, c) for i, c in enumerate(circles)] + [("arc", i, a) for i, a in enumerate(arcs)]
-    segs = list(segments)
     if segs:
         for kind, i, c in round_:
             for j, d in enumerate(_point_segment(np.array(c.center), segs)):
@@ -86,8 +89,34 @@ def relations(segments: list = (), circles: list = (), ellipses: list = (), arcs
     return rows
 
 
+def _features(items, name: str, attrs: tuple[str, ...]) -> list:
+    """``items`` as a list, each with ``attrs`` (a segment: start and end; a circle or arc:
+    center; an ellipse: center and orientation), else a clear error naming the argument."""
+    if items is None:
+        return []
+    if hasattr(items, attrs[0]) or isinstance(items, (str, bytes)) or not hasattr(items, "__iter__"):
+        raise RangesimError(f"relations: {name} must be a list of features, got one {type(items).__name__}")
+    items = list(items)
+    for k, item in enumerate(items):
+        missing = [a for a in attrs if not hasattr(item, a)]
+        if missing:
+            raise RangesimError(f"relations: {name}[{k}] is a {type(item).__name__}, not a feature with "
+                                f"{' and '.join(attrs)} (as rs.features returns)")
+    return items
+
+
+def _check_rows(rows) -> list[dict]:
+    """The rows of :func:`relations`: dicts with exactly :data:`FIELDS`."""
+    rows = list(rows)
+    for k, row in enumerate(rows):
+        if not isinstance(row, dict) or set(row) != set(FIELDS):
+            raise RangesimError(f"relations table row {k} must be a dict with the keys {', '.join(FIELDS)}")
+    return rows
+
+
 def relations_to_csv(rows: list[dict], path: str | Path | None = None) -> str:
     """The table as CSV text (written to ``path`` when given, atomically)."""
+    rows = _check_rows(rows)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=FIELDS, lineterminator="\n")
     w.writeheader()
@@ -100,12 +129,19 @@ def relations_to_csv(rows: list[dict], path: str | Path | None = None) -> str:
 
 def relations_to_json(rows: list[dict], path: str | Path | None = None) -> str:
     """The table as JSON text (a list of objects), written to ``path`` when given, atomically."""
-    # strict JSON: a non-finite value (hand-made features) is null, never a bare NaN
-    rows = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()} for row in rows]
+    # strict JSON: a non-finite value (hand-made features) is null, never a bare NaN; NumPy
+    # scalars as Python numbers
+    rows = [{k: _json_value(v) for k, v in row.items()} for row in _check_rows(rows)]
     text = json.dumps(rows, indent=1, allow_nan=False)
     if path is not None:
         _write_text(path, text)
     return text
+
+
+def _json_value(v):
+    if isinstance(v, np.generic):
+        v = v.item()
+    return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
 def _write_text(path: str | Path, text: str) -> None:
@@ -114,7 +150,12 @@ def _write_text(path: str | Path, text: str) -> None:
     are created. Plain Python, so that this analysis layer does not depend on
     :mod:`rangesim.io` (same scheme as :func:`rangesim.io.atomic.atomic_path`)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.is_dir():
+        raise RangesimError(f"{path}: is a directory, not a file to write the relations table to")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise RangesimError(f"{path}: cannot create its directory ({e.strerror or e})") from None
     while True:
         tmp = path.with_name(f".{path.stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
         if not tmp.exists():
@@ -122,6 +163,9 @@ def _write_text(path: str | Path, text: str) -> None:
     try:
         tmp.write_text(text)
         os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise RangesimError(f"{path}: cannot write the relations table ({e.strerror or e})") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
