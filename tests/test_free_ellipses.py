@@ -60,9 +60,12 @@ def scene_mask():
 
 
 def _match(found, center, axes):
-    d = [np.hypot(*np.subtract(f.center, center)) for f in found]
-    k = int(np.argmin(d))
-    return d[k], np.abs(np.subtract(found[k].axes, axes)).max()
+    """Centre distance and largest semi-axis error of the found ellipse nearest to the given
+    one (centre and axes together: concentric ellipses share a centre)."""
+    d = np.array([np.hypot(*np.subtract(f.center, center)) for f in found])
+    da = np.array([np.abs(np.subtract(f.axes, axes)).max() for f in found])
+    k = int(np.argmin(d + da))
+    return d[k], da[k]
 
 
 @pytest.mark.parametrize("hypotheses", ["tilings", "chains"])
@@ -570,6 +573,31 @@ def test_outlines_without_dilation_keep_apart_what_it_joins(monkeypatch):
         assert d <= 0.1 and da <= 0.1, (hypotheses, d, da)
     monkeypatch.setattr(A, "OUTLINE_PASSES", ((1, True),))
     assert F.ellipses(m, remove_explained=False, hypotheses="outlines") == []
+
+
+@pytest.mark.parametrize("hypotheses", ["tilings", "chains", "outlines"])
+def test_concentric_ellipses_a_few_pixels_apart_are_both_found(hypotheses):
+    """Concentric rims (a counterbore, a chamfer, a hole's two rims head-on) 8-12 px apart:
+    their hypotheses are within 20 % of each other's size, which alone made them one before
+    growth (only the outer one was found); hypotheses whose semi-axes differ by more than the
+    first growth band (:data:`DISTINCT_MAX_PX`) grow onto different edges and are kept apart.
+    Ten rings 10 px apart: each found, nothing else."""
+    m = np.zeros((300, 300), bool)
+    draw_ellipse(m, (150.3, 149.6), (100.0, 70.0), 0.3)
+    draw_ellipse(m, (150.3, 149.6), (88.0, 61.6), 0.3)
+    found = F.ellipses(m, remove_explained=False, hypotheses=hypotheses)
+    assert len(found) == 2
+    for axes in ((100.0, 70.0), (88.0, 61.6)):
+        d, da = _match(found, (150.3, 149.6), axes)
+        assert d <= 0.3 and da <= 0.3, (axes, d, da)
+    m = np.zeros((240, 240), bool)
+    for a in range(20, 120, 10):
+        draw_ellipse(m, (120.2, 119.7), (float(a), 0.7 * a), 0.0)
+    found = F.ellipses(m, remove_explained=False, hypotheses=hypotheses)
+    assert len(found) == 10
+    for a in range(20, 120, 10):
+        d, da = _match(found, (120.2, 119.7), (float(a), 0.7 * a))
+        assert d <= 0.3 and da <= 0.3, (a, d, da)
 
 
 def test_a_segment_along_a_curve_explains_no_points():

@@ -23,6 +23,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.features._conic_kernels import sampson_pairs
 from rangesim.features._ellipse_chains import chain_hypotheses
 from rangesim.features._ellipse_kernels import (
+    DISTINCT_MAX_PX,
     arc_pieces,
     claim,
     coverage_rows,
@@ -171,12 +172,14 @@ def _parametric_angle(p: np.ndarray, c: np.ndarray, axes: np.ndarray, ang: np.nd
     return np.mod(np.arctan2(v, u), 2 * np.pi)
 
 
-def distinct(conics: np.ndarray, center_px: float = 2.0, rel_size: float = 0.2) -> np.ndarray:
+def distinct(conics: np.ndarray, center_px: float = 2.0, rel_size: float = 0.2,
+             max_px: float = DISTINCT_MAX_PX) -> np.ndarray:
     """Indices of the conics (in order) that repeat no earlier kept one (centre within
-    ``center_px`` and both semi-axes within ``rel_size`` of the later one's)."""
+    ``center_px`` and both semi-axes within ``rel_size`` of the later one's and within
+    ``max_px``)."""
     if len(conics) == 0:
         return np.zeros(0, np.int64)
-    return distinct_conics(np.ascontiguousarray(conics, np.float64), float(center_px), float(rel_size))
+    return distinct_conics(np.ascontiguousarray(conics, np.float64), float(center_px), float(rel_size), float(max_px))
 
 
 def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2.0, 1.5, 1.0),

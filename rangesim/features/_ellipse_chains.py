@@ -23,7 +23,7 @@ from rangesim.features._ellipse_chains_kernels import (
     piece_fits,
     trace_chains,
 )
-from rangesim.features._ellipse_kernels import distinct_conics
+from rangesim.features._ellipse_kernels import DISTINCT_MAX_PX, distinct_conics
 
 #: edge normals of linked 8-neighbours agree within this, degrees (as the curves of
 #: :func:`~._arc_ellipses.smooth_curves`)
@@ -242,7 +242,7 @@ def chain_hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray | Non
     sel = np.nonzero(good)[0]
     sel = sel[np.argsort(-n[sel], kind="stable")]
     if SEED_DISTINCT and len(sel):  # seeds that repeat a larger one grow into the same union
-        sel = sel[distinct_conics(np.ascontiguousarray(conics[sel]), 2.0, 0.2)]
+        sel = sel[distinct_conics(np.ascontiguousarray(conics[sel]), 2.0, 0.2, DISTINCT_MAX_PX)]
     if PIECE_GROW_ITER == 0:
         return np.concatenate([conics[sel], c_conics]), np.concatenate([n[sel], c_n])
     ct, st = np.cos(theta), np.sin(theta)

@@ -21,6 +21,11 @@ from rangesim.features._conic_kernels import _monomials, _reduce_rows, band_mome
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 TWO_PI = 2 * np.pi
+#: two ellipse hypotheses are one (:func:`distinct_conics`) only when their semi-axes differ by
+#: at most this, px, besides 20 % (and their centres by 2 px): the first growth band's width, so
+#: that hypotheses farther apart, which would grow onto different edges (concentric rims a
+#: few pixels apart: a counterbore, a chamfer, a hole's two rims head-on), are both grown
+DISTINCT_MAX_PX = 3.0
 
 
 # -- helpers ------------------------------------------------------------------------------------
@@ -769,7 +774,7 @@ def outline_fits(xy, idx, n, min_points, max_rms, min_inliers, ax_lo, ax_hi, min
 # -- distinct hypotheses ------------------------------------------------------------------------
 
 @numba.njit(**_JIT)
-def distinct_conics(conics, center_px, rel_size):  # pragma: no cover - compiled
+def distinct_conics(conics, center_px, rel_size, max_px):  # pragma: no cover - compiled
     """:func:`~._arc_ellipses.distinct`: indices of the conics (in order) that repeat no
     earlier kept one (centres within ``center_px``, both semi-axes within ``rel_size`` of
     the later one's)."""
@@ -801,8 +806,8 @@ def distinct_conics(conics, center_px, rel_size):  # pragma: no cover - compiled
                 k = o[r]
                 if k > j and not taken[k]:
                     dx, dy = cx[k] - cx[j], cy[k] - cy[j]
-                    if dx * dx + dy * dy <= r2 and abs(a[j] - a[k]) <= rel_size * a[k] \
-                            and abs(b[j] - b[k]) <= rel_size * b[k]:
+                    if dx * dx + dy * dy <= r2 and abs(a[j] - a[k]) <= min(rel_size * a[k], max_px) \
+                            and abs(b[j] - b[k]) <= min(rel_size * b[k], max_px):
                         taken[k] = True
                 r += step
     return kept[:n_kept]
