@@ -55,13 +55,14 @@ def test_split_tangent_finds_both_circles_of_a_tangent_pair(seed):
 
 def test_without_split_the_pair_is_not_both_found():
     # the property the split adds: without it, at least one circle of the pair is missed or
-    # more than 0.3 px off on these masks
+    # more than 0.3 px off on some of these masks (two of three until the first refinement
+    # ring stopped halfway to a concentric radius of the same candidate, one since)
     misses = 0
     for seed in range(3):
         mask, truth = _pair(seed)
         found = F.circles(mask, radii=(5, 40))
         misses += any(_nearest(found, c, r) > 0.3 for c, r in truth)
-    assert misses >= 2
+    assert misses >= 1
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -114,3 +115,31 @@ def test_claim_pairs_lets_siblings_share_the_points_where_they_meet():
     assert list(claim(*args)) == [0]  # the inner circle's free arc alone is below 0.7
     assert list(claim_pairs(*args, np.array([1, 0], np.int64))) == [0, 1]
     assert list(claim_pairs(*args, np.array([-1, -1], np.int64))) == [0]
+
+
+@pytest.mark.parametrize("r, gap", [(50.0, 6.0), (70.0, 5.0), (20.0, 3.0), (12.0, 3.0)])
+def test_concentric_circles_a_few_pixels_apart_are_both_found(r, gap):
+    """Two concentric rims 3-6 px apart (a counterbore, a hole's two rims head-on) make one
+    centre candidate whose voter distances peak at both radii; the first refinement ring, as
+    wide as the candidate's cell (10 px at r = 40-80), held both, the fit averaged them and
+    neither was found. Each ring now stops halfway to the other radius
+    (:func:`~rangesim.features._circles.concentric_reach`): both found within 0.15 px."""
+    rng = np.random.default_rng(int(r))
+    mask = np.zeros((200, 200), bool)
+    c = np.array([100.3, 99.6])
+    _draw_circle(mask, c, r, rng, sigma=0.0)
+    _draw_circle(mask, c, r - gap, rng, sigma=0.0)
+    found = F.circles(mask)
+    assert len(found) == 2
+    for radius in (r, r - gap):
+        k = int(np.argmin([abs(f.radius - radius) for f in found]))
+        assert abs(found[k].radius - radius) < 0.1 and np.hypot(*(np.asarray(found[k].center) - c)) < 0.15
+
+
+def test_concentric_reach_stops_halfway_to_the_nearest_radius_of_the_same_candidate():
+    from rangesim.features._circles import concentric_reach
+    cand = np.array([0, 0, 1, 0, 2, 2])
+    r = np.array([50.0, 44.0, 30.0, 60.0, 20.0, 20.5])
+    reach = concentric_reach(cand, r, np.full(6, 7.0), 1.5)
+    # candidate 0: radii 44, 50, 60 (gaps 6, 10); candidate 1 alone; candidate 2: 0.5 apart
+    assert np.allclose(reach, [3.0, 3.0, 7.0, 5.0, 1.5, 1.5])

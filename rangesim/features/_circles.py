@@ -159,12 +159,32 @@ def _hypotheses(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, shape: tu
     index = np.full(shape[0] * shape[1], -1, np.int32)  # int32: half the cache lines of int64
     index[pixels[:, 1] * shape[1] + pixels[:, 0]] = np.arange(len(xy), dtype=np.int32)
     hcell = cell[hk]
-    reach = band_px + 1.0 + 0.5 * hcell
+    reach = concentric_reach(hk, r, band_px + 1.0 + 0.5 * hcell, band_px + 0.5)
     labels = np.zeros(0, np.uint8) if labels is None else np.ascontiguousarray(labels, np.uint8)
     c, r, ph, pp, parent, sibling = refine(px, py, ct, st, index, shape[0], shape[1], c, r, reach, float(band_px),
                                            float(np.cos(np.deg2rad(DIRECTION_TOL_DEG))), float(hcell.max()) + 3.0,
                                            labels, bool(split), int(EdgeLabel.CONCAVE), int(EdgeLabel.NONE))
     return c, r, votes[parent], ph, pp, sibling
+
+
+def concentric_reach(candidate: np.ndarray, r: np.ndarray, reach: np.ndarray, least: float) -> np.ndarray:
+    """The first refinement ring's half-width of each hypothesis (px), at most half the gap to
+    the nearest other radius of the same centre candidate (and at least ``least``).
+
+    The first ring is as wide as the candidate's cell, since the centre is known to about that;
+    but where one candidate's voter distances peak at two radii a few pixels apart (two
+    concentric rims: a counterbore, a hole's two rims head-on, 5-6 px apart at r = 44-70), a
+    ring that wide holds both, the fit averages them and the narrowed rings around the mean
+    hold neither (both were lost). ``candidate`` (K,): each hypothesis's candidate; ``r`` (K,):
+    its radius; ``reach`` (K,): the cell's half-width ring.
+    """
+    reach = np.asarray(reach, float).copy()
+    o = np.lexsort((r, candidate))
+    same = candidate[o][1:] == candidate[o][:-1]
+    gap = np.where(same, np.diff(r[o]), np.inf)
+    nearest = np.minimum(np.concatenate([[np.inf], gap]), np.concatenate([gap, [np.inf]]))
+    reach[o] = np.minimum(reach[o], np.maximum(0.5 * nearest, least))
+    return reach
 
 
 def _support(xy: np.ndarray, c: np.ndarray, r: float) -> tuple[np.ndarray, float, float, float, float]:
