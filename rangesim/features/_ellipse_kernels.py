@@ -558,10 +558,14 @@ def outline_points(pix, g, inner=False):  # pragma: no cover - compiled
         pstart[pix[i, 1] + oy + 1] += 1
     for y in range(H):
         pstart[y + 1] += pstart[y]
-    # room for every run at once (a row holds at most one foreground and one background run
-    # per point of its 2 g + 1 rows, after its first background run): arrays that grow and
-    # are rebound inside the loop cost reference counting on every access
-    cap = 2 * (2 * g + 1) * N + H + 1
+    # room for every run at once (arrays that grow and are rebound inside the loop cost
+    # reference counting on every access): a row holds a first background run, then a
+    # foreground and a background run per point of its 2 g + 1 rows at most, and at most one
+    # per 2 g + 2 columns (a dilated run is 2 g + 1 wide, with a gap after it)
+    per_row = W // (2 * g + 2) + 1
+    cap = 1
+    for y in range(H):
+        cap += 1 + 2 * min(pstart[min(y + g + 1, H)] - pstart[max(y - g, 0)], per_row)
     rs = np.empty(cap, np.int64)
     re = np.empty(cap, np.int64)
     rf = np.empty(cap, np.bool_)
