@@ -600,6 +600,32 @@ def test_concentric_ellipses_a_few_pixels_apart_are_both_found(hypotheses):
         assert d <= 0.3 and da <= 0.3, (a, d, da)
 
 
+def test_a_chord_that_bows_explains_no_points():
+    """A very elongated ellipse's flat sides: the line finder's chords there turn by less
+    than :data:`CURVED_SEGMENT_DEG` (a 100 px chord where the curvature radius is 800 px:
+    7 degrees) but bow from a straight line by over half a pixel (:func:`_sagitta`), so they
+    explain no points and the default call finds the ellipse (it found none of these). A
+    digitised straight edge at any angle, with or without noise, does not bow."""
+    from rangesim.features._ellipses import CURVED_SEGMENT_SAGITTA_PX, _sagitta
+    for (a, b), angle in [((180.0, 40.0), 0.7), ((200.0, 44.0), 0.0), ((160.0, 35.0), 0.7)]:
+        m = np.zeros((450, 450), bool)
+        draw_ellipse(m, (225.3, 224.8), (a, b), angle)
+        d, da = _match(F.ellipses(m), (225.3, 224.8), (a, b))
+        assert d <= 0.3 and da <= 0.5, (a, b, angle, d, da)
+    rng = np.random.default_rng(4)
+    for angle in np.linspace(0, np.pi, 13):
+        for noise in (0.0, 0.3):
+            t = np.arange(0, 120.0, 0.5)
+            p = np.rint(np.column_stack([20 + t * np.cos(angle), 20 + t * np.sin(angle)]) + rng.normal(0, noise, (len(t), 2)))
+            p = np.unique(p, axis=0)
+            ab = np.array([np.cos(angle), np.sin(angle)]) * 120
+            assert _sagitta(p, np.array([20.0, 20.0]), ab) <= CURVED_SEGMENT_SAGITTA_PX, (angle, noise)
+    # a 100 px chord of a circle of radius 800 px bows 100^2 / (8 * 800) = 1.56 px
+    u = np.arange(-50.0, 50.5, 1.0)
+    arc = np.column_stack([u, 800 - np.sqrt(800 ** 2 - u ** 2)])
+    assert abs(_sagitta(arc, np.array([-50.0, 0.0]), np.array([100.0, 0.0])) - 1.56) < 0.05
+
+
 def test_a_segment_along_a_curve_explains_no_points():
     """The line finder draws chords along a large ellipse's flatter sides (30-55 px on a
     120 x 60 px one); their points' normals turn along them, so they are not removed as

@@ -28,6 +28,12 @@ from rangesim.features._edge_points import check_range, check_scan_shape, edge_m
 #: but one) and on the machined parts' tuning seeds 0-7 / 20-29 (5 cost cyberware_3030 one
 #: false round feature; 7 and 10 none), checked on 8-15 / 30-39 (the same round features)
 CURVED_SEGMENT_DEG = 7.0
+#: nor a segment whose points bow by more than this (px) from its chord (:func:`_sagitta`):
+#: chosen on clean drawn ellipses of semi-axes 80-200 x 30-60 px at five angles (23 -> 37 of
+#: 40 found by the default call) and the machined parts' tuning seeds (the same round features); on
+#: their check seeds one false round feature more of 74 (inria_laser)
+CURVED_SEGMENT_SAGITTA_PX = 0.5
+SAGITTA_SIGNIFICANCE = 3.0
 
 
 @dataclass(frozen=True)
@@ -324,6 +330,11 @@ def ellipses(
                 # large ellipse) is no line: its points' normals turn along it
                 if _turns(t[near] * np.hypot(*ab), theta[near], ab) > np.radians(CURVED_SEGMENT_DEG):
                     continue
+                # or bow away from their chord (a long chord of a very elongated ellipse, whose
+                # normals turn by less over it: a 100 px chord where the curvature radius is
+                # 800 px turns 7 degrees but bows 1.5 px)
+                if _sagitta(xy[near], a, ab) > CURVED_SEGMENT_SAGITTA_PX:
+                    continue
                 remove |= near
     claimed = np.zeros(len(xy), bool)
     for _, conic in predictions:
@@ -358,6 +369,26 @@ def ellipses(
     labels = point_labels(edge_map, pixels)
     return _free(xy[keep], theta[keep], pixels[keep], None if labels is None else labels[keep], min_points,
                  free_support, axes_range, hypotheses)
+
+
+def _sagitta(p: np.ndarray, a: np.ndarray, ab: np.ndarray) -> float:
+    """How far (px) the points ``p`` (N, 2) near a segment (start ``a``, vector ``ab``) bow
+    from a straight line over their span: a parabola's offset between the span's middle and
+    its ends (least squares in the segment's frame), or 0 where that is within
+    ``SAGITTA_SIGNIFICANCE`` standard errors of the fit (a digitised or noisy straight edge:
+    the standard error of the sagitta of N points spread evenly over the span is
+    rms sqrt(180 / N) / 4)."""
+    L = float(np.hypot(*ab))
+    if len(p) < 5 or L <= 0:
+        return 0.0
+    d = ab / L
+    u = (p - a) @ d
+    u = u - u.mean()
+    v = (p - a) @ np.array([-d[1], d[0]])
+    coef = np.polyfit(u, v, 2)
+    sag = abs(coef[0]) * np.ptp(u) ** 2 / 4
+    rms = float(np.sqrt(np.mean((np.polyval(coef, u) - v) ** 2)))
+    return float(sag) if sag > SAGITTA_SIGNIFICANCE * rms * np.sqrt(180.0 / len(p)) / 4 else 0.0
 
 
 def _turns(u: np.ndarray, theta: np.ndarray, ab: np.ndarray) -> float:
