@@ -781,7 +781,7 @@ def outline_fits(xy, idx, n, min_points, max_rms, min_inliers, ax_lo, ax_hi, min
 def distinct_conics(conics, center_px, rel_size, max_px):  # pragma: no cover - compiled
     """:func:`~._arc_ellipses.distinct`: indices of the conics (in order) that repeat no
     earlier kept one (centres within ``center_px``, both semi-axes within ``rel_size`` of
-    the later one's)."""
+    the later one's and within ``max_px``)."""
     K = len(conics)
     cx, cy = np.empty(K), np.empty(K)
     a, b = np.empty(K), np.empty(K)

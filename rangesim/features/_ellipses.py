@@ -83,12 +83,9 @@ def mesh_circles(mesh: Any, crease_deg: float = 30.0, max_rel_residual: float = 
     if not (hasattr(mesh, "face_adjacency_angles") and hasattr(mesh, "vertices")):
         raise RangesimError(f"mesh_circles: mesh must be a trimesh.Trimesh (load a file with rs.cad.load_model), "
                             f"got {type(mesh).__name__}")
-    if not (np.isfinite(crease_deg) and 0 < crease_deg < 180):
-        raise RangesimError(f"mesh_circles: crease_deg must lie in (0, 180) degrees, got {crease_deg}")
-    if not (np.isfinite(max_rel_residual) and max_rel_residual > 0):
-        raise RangesimError(f"mesh_circles: max_rel_residual must be > 0, got {max_rel_residual}")
-    if int(min_points) < 3:
-        raise RangesimError(f"mesh_circles: min_points must be >= 3, got {min_points}")
+    P.number(crease_deg, "crease_deg", 0, 180, lo_open=True, hi_open=True, what="angle", unit="degrees")
+    P.number(max_rel_residual, "max_rel_residual", 0, lo_open=True)
+    min_points = P.whole(min_points, "min_points", 3)
     angles = np.asarray(mesh.face_adjacency_angles)
     edges = np.asarray(mesh.face_adjacency_edges)[angles > np.deg2rad(crease_deg)]
     if len(edges) == 0:
@@ -104,13 +101,13 @@ def mesh_circles(mesh: Any, crease_deg: float = 30.0, max_rel_residual: float = 
         vs = verts[lab[verts] == comp]
         if len(vs) < min_points or np.any(deg[vs] != 2):
             continue
-        P = V[vs]
-        m = P.mean(0)
-        _, sv, vt = np.linalg.svd(P - m, full_matrices=False)
+        loop = V[vs]
+        m = loop.mean(0)
+        _, sv, vt = np.linalg.svd(loop - m, full_matrices=False)
         normal = vt[2]
-        uv = (P - m) @ vt[:2].T
+        uv = (loop - m) @ vt[:2].T
         c2, r, rms = fit_circle(uv)
-        planar = sv[2] / np.sqrt(len(P))
+        planar = sv[2] / np.sqrt(len(loop))
         if r <= 0 or rms > max_rel_residual * r or planar > max_rel_residual * r:
             continue
         out.append(Circle3D(f"loop_{comp}", m + c2 @ vt[:2], normal, float(r)))
