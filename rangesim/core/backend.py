@@ -44,14 +44,48 @@ def coherent_rays() -> bool:
             raise RangesimError(f"RANGESIM_COHERENT_RAYS must be 1 or 0, not {override!r}",
                                 source="RANGESIM_COHERENT_RAYS")
         return override in ("1", "true", "yes")
+    flags = cpu_flags()
+    return flags is None or "avx512f" in flags
+
+
+@functools.lru_cache(maxsize=1)
+def cpu_flags() -> frozenset[str] | None:
+    """The CPU's feature flags (``avx2``, ``avx512f``, ...) from Linux ``/proc/cpuinfo``; None where
+    that cannot be read."""
     try:
         with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
             for line in f:
                 if line.startswith("flags"):
-                    return "avx512f" in line.split()
+                    return frozenset(line.split(":", 1)[-1].split())
     except OSError:
         pass
-    return True
+    return None
+
+
+#: the oldest libLLVM Dr.Jit's CPU backend may use on a CPU with AVX-512: with Debian 12's
+#: LLVM 15 and 16, a kernel taking a float maximum (``dr.maximum``; Mitsuba's ray casts have
+#: them) makes LLVM abort the whole process ("LLVM ERROR: Cannot select: fmaximum", seen on
+#: an AMD EPYC Zen 4 with its 16-lane AVX-512 code); LLVM 19 compiles it
+MIN_LLVM_AVX512 = (19, 0, 0)
+
+
+@functools.lru_cache(maxsize=1)
+def llvm_problem() -> str | None:
+    """Why Dr.Jit's CPU backend must not run here (a libLLVM known to abort the process on this
+    CPU), or None. Checked before the first kernel, so the user reads a one-line refusal with
+    the fix instead of an LLVM crash dump and a dead process."""
+    import drjit as dr
+
+    flags = cpu_flags()
+    if flags is None or "avx512f" not in flags:
+        return None
+    version = tuple(dr.detail.llvm_version())
+    if version >= MIN_LLVM_AVX512:
+        return None
+    found = ".".join(map(str, version))
+    return (f"Dr.Jit found libLLVM {found}, which aborts on this AVX-512 CPU when it compiles Mitsuba's kernels; "
+            f"install libLLVM {MIN_LLVM_AVX512[0]} or newer (Debian 12: apt-get install libllvm19; "
+            "or run sh system-deps.sh) or point DRJIT_LIBLLVM_PATH at one")
 
 
 def mitsuba() -> ModuleType:
@@ -69,6 +103,10 @@ def mitsuba() -> ModuleType:
             mi.set_variant(variant)
         except Exception as exc:  # e.g. cuda requested without a GPU
             raise RangesimError(f"cannot use Mitsuba variant {variant!r}: {exc}") from exc
+    if mi.variant().startswith("llvm"):
+        problem = llvm_problem()
+        if problem is not None:
+            raise RangesimError(problem, source="libLLVM")
     return mi
 
 
