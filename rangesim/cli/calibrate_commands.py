@@ -5,7 +5,7 @@ import argparse
 import re
 from pathlib import Path
 
-from rangesim.cli.common import check_conf, check_writable, write_json, write_together
+from rangesim.cli.common import check_conf, check_outputs, same_file, write_json, write_together
 from rangesim.core.errors import RangesimError
 
 #: what ``--name`` may be: a sensor name as the presets spell them (it becomes ``name = "..."`` in TOML)
@@ -23,14 +23,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise RangesimError(f"--evaluations must be an integer >= 1, got {args.evaluations}")
     if args.name is not None and not _NAME.fullmatch(args.name):
         raise RangesimError(f"--name must be a non-empty name of letters, digits, '_', '-' or '.', got {args.name!r}")
-    check_writable(out, "calibrated sensor")
     report = Path(args.report) if args.report else None
     if report is not None:
         if report.suffix.lower() != ".json":
             raise RangesimError("the fit's report must be written to a .json file", source=report)
-        check_writable(report, "report")
-        if report.resolve() == out.resolve():
-            raise RangesimError("--report and --out name the same file", source=report)
+    check_outputs([(out, "calibrated sensor"), (report, "report")],
+                  [args.mesh, args.conf, args.sensor, *args.recorded])
+    for k, name in enumerate(args.recorded):  # one view twice would count twice in the joint fit
+        twin = next((other for other in args.recorded[:k] if same_file(other, name)), None)
+        if twin is not None:
+            raise RangesimError(f"the same recording is given twice ({twin} and {name})", source=name)
     mesh = Path(args.mesh)
     if not mesh.is_file():
         raise RangesimError("mesh file not found", source=mesh)

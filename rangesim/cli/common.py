@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Iterator, Sequence
+import os
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
@@ -221,13 +222,62 @@ def check_writable(path: Path | str, what: str = "file") -> None:
                             source=path) from exc
 
 
-def check_out_files(folder: Path, names: Sequence[str]) -> None:
-    """The files a command writes into ``folder``: none may be a directory, the folder must be creatable."""
+def same_file(a: Path | str, b: Path | str) -> bool:
+    """Whether two paths name one file: the same inode when both exist (hard and symbolic links
+    included), else the same absolute path once links in the folders above are resolved."""
+    a, b = Path(a), Path(b)
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return a.resolve() == b.resolve()
+
+
+def check_outputs(outputs: Iterable[tuple[Path | str | None, str]],
+                  inputs: Iterable[Path | str | None] = ()) -> None:
+    """Refuse, before any work, outputs that cannot be written, that name one file twice or that
+    would overwrite one of the command's inputs (``scan --out`` onto its own mesh, ``points
+    --out`` onto the model it samples: the input was replaced with exit status 0).
+
+    Parameters
+    ----------
+    outputs : iterable of (path or None, what)
+        The files the command writes and a few words for each (``"scan"``, ``"preview"``);
+        ``None`` paths (options not given) are skipped.
+    inputs : iterable of path or None
+        Files the command reads (scene, meshes it names, scan, pose or .conf files); ``None``
+        and names that are no existing file (built-in model names) are skipped.
+    """
+    outs = [(Path(path), what) for path, what in outputs if path is not None]
+    ins = [Path(p) for p in inputs if p is not None and Path(p).is_file()]
+    for k, (path, what) in enumerate(outs):
+        check_writable(path, what)
+        for other, other_what in outs[:k]:
+            if same_file(path, other):
+                raise RangesimError(f"the {other_what} and the {what} would be the same file; give each its own name",
+                                    source=path)
+        for source in ins:
+            if same_file(path, source):
+                raise RangesimError(f"the {what} would overwrite {source}, an input of this command; "
+                                    "write it under another name", source=path)
+
+
+def check_out_files(folder: Path, names: Sequence[str], inputs: Iterable[Path | str | None] = ()) -> None:
+    """The files a command writes into ``folder``: none may be a directory or one of the command's
+    ``inputs`` (see :func:`check_outputs`), the folder must be creatable."""
     check_writable(folder / (names[0] if names else "probe"))
     for name in names:
         target = folder / name
         if target.is_dir():
             raise RangesimError("cannot write the file: a directory of that name exists", source=target)
+    check_outputs([(folder / name, name) for name in names], inputs)
+
+
+def scene_files(scene: Any) -> list[str]:
+    """The files a loaded scene was read from: its scene file (or bare mesh) and every mesh file
+    its objects name (built-in models and primitives have none)."""
+    files = [str(getattr(scene, "source", ""))]
+    files += [str(getattr(obj, "source", "")) for obj in getattr(scene, "objects", ())]
+    return [f for f in files if f and Path(f).is_file()]
 
 
 def check_conf(scan_path: Path | str, conf: str | None) -> None:

@@ -9,10 +9,19 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from rangesim.cli.common import check_conf, make_out_dir, positive, write_json
+from rangesim.cli.common import check_conf, check_out_files, make_out_dir, positive, write_json, write_together
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate.runs import load_scan_with_labels
+
+#: what ``rangesim compare`` writes into its folder
+OUT_FILES = ("metrics.json", "compare.png")
+
+
+def _write_outputs(out: Path, metrics: dict, draw) -> None:
+    """The metrics (strict JSON) and the picture ``draw(path)`` makes: both files or neither."""
+    make_out_dir(out)
+    write_together([(out / OUT_FILES[0], lambda tmp: write_json(metrics, tmp)), (out / OUT_FILES[1], draw)])
 
 
 def _detectors_only(scan, labels, args, out: Path) -> tuple[dict, dict, Any]:
@@ -67,9 +76,8 @@ def _kinect_twin(scan, labels, args, out: Path) -> int:
         raise RangesimError(str(exc), source=args.recorded) from exc  # (no table, no object: the frame's)
     metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **_recorded_sensor(scan, args),
                **metrics}
-    make_out_dir(out)
-    write_json(metrics, out / "metrics.json")
-    save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
+    _write_outputs(out, metrics, lambda tmp: save_comparison(scan, twin_scan, metrics, tmp, detector=args.detector,
+                                                             edge_maps=edge_maps))
     shapes = ", ".join(s["kind"] for s in metrics["shapes"])
     print(f"twin: {shapes} fitted to the labels, scanned by {args.sensor} at f = {metrics['focal_px']:.1f} px")
     print(f"IoU {metrics['iou']:.3f} (no-physics twin {metrics['iou_no_physics']:.3f})")
@@ -101,6 +109,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise RangesimError(f"--seed must not be negative, got {args.seed}")
     path = Path(args.recorded)
     check_conf(path, args.conf)
+    check_out_files(out, OUT_FILES, [path, args.conf, args.mesh, args.sensor, args.recorded_sensor])
     scan, labels = load_scan_with_labels(path, args.conf, sensor=args.recorded_sensor)
     from rangesim.cli.edge_commands import describe_sensor, require_grid
 
@@ -113,12 +122,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         from rangesim.viz.edge_overlay import save_edge_panels
 
         metrics, edge_maps, truth = _detectors_only(scan, labels, args, out)
-        make_out_dir(out)
-        write_json(metrics, out / "metrics.json")
         # no twin to compare with: the picture shows the recording and what each detector finds in it
-        save_edge_panels(scan, edge_maps, out / "compare.png", truth=None if truth is None else truth.edge_map(),
-                         scores=metrics["edges"],
-                         title=f"{path.name}: edges (no mesh, so no twin)")
+        _write_outputs(out, metrics, lambda tmp: save_edge_panels(
+            scan, edge_maps, tmp, truth=None if truth is None else truth.edge_map(), scores=metrics["edges"],
+            title=f"{path.name}: edges (no mesh, so no twin)"))
         for name, e in metrics["edges"].items():
             score = f"  F1 {e['f1']:.3f}" if "f1" in e else ""
             print(f"{name:<15}{e['edges']:>9,}{score}")
@@ -148,9 +155,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise RangesimError(str(exc), source=f"{args.mesh} with {path}") from exc
     metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **_recorded_sensor(scan, args),
                **metrics}
-    make_out_dir(out)
-    write_json(metrics, out / "metrics.json")
-    save_comparison(scan, twin_scan, metrics, out / "compare.png", detector=args.detector, edge_maps=edge_maps)
+    _write_outputs(out, metrics, lambda tmp: save_comparison(scan, twin_scan, metrics, tmp, detector=args.detector,
+                                                             edge_maps=edge_maps))
     p = metrics["params"]
     noise = "the sensor's noise model" if p["sigma_mm"] is None else f"sigma {p['sigma_mm']:.3f} mm"
     print(f"twin: theta {p['theta_deg']:.1f} deg, alpha {p['alpha_deg']:.1f} deg, {noise}, "

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_suffix, positive, writing
+from rangesim.cli.common import check_outputs, check_suffix, positive, writing
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
@@ -16,6 +16,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_suffix(out, (".png",), "difference pictures")
     positive("--limit", args.limit)
+    check_outputs([(out, "difference picture")], [args.scan_a, args.scan_b])
     a, b = load_scan(args.scan_a), load_scan(args.scan_b)
     from rangesim.core.errors import RangesimError
 

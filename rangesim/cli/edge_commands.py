@@ -7,10 +7,18 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_conf, check_out_files, json_safe, make_out_dir, positive, write_json, writing
+from rangesim.cli.common import (
+    check_conf,
+    check_out_files,
+    json_safe,
+    make_out_dir,
+    positive,
+    scene_files,
+    write_json,
+    write_together,
+)
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
-from rangesim.io.atomic import atomic_path
 
 
 def require_grid(scan, path: Path) -> None:
@@ -49,6 +57,18 @@ def sensor_summary(scan, given) -> dict:
     return summary
 
 
+def _another_scans_map(path: Path, scan_id: str) -> bool:
+    """Whether ``path`` is an edge map ``rangesim detect`` wrote for another scan (a file that is
+    no such map, the input scan included, is never taken for one)."""
+    if not path.is_file():
+        return False
+    try:
+        with np.load(path) as npz:
+            return {"method", "mask", "scan"} <= set(npz.files) and str(npz["scan"]) != scan_id
+    except (OSError, ValueError):  # not an NPZ: not ours
+        return False
+
+
 def cmd_detect(args: argparse.Namespace) -> int:
     from rangesim.edges import DETECTORS
     from rangesim.evaluate.runs import load_scan_with_labels, run_detectors, scan_truth
@@ -63,7 +83,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     path = Path(args.scan)
     check_conf(path, args.conf)
     names = [f"{m}_edges.npz" for m in methods] + [f"{m}.png" for m in methods] + ["ground_truth.png", "scores.json"]
-    check_out_files(out, names)
+    check_out_files(out, names, [path, args.conf, args.scene, args.sensor])
     scan, segment_labels = load_scan_with_labels(path, args.conf, sensor=args.sensor)
     require_grid(scan, path)
     if not np.any(scan.valid):  # as rangesim scan refuses to write one without --keep-empty
@@ -77,6 +97,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
         require_synthetic(scan, path, args.scene)
         scene = load_scene_arg(args.scene)
         require_matching_scene(scan, scene, path, args.scene)
+        check_out_files(out, names, scene_files(scene))
     elif scan.xyz_true is not None and scan.K is not None and Path(str(scan.meta.get("scene", ""))).is_file():
         # the scene file the scan names is scored against only if it still makes this scan (it may
         # have been edited since: every score was 0 with no word)
@@ -91,6 +112,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
                 f"the scene the scan names ({named}) no longer matches it: cast from the scan's pose it hits the "
                 f"scan's true surface on {100 * share:.1f} % of its pixels (edited since the scan?); give --scene",
                 source=path)
+        check_out_files(out, names, scene_files(scene))
     truth = scan_truth(scan, scene, segment_labels, crease_deg=args.crease_deg)
     try:
         results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
@@ -104,18 +126,11 @@ def cmd_detect(args: argparse.Namespace) -> int:
 
     make_out_dir(out)
     scan_id = str(path.resolve())
-    for other in set(DETECTORS) - set(methods):
-        # a reused folder: another scan's maps of the methods not run now would sit beside these
-        old = out / f"{other}_edges.npz"
-        if old.is_file():
-            try:
-                with np.load(old) as npz:
-                    same = "scan" in npz.files and str(npz["scan"]) == scan_id
-            except (OSError, ValueError):
-                same = False
-            if not same:
-                old.unlink(missing_ok=True)
-                (out / f"{other}.png").unlink(missing_ok=True)
+    # a reused folder: another scan's maps of the methods not run now would sit beside these
+    stale = [old for other in sorted(set(DETECTORS) - set(methods))
+             if _another_scans_map(out / f"{other}_edges.npz", scan_id)
+             for old in (out / f"{other}_edges.npz", out / f"{other}.png")]
+    writes = []
     for method, result in results.items():
         edge_map = result["edge_map"]
         # self-describing: which scan and method made it, with the parameters it used (the
@@ -126,12 +141,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
         for name in ("direction", "offset"):
             if getattr(edge_map, name) is not None:
                 arrays[name] = getattr(edge_map, name)
-        target = out / f"{method}_edges.npz"
-        with writing(target), atomic_path(target) as tmp:
-            np.savez_compressed(tmp, **arrays)
-        save_edge_overlay(scan, edge_map, out / f"{method}.png")
+        writes.append((out / f"{method}_edges.npz", lambda tmp, arrays=arrays: np.savez_compressed(tmp, **arrays)))
+        writes.append((out / f"{method}.png", lambda tmp, m=edge_map: save_edge_overlay(scan, m, tmp)))
     if truth is not None:
-        save_edge_overlay(scan, truth.edge_map(), out / "ground_truth.png", title=f"ground truth ({truth.kind})")
         report = {
             "scan": str(path), "truth": truth.kind, "tolerance_px": args.tolerance, "crease_deg": args.crease_deg,
             # every prediction counted: rs.evaluate.score_edges(..., ignore_data_boundary=False) gives these
@@ -140,11 +152,14 @@ def cmd_detect(args: argparse.Namespace) -> int:
         }
         if args.sensor is not None:
             report["sensor"] = sensor_summary(scan, args.sensor)
-        target = out / "scores.json"
-        write_json(report, target)  # strict JSON: NaN as null
+        writes.append((out / "ground_truth.png", lambda tmp: save_edge_overlay(
+            scan, truth.edge_map(), tmp, title=f"ground truth ({truth.kind})")))
+        writes.append((out / "scores.json", lambda tmp: write_json(report, tmp)))  # strict JSON: NaN as null
     else:  # a scan without truth: a reused folder's old scores and truth picture are another scan's
-        for stale in ("scores.json", "ground_truth.png"):
-            (out / stale).unlink(missing_ok=True)
+        stale += [out / name for name in ("scores.json", "ground_truth.png")]
+    write_together(writes)  # all files or none
+    for old in stale:
+        old.unlink(missing_ok=True)
 
     print(f"{path}: {scan.shape[1]} x {scan.shape[0]} px, truth: {truth.kind if truth else 'none'}")
     if args.sensor is not None:

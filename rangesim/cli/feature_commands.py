@@ -8,9 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_out_files, make_out_dir, positive, write_json, writing
+from rangesim.cli.common import check_out_files, make_out_dir, positive, scene_files, write_json, write_together
 from rangesim.core.errors import RangesimError
-from rangesim.io.atomic import atomic_path
 
 
 def _plain(obj):
@@ -39,7 +38,8 @@ def cmd_features(args: argparse.Namespace) -> int:
     positive("--rmax", args.rmax)
     if args.rmin > args.rmax:  # equal: one radius, as the API's radii=(r, r)
         raise RangesimError(f"--rmin ({args.rmin:g}) must not exceed --rmax ({args.rmax:g})")
-    check_out_files(out, ["features.json", "relations.csv", "features.png"])
+    names = ["features.json", "relations.csv", "features.png"]
+    check_out_files(out, names, [args.scan, args.scene])
     scan = load_scan(args.scan)
     from rangesim.cli.edge_commands import require_grid
 
@@ -60,6 +60,8 @@ def cmd_features(args: argparse.Namespace) -> int:
 
         given_model = scene_of_scan(scan)  # (a bare mesh in its own units, as it was scanned)
         scene = given_model.source if given_model is not None else None
+    if given_model is not None:
+        check_out_files(out, names, scene_files(given_model))
     # rims are fitted whole: keep the creases a jump would otherwise clear around it
     options = {"jump_clearance": 0} if args.edges == "gradient" else {}
     edge_map = DETECTORS[args.edges](scan, **options)
@@ -80,13 +82,11 @@ def cmd_features(args: argparse.Namespace) -> int:
 
         truth = ground_truth_features(scan, model if model is not None else scene)
         report["scores"] = _plain(feature_scores(feats, truth, scan))
-    target = out / "features.json"
-    write_json(report, target)  # strict JSON: NaN as null
-    target = out / "relations.csv"
-    with writing(target), atomic_path(target) as tmp:
-        Path(tmp).write_text(F.relations_to_csv(rows))
-    with writing(out / "features.png"):
-        save_features_overlay(scan, edge_map, feats, out / "features.png")
+    write_together([  # all three or none
+        (out / "features.json", lambda tmp: write_json(report, tmp)),  # strict JSON: NaN as null
+        (out / "relations.csv", lambda tmp: Path(tmp).write_text(F.relations_to_csv(rows))),
+        (out / "features.png", lambda tmp: save_features_overlay(scan, edge_map, feats, tmp)),
+    ])
     print(f"{args.scan}: {len(segs)} segments, {len(circ)} circles, {len(arc)} arcs, {len(ell)} ellipses, "
           f"{len(rows)} relations")
     if "scores" in report:

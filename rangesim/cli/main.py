@@ -28,14 +28,15 @@ import time
 import tomllib
 import traceback
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
 from rangesim import __version__
-from rangesim.cli.common import MESH_UNITS, check_suffix, check_writable, load_scene_arg, write_together
+from rangesim.cli.common import MESH_UNITS, check_outputs, check_suffix, load_scene_arg, scene_files, write_together
 from rangesim.core.constants import Status, status_name
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import check_pose
@@ -55,6 +56,33 @@ SCAN_SUFFIXES = (".exr", ".npz", ".ply", ".pcd")  # .pcd: an organized PCD (rang
 PREVIEW_SUFFIXES = (".png",)
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: the shell's status for a process ended by SIGTERM (128 + 15)
+EXIT_TERMINATED = 143
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, a batch system) raised as an interrupt, so every ``finally``
+    and atomic write cleans up (temporary files removed, worker pools stopped) as on Ctrl-C."""
+
+
+def _terminate(signum, frame) -> None:  # noqa: ARG001 -- a signal handler's signature
+    raise Terminated()
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block SIGTERM raises :class:`Terminated` (main thread only: Python's rule)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 #: modules adding subcommands: each has ``register(subparsers)`` that sets ``func`` (args -> exit code)
 COMMAND_MODULES: tuple[str, ...] = (
@@ -174,11 +202,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if intensity is not None:
         check_suffix(intensity, PREVIEW_SUFFIXES + (".npy",), "intensity images")
     frames_path = out.with_name(out.stem + ".frames.npz") if args.keep_frames else None
-    # every output checked before any work: all of them are written, or none
-    for path, what in ((out, "scan"), (preview, "preview"), (intensity, "intensity image"),
-                       (frames_path, "frames")):
-        if path is not None:
-            check_writable(path, what)
+    # every output checked before any work: all of them are written, or none, and no input is overwritten
+    outputs = [(out, "scan"), (preview, "preview"), (intensity, "intensity image"), (frames_path, "frames")]
+    check_outputs(outputs, [args.scene, args.pose, args.sensor])
     changes = dict(_parse_setting(text) for text in args.set)
     pose = _load_pose(Path(args.pose)) if args.pose else None
 
@@ -195,6 +221,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
                  f"camera.width x camera.height = {sensor.width:,} x {sensor.height:,} px "
                  f"(the scan and its {Path(args.out).suffix or 'output'} file)", source=sensor.source)
     scene = load_scene_arg(args.scene, args.units)
+    check_outputs(outputs, scene_files(scene))  # the meshes a scene file names
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", EmptyScanWarning)
         if args.keep_frames:
@@ -360,7 +387,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 success, 2 user error, 1 internal error, 130 interrupted.
+        Exit code: 0 success, 2 user error, 1 internal error, 130 interrupted (Ctrl-C), 143
+        terminated (SIGTERM).
     """
     parser = build_parser()
     try:
@@ -378,7 +406,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not _debug():
         warnings.showwarning = _show_warning
     try:
-        return args.func(args)
+        with _sigterm_as_interrupt():
+            return args.func(args)
+    except Terminated:
+        _error("terminated")
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         _error("interrupted")
         return EXIT_INTERRUPTED

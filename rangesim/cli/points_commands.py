@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rangesim.cad.sampling import ENDS, surface_points
-from rangesim.cli.common import check_suffix, check_writable, write_together
+from rangesim.cli.common import check_outputs, check_suffix, write_together
 from rangesim.core.errors import RangesimError
 from rangesim.core.units import parse_length
 
@@ -45,9 +45,7 @@ def cmd_points(args: argparse.Namespace) -> int:
     if preview is not None:
         check_suffix(preview, PREVIEW_SUFFIXES, "previews")
     # every output checked before any work: both files are written, or neither
-    check_writable(out, "surface points")
-    if preview is not None:
-        check_writable(preview, "preview")
+    check_outputs([(out, "surface points"), (preview, "preview")], [args.model])
     h = parse_length(args.resolution, positive=True, what="--resolution")
     view = parse_viewpoint(args.view) if args.view else None
 

@@ -59,6 +59,16 @@ def init_worker() -> None:
     dr.set_thread_count(1)
 
 
+def init_pool_worker() -> None:
+    """:func:`init_worker` for a local pool's process, which also ignores Ctrl-C: the terminal sends
+    SIGINT to the whole process group, and the driver, not each worker, decides what stops (it
+    ends the pool's processes itself; see :meth:`Executor.close`)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    init_worker()
+
+
 def _exit_with_parent() -> None:
     """Linux: this worker gets SIGTERM when the process that started it dies (a driver killed
     with SIGKILL left its pool workers blocked on a pipe for good, holding their memory)."""
@@ -159,18 +169,34 @@ class Executor:
             for k in THREAD_VARIABLES:
                 os.environ[k] = "1"
             self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=init_worker)
+                                             initializer=init_pool_worker)
         elif self.kind in ("local", "tcp"):
             self._start_dask()
         return self
 
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
+    def __exit__(self, exc_type: Any, *exc: Any) -> None:
+        self.close(abort=exc_type is not None and issubclass(exc_type, (KeyboardInterrupt, SystemExit)))
 
-    def close(self) -> None:
-        """Stop the pool or cluster (pending tasks are cancelled)."""
+    def close(self, abort: bool = False) -> None:
+        """Stop the pool or cluster (pending tasks are cancelled).
+
+        Parameters
+        ----------
+        abort : bool
+            End a local pool's processes at once instead of waiting for the tasks they run
+            (Ctrl-C, SIGTERM: a scan task may run for minutes, and a shutdown that waits for a
+            pool whose workers were interrupted could wait for good).
+        """
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            if abort:
+                processes = list((getattr(self._pool, "_processes", None) or {}).values())
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                for process in processes:
+                    process.terminate()
+                for process in processes:
+                    process.join(timeout=10)
+            else:
+                self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
             for k, v in self._saved_env.items():
                 if v is None:
