@@ -134,6 +134,22 @@ def test_working_range_marks_status_4():
     assert np.isnan(far_scan.depth).all() and np.isfinite(far_scan.xyz_true).all()
 
 
+
+def test_measured_depths_past_the_working_range_are_not_valid():
+    """The camera reads the stripe only within its window (the working range): a peak error that
+    carries the measured depth past ``near`` falls off the sensor. A plane at 400 mm with
+    ``near`` half a depth std below it loses the share of pixels whose error is below -0.5 std
+    (about Phi(-0.5) = 0.31 for the near-Gaussian peak error); no valid depth lies past near."""
+    sigma_z = depth_error_std(400.0, **{"noise.sigma_px": 0.5})[0]
+    near = 400.0 - 0.5 * sigma_z
+    scan, _ = fronto_plane_scan(400.0, **{"noise.sigma_px": 0.5, "range.near": near})
+    assert np.isfinite(scan.xyz_true).all() and (scan.xyz_true[..., 2] >= near).all()
+    assert (scan.depth[scan.valid] >= near).all()
+    out = scan.status == Status.OUT_OF_RANGE
+    assert np.isnan(scan.depth[out]).all()
+    share = out.mean() / (out | scan.valid).mean()
+    assert abs(share - 0.5 * math.erfc(0.5 / math.sqrt(2))) < 0.06, share
+
 # 4. range noise through triangulation --------------------------------------------------------
 def depth_error_std(distance, **changes):
     scan, sensor = fronto_plane_scan(distance, **changes)

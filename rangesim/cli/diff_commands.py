@@ -15,7 +15,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     check_suffix(out, (".png",), "difference pictures")
-    positive("--limit", args.limit)
+    positive("--limit", args.limit, at_most=1e6)  # mm: a kilometre of depth difference
     check_outputs([(out, "difference picture")], [args.scan_a, args.scan_b])
     a, b = load_scan(args.scan_a), load_scan(args.scan_b)
     from rangesim.core.errors import RangesimError

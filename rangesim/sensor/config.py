@@ -33,6 +33,12 @@ MAX_EXPOSURE_E = 1e9
 MAX_AMBIENT = 1e3
 #: the most disparities (in image widths) a structured-light sensor's working range may span
 MAX_SPAN_WIDTHS = 4
+#: the most bounces of the rendered mode's path tracer: past a few interreflections the stripe's
+#: light is gone (albedo^n), and the paths' bounce counts are stored as int8
+MAX_RENDER_DEPTH = 32
+#: the widest structured-light dot (Gaussian std, projector pixels): the pattern has at most one
+#: dot per pixel, so dots this wide already overlap into a nearly flat field with nothing to match
+MAX_DOT_SIGMA_PX = 10.0
 
 def focal_px(width: int, fov_deg: float) -> float:
     """Focal length (px) of a pinhole camera ``width`` px wide with horizontal field ``fov_deg`` degrees."""
@@ -294,6 +300,15 @@ def _validate(params: dict[str, dict[str, Any]], source, mode: str = "geometric"
     for key in ("sigma_px", "quantization_px", "speckle_contrast", "signal_px", "correlation_mm", "edge_gain",
                 "signal_contrast"):
         _number(params, "noise", key, source, nonneg=True)
+    cam = params["camera"]
+    corr_px = params["noise"]["correlation_mm"] * focal_px(cam["width"], cam["fov_deg"]) / (
+        0.5 * (params["range"]["near"] + params["range"]["far"]))
+    if corr_px > max(cam["width"], cam["height"]):
+        # a field correlated over more than the image is one offset of the whole scan (and its
+        # smoothing kernel would outgrow memory): a calibration error, not speckle
+        raise RangesimError(f"noise.correlation_mm = {params['noise']['correlation_mm']:g} mm is {corr_px:,.0f} px at "
+                            f"mid-range, more than the image's {max(cam['width'], cam['height'])} px; speckle "
+                            "correlates over a few pixels", source=source)
     _number(params, "camera", "psf_px", source, nonneg=True)
     for key in ("theta_deg", "alpha_deg", "min_cos"):
         if params["twin"][key] is not None:
@@ -317,6 +332,9 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
     _number(params, "structured_light", "pattern_seed", source, nonneg=True, integer=True)
     for key in ("dot_density", "dot_sigma_px", "exposure_e"):
         _number(params, "structured_light", key, source, positive=True)
+    if sl["dot_sigma_px"] > MAX_DOT_SIGMA_PX:
+        raise RangesimError(f"structured_light.dot_sigma_px must be at most {MAX_DOT_SIGMA_PX:g} projector pixels "
+                            f"(wider dots blur the pattern flat), got {sl['dot_sigma_px']:g}", source=source)
     if sl["dot_density"] > 1:
         raise RangesimError(f"structured_light.dot_density must be at most 1 dot per pixel, got {sl['dot_density']}",
                             source=source)
@@ -384,9 +402,13 @@ def _validate_render(params: dict[str, dict[str, Any]], source) -> None:
                                 source=source)
     _number(params, "render", "spp", source, positive=True, integer=True)
     _number(params, "render", "max_depth", source, positive=True, integer=True)
-    if render["max_depth"] < 2:
-        raise RangesimError("render.max_depth must be at least 2 (2 = direct light only)", source=source)
+    if not 2 <= render["max_depth"] <= MAX_RENDER_DEPTH:
+        raise RangesimError(f"render.max_depth must lie in [2, {MAX_RENDER_DEPTH}] (2 = direct light only, 3 = one "
+                            f"interreflection), got {render['max_depth']}", source=source)
     _number(params, "render", "exposure_e", source, positive=True)
+    if render["exposure_e"] > MAX_EXPOSURE_E:  # saturated anyway; NumPy's Poisson draw refuses such means
+        raise RangesimError(f"render.exposure_e must lie in (0, {MAX_EXPOSURE_E:.0e}] electrons, "
+                            f"got {render['exposure_e']:g}", source=source)
     if not isinstance(render["image_noise"], bool):
         raise RangesimError(f"render.image_noise must be true or false, got {render['image_noise']!r}",
                             source=source)

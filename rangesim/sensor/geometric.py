@@ -99,6 +99,13 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows: tup
     # 7b. the peak error triangulated against the sheet; the predicted std (mm): the model's
     # peak std with the mixed pixels' centroid shift, through dz/du
     measured = dr.select(valid, triangulate(points, sheet_n, rays, shift + draw.error_px, opaque_scalar(f)), dr.nan)
+    # the camera reads the stripe's peak within the window its sensor sees, which is the working
+    # range: a peak error that carries the measured depth past near or far puts the peak off
+    # the sensor, so the pixel has no measurement (the true surface was in range)
+    off_window = valid & ((measured.z < opaque_scalar(near)) | (measured.z > opaque_scalar(far)))
+    status = dr.select(off_window, int(Status.OUT_OF_RANGE), status)
+    valid = valid & ~off_window
+    measured = dr.select(valid, measured, dr.nan)
     shift_px = dr.select(dr.isfinite(shift), shift, 0.0)
     sigma = dr.select(valid, dr.sqrt(dr.square(draw.sigma_px) + dr.square(shift_px)) * dz_du, dr.nan)
     points = dr.select(hit, points, dr.nan)
