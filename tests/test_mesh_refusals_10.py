@@ -196,3 +196,31 @@ def test_truncated_binary_stl_with_a_text_header_is_still_truncated(tmp_path):
     _refused(tmp_path / "cut.stl", "truncated binary STL", "12 triangles")
     (tmp_path / "whole.stl").write_bytes(bytes(binary))
     assert len(rs.load_scene(tmp_path / "whole.stl").objects[0].mesh.faces) == 12
+
+
+# -- read without an error as a wrong mesh (review 12): truncated OFF / OBJ, OBJ index 0 ---------
+@pytest.mark.parametrize(("ext", "keep", "words"), [
+    ("off", 0.5, ["truncated OFF", "12 faces"]),
+    ("off", 0.97, ["truncated OFF", "found 8 vertices and 10 faces"]),
+    ("obj", 0.97, ["truncated OBJ", "last line"]),
+])
+def test_truncated_text_mesh_is_refused_not_half_read(tmp_path, ext, keep, words):
+    """trimesh read a box's OFF or OBJ cut short as the faces before the cut, without an error."""
+    whole = tmp_path / f"box.{ext}"
+    trimesh.creation.box(extents=(10.0, 20.0, 30.0)).export(whole)
+    data = whole.read_bytes()
+    cut = tmp_path / f"cut.{ext}"
+    cut.write_bytes(data[: int(len(data) * keep)])
+    assert data[int(len(data) * keep) - 1:int(len(data) * keep)] != b"\n"  # cut inside a line
+    _refused(cut, *words)
+    assert len(rs.load_scene(whole).objects[0].mesh.faces) == 12  # the whole file loads
+
+
+@pytest.mark.parametrize("face", ["f 0 2 4", "f 1/1 0/1 4/1", "f 2 4 0"])
+def test_obj_index_zero_is_refused_among_good_faces(tmp_path, face):
+    """OBJ counts vertices from 1; trimesh read index 0 as the last vertex (a wrong face, no error)."""
+    path = tmp_path / "zero.obj"
+    path.write_text(f"v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nvt 0 0\nf 1 2 3\n{face}\n")
+    _refused(path, "line 7", "index 0", "start at 1")
+    path.write_text("v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nvt 0 0\nf 1 2 3\nf 1 3 4\n")
+    assert len(rs.load_scene(path).objects[0].mesh.faces) == 2  # zero coordinates are no index

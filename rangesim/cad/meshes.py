@@ -47,7 +47,7 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
 #: environment variable naming the folder of the on-disk cache of validated meshes (unset: no cache)
 CACHE_ENV = "RANGESIM_MESH_CACHE"
 #: bump when validation changes what it produces or refuses, so stale cache entries are not used
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 
 
 def mesh_cache_dir() -> Path | None:
@@ -95,7 +95,7 @@ def _cached_load(path: Path, cache: Path) -> trimesh.Trimesh:
 
 
 def _read_and_validate(path: Path) -> trimesh.Trimesh:
-    from rangesim.io.mesh_check import diagnose_mesh_file
+    from rangesim.io.mesh_check import check_text_mesh, diagnose_mesh_file
 
     # Where trimesh fails, or reads a broken file as nothing or as garbage, the file's bytes
     # name the real problem (truncated, empty, 0-based OBJ indices, ...) where it can be told:
@@ -115,6 +115,10 @@ def _read_and_validate(path: Path) -> trimesh.Trimesh:
         raise RangesimError(
             f"file holds a {type(loaded).__name__}, not a triangle mesh", source=path
         )
+    # a truncated OFF or OBJ, or an OBJ index 0, reads without an error as a wrong mesh
+    problem = check_text_mesh(path, len(loaded.vertices), len(loaded.faces))
+    if problem is not None:
+        raise RangesimError(problem, source=path)
     try:
         return validate_mesh(loaded, source=path)
     except RangesimError:

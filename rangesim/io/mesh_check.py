@@ -156,6 +156,87 @@ def _obj(path: Path) -> str | None:
     return None
 
 
+#: an index 0 between separators, as it appears in an OBJ face line (``f 0 1 2``, ``f 1/1 0/2 2/3``)
+_ZERO_TOKENS = tuple(a + b"0" + b for a in (b" ", b"\t") for b in (b" ", b"/", b"\n", b"\r", b"\t"))
+
+
+def _zero_index_line(data: bytes) -> int | None:
+    """Offset of the first OBJ face line holding a vertex index 0, or None. ``bytes.find`` over
+    the few spellings (memchr speed); a match in another record (``v 0 0 1``) skips its line."""
+    found = []
+    for token in _ZERO_TOKENS:
+        i = data.find(token)
+        while i >= 0:
+            start = data.rfind(b"\n", 0, i) + 1
+            if data[start:start + 2] in (b"f ", b"f\t"):
+                found.append(start)
+                break
+            end = data.find(b"\n", i + 1)
+            i = data.find(token, end) if end >= 0 else -1
+    if data.endswith((b" 0", b"\t0")):  # the file's last token
+        start = data.rfind(b"\n") + 1
+        if data[start:start + 2] in (b"f ", b"f\t"):
+            found.append(start)
+    return min(found) if found else None
+
+
+def _obj_quick(path: Path) -> str | None:
+    """What :func:`check_text_mesh` finds in an OBJ that trimesh read: an index 0 (read as the
+    last vertex: a wrong face and no error) or a last line cut short (a truncated file, read
+    as a part of the part)."""
+    data = path.read_bytes()
+    zero = _zero_index_line(data)
+    if zero is not None:
+        line = data.count(b"\n", 0, zero) + 1
+        return f"face index out of range of the vertex list: line {line:,} has index 0 (OBJ indices start at 1)"
+    if data and not data.endswith((b"\n", b"\r")):
+        last = data.rsplit(b"\n", 1)[-1].split()
+        needed = {b"v": 4, b"vn": 4, b"f": 4, b"vt": 2}
+        if last and len(last) < needed.get(last[0], 0):
+            line = data.count(b"\n") + 1
+            return f"truncated OBJ: its last line ({line:,}) ends in the middle of a '{last[0].decode()}' record"
+    return None
+
+
+def _off_counts(path: Path) -> tuple[int, int] | None:
+    """The vertex and face counts an OFF file's count line declares (None if it has none)."""
+    with open(path, "rb") as f:
+        lines = (w for w in (line.split(b"#")[0].split() for line in f) if w)
+        first = next(lines, [b""])
+        counts = first[1:] or next(lines, [])
+        try:
+            return int(counts[0]), int(counts[1])
+        except (IndexError, ValueError):
+            return None
+
+
+def check_text_mesh(path: str | Path, n_vertices: int, n_faces: int) -> str | None:
+    """The problem with an OBJ or OFF file that trimesh read without an error, or None.
+
+    trimesh reads a truncated OFF or OBJ as the part of the part it holds, and an OBJ index 0
+    as the last vertex: no error, a wrong mesh. Cheap checks of the loaded mesh against the
+    file: an OFF's declared counts (the whole body is read only when they are not met) and one
+    pass over an OBJ's bytes.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file trimesh read.
+    n_vertices, n_faces : int
+        What it read: vertices, and triangles (an OFF polygon of n sides gives n - 2).
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        return _obj_quick(path)
+    if suffix == ".off":
+        counts = _off_counts(path)
+        if counts is not None and (n_vertices < counts[0] or n_faces < counts[1]):
+            return _off(path) or (f"truncated OFF: its count line says {counts[0]:,} vertices and {counts[1]:,} "
+                                  f"faces, {n_vertices:,} and {n_faces:,} triangles were read")
+    return None
+
+
 def _ply(raw: bytes, size: int, path: Path, full: bool) -> str | None:
     try:
         header = read_ply_header(raw, path)
