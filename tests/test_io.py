@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+import rangesim as rs
 import rangesim.io as rio
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
@@ -314,4 +315,34 @@ def test_atomic_write_errors_name_the_final_file(tmp_path):
         with atomic_path(tmp_path / "sweep.json") as tmp:
             raise PermissionError(13, "Permission denied", str(tmp))
     assert info.value.filename == str(tmp_path / "sweep.json") and info.value.strerror == "Permission denied"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_exr_write_failure_is_one_line_naming_the_file(tmp_path, monkeypatch):
+    """A full disk made OpenEXR raise a bare RuntimeError naming the temporary file (an 'internal
+    error' on the CLI); it is now a RangesimError naming the file asked for, and nothing is left."""
+    import OpenEXR
+
+    import rangesim.io.exr as exr_module
+
+    class FullDisk:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def write(self, name):
+            open(name, "wb").write(b"partial")
+            raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device.')
+
+    monkeypatch.setattr(exr_module.OpenEXR, "File", FullDisk)
+    assert OpenEXR.File is FullDisk
+    target = tmp_path / "scan.exr"
+    with pytest.raises(rs.RangesimError) as info:
+        rs.datasets.plate_scan().save(target)
+    assert str(info.value) == f"{target}: cannot write file (No space left on device)"
     assert list(tmp_path.iterdir()) == []

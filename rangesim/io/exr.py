@@ -161,7 +161,11 @@ def write_exr(scan: RangeScan, path: str | Path) -> None:
         POSE_ATTR: encode_pose(scan.pose),
     }
     with OpenEXR.File(header, channels) as exr:
-        exr.write(str(path))
+        try:
+            exr.write(str(path))
+        except RuntimeError as exc:  # the bindings' words for an OS failure: '... "file". No space left on device.'
+            reason = str(exc).rsplit('". ', 1)[-1].strip().rstrip(".") or type(exc).__name__
+            raise RangesimError(f"cannot write file ({reason})", path) from exc
 
 
 @contextlib.contextmanager
