@@ -56,3 +56,20 @@ def test_a_long_correlation_still_scans_a_plane():
     sensor = _sensor(**{"noise.correlation_mm": 20.0})
     scan = rs.scan([plane()], sensor, pose=top_down_pose(sensor.reference_distance), seed=3)
     assert scan.valid.mean() > 0.9 and np.isfinite(scan.depth[scan.valid]).all()
+
+
+@pytest.mark.parametrize(("old", "new", "words"), [
+    ('name = "white_scanner"', "name = 5", ["name must be a text", "5"]),
+    ('mode = "geometric"', "mode = 1", ["mode must be a text"]),
+    ("sigma_px = 0.1", 'sigma_px = "0.1"', ["noise.sigma_px must be a number", "'0.1'", "without quotes"]),
+])
+def test_sensor_file_values_of_the_wrong_type_are_refused(tmp_path, old, new, words):
+    """A quoted number was read as the number, `name = 5` as the name "5": a typo passed silently."""
+    base = (rs.sensor.config.PRESET_DIR / "white_scanner.toml").read_text()
+    assert base.count(old) == 1
+    path = tmp_path / "s.toml"
+    path.write_text(base.replace(old, new))
+    with pytest.raises(RangesimError) as info:
+        rs.load_sensor(path)
+    for word in words:
+        assert word in str(info.value), str(info.value)

@@ -226,6 +226,9 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
                 raise RangesimError(f"missing required key {table}.{key}", source=source)
             filled[key] = value
         params[table] = filled
+    for key in ("name", "description", "mode"):  # `name = 5` was taken as the name "5"
+        if key in data and not isinstance(data[key], str):
+            raise RangesimError(f"{key} must be a text in quotes, got {data[key]!r}", source=source)
     mode = str(data.get("mode", "geometric"))
     if mode not in MODES:
         raise RangesimError(
@@ -245,6 +248,9 @@ def _number(params, table, key, source, *, positive=False, nonneg=False, integer
     value = params[table][key]
     if isinstance(value, bool):  # float(True) == 1.0: a boolean is never meant as a number
         raise RangesimError(f"{table}.{key} must be a number, got {value!r}", source=source)
+    if isinstance(value, str):  # float("0.5") would take a quoted TOML text as a number
+        raise RangesimError(f"{table}.{key} must be a number, got the text {value!r} (write numbers without quotes)",
+                            source=source)
     try:
         number = float(value)
     except (TypeError, ValueError):
