@@ -230,3 +230,13 @@ def _alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except OSError:
         return False
+
+
+@pytest.mark.parametrize("command", ["sweep", "dataset"])
+def test_workers_with_a_scheduler_is_refused(tmp_path, capsys, command):
+    """--workers sizes the local pool; with --scheduler it was silently ignored."""
+    args = ([command, "any.toml"] if command == "sweep" else [command, "--scene", "any.toml", "--sensor", "white_scanner",
+                                                             "--views", "2"])
+    _refused(capsys, [*args, "--out", tmp_path / "o", "--workers", "3", "--scheduler", "local:2"],
+             "--workers 3", "--scheduler local:2")
+    assert not (tmp_path / "o").exists()

@@ -31,10 +31,18 @@ def _progress(args: argparse.Namespace) -> bool | None:
     return False if args.quiet else None
 
 
+def _check_executor_options(args: argparse.Namespace) -> None:
+    """``--workers`` sizes the local process pool; with ``--scheduler`` it was silently ignored."""
+    if args.scheduler and args.workers is not None:
+        raise RangesimError(f"--workers {args.workers} applies to the local process pool; with --scheduler "
+                            f"{args.scheduler} the Dask cluster's workers run the tasks (local:N sets their number)")
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     """``rangesim sweep``: run a sweep file, write the table and plots, print a summary."""
     from rangesim.experiments.sweep import run_sweep
 
+    _check_executor_options(args)
     run = run_sweep(args.sweep, args.out, keep_scans=args.keep_scans, workers=args.workers,
                     scheduler=args.scheduler, progress=_progress(args), plots=not args.no_plots)
     table = run.table
@@ -62,6 +70,7 @@ def cmd_dataset(args: argparse.Namespace) -> int:
     from rangesim.cli.main import _parse_setting
     from rangesim.experiments.dataset import make_dataset
 
+    _check_executor_options(args)
     changes = dict(_parse_setting(text) for text in args.set)
     if args.views < 1:
         raise RangesimError(f"--views must be at least 1, got {args.views}")
