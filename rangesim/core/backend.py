@@ -34,7 +34,9 @@ def coherent_rays() -> bool:
     cores, 1024^2 rays) coherent casts were ~1.7x faster (55 -> 33 ms at 327k triangles);
     on an AVX2-only AMD EPYC the bare cast in 4 x 4 tiles was slower (96 -> 104 ms at 327k,
     112 -> 144 ms at 1.3M) and the full scan at 5.2M triangles took 364 ms against 302 ms
-    incoherent (the same within noise at 327k and 1.3M). So: coherent where the CPU reports
+    incoherent (the same within noise at 327k and 1.3M); on an AVX-512 AMD EPYC Zen 4 (2 cores)
+    the full 1024^2 scan of the Green Piece took 0.17 s coherent against 0.20 s incoherent
+    (medians of 5, interleaved). So: coherent where the CPU reports
     AVX-512 (Linux ``/proc/cpuinfo``; True where that cannot be read), and on the GPU
     Mitsuba ignores the flag. ``RANGESIM_COHERENT_RAYS`` = 1 / 0 overrides.
     """
