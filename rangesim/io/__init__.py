@@ -30,6 +30,7 @@ from rangesim.io.ply import write_ply
 
 __all__ = [
     "atomic_path",
+    "check_scan_contents",
     "load_scan",
     "read_exr",
     "read_npz",
@@ -92,6 +93,45 @@ register_reader(".exr", read_exr)
 register_reader(".npz", read_npz)
 
 
+def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
+    """Refuse a scan file whose contents every reader of it would trip over later, in one line.
+
+    The pose must be finite with a non-singular rotation block (a NaN pose was printed and
+    used, a zero one made every world point the origin), ``meta["sensor"]`` a table, ``meta["K"]``
+    (when present) a finite 3x3 matrix with positive focal lengths, and every valid pixel's
+    ``xyz`` finite (a NaN point counted as measured).
+
+    Returns
+    -------
+    RangeScan
+        ``scan`` itself.
+    """
+    import numpy as np
+
+    pose = scan.pose
+    if not np.all(np.isfinite(pose)):
+        raise RangesimError("the scan's pose holds NaN or infinity", path)
+    det = float(np.linalg.det(pose[:3, :3]))
+    if not abs(det) > 1e-6:
+        raise RangesimError(f"the scan's pose has a singular rotation block (determinant {det:.3g}): "
+                            "it maps the scan onto a plane or a point", path)
+    sensor = scan.meta.get("sensor")
+    if sensor is not None and not isinstance(sensor, dict):
+        raise RangesimError(f"the scan's meta.sensor must be a table, got {type(sensor).__name__} {sensor!r:.60}", path)
+    if scan.meta.get("K") is not None:
+        try:
+            K = np.asarray(scan.meta["K"], dtype=np.float64)
+        except (TypeError, ValueError):
+            K = np.empty(0)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or not (K[0, 0] > 0 and K[1, 1] > 0):
+            raise RangesimError("the scan's meta.K must be a finite 3x3 pinhole matrix with positive focal "
+                                f"lengths, got {scan.meta['K']!r:.80}", path)
+    bad = int(np.count_nonzero(~np.isfinite(scan.xyz[scan.valid]).all(axis=-1)))
+    if bad:
+        raise RangesimError(f"{bad:,} valid pixels have NaN or infinite coordinates (xyz)", path)
+    return scan
+
+
 def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
     """Read a scan; the reader is chosen by extension (see :func:`register_reader`).
 
@@ -126,7 +166,7 @@ def load_scan(path: str | Path, **kwargs: Any) -> RangeScan:
             path,
         )
     try:
-        return reader(path, **kwargs)
+        return check_scan_contents(reader(path, **kwargs), path)
     except RangesimError:
         raise
     except (OSError, ValueError, KeyError, EOFError, IndexError, TypeError, SyntaxError, struct.error, zlib.error,
