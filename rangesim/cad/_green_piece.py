@@ -57,6 +57,9 @@ DEFAULTS: dict[str, Any] = {
     "divisions_per_turn": 16,  # sections of a thread per turn of its helix
 }
 THREAD_DEPTH_PER_PITCH = 0.6
+#: the most vertices of all thread cutters together (the default part: 7 threads, 1,228 sections
+#: of 48 segments, 59,000); the CSG work grows with them (1.77 million: 31 s and 4.7 GB)
+MAX_THREAD_VERTICES = 500_000
 
 
 def green_piece(**params) -> BuiltPart:
@@ -165,6 +168,19 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     for k, (x, y, r_major, pitch) in enumerate(threads, start=1):
         positive(m, **{f"threads[{k - 1}] major radius": r_major, f"threads[{k - 1}] pitch": pitch})
         within(m, f"threads[{k - 1}]", x, y, r_major, L / 2, W / 2)
+    # each thread is a helix of sections every 1 / divisions_per_turn of a turn through the
+    # plate, each a circle of `segments` vertices: a fine pitch makes millions of them (a
+    # 0.001 mm pitch: 200,000 sections, and the CSG library crashed the process at ~3 GB)
+    per_turn = float(p["divisions_per_turn"])
+    sections = [math.ceil(T / pitch * per_turn) + 2 for (_, _, _, pitch) in threads]
+    vertices = sum(sections) * float(p["segments"])
+    if vertices > MAX_THREAD_VERTICES:
+        finest = min(range(len(threads)), key=lambda k: threads[k][3])
+        raise RangesimError(
+            f"{m}: the threads would need {vertices:,.0f} vertices (at most {MAX_THREAD_VERTICES:,}): "
+            f"{sum(sections):,} helix sections (thickness / pitch x divisions_per_turn; threads[{finest}] pitch "
+            f"{threads[finest][3]:g} mm alone {sections[finest]:,}) of {int(p['segments'])} segments; use a coarser "
+            "pitch or fewer divisions_per_turn or segments")
     return {"holes": holes, "dent": dent, "scratches": scratches, "threads": threads}
 
 

@@ -46,6 +46,9 @@ DEFAULTS: dict[str, Any] = {
     "samples_per_mm": 0.8,    # tessellation density of the freeform tops
     "segments": 48,
 }
+#: the most grid points of all freeform tops together (the default part: 4,081; 415,744 at
+#: 8 per mm took 12 s and 2 GB, and 1000 per mm asked for 24 GB)
+MAX_FREEFORM_SAMPLES = 200_000
 FLOOR_Z = 5.0  # freeform solids reach down into the plate, so the unions are clean
 
 
@@ -133,6 +136,12 @@ def _check_layout(p: dict) -> None:
     for key in ("head_size", "bump_size"):
         (size,) = tuples(m, key, p[key], ("x", "y"), many=False)
         positive(m, **{f"{key} x": size[0], f"{key} y": size[1]})
+    grid = [(p["neck_length"], p["neck_width"]), tuple(p["head_size"]), tuple(p["head_size"]), tuple(p["bump_size"])]
+    samples = sum(max(8, int(sx * p["samples_per_mm"])) * max(8, int(sy * p["samples_per_mm"])) for sx, sy in grid)
+    if samples > MAX_FREEFORM_SAMPLES:
+        # the freeform tops are sampled on grids of size x density points per side
+        raise RangesimError(f"{m}: samples_per_mm {p['samples_per_mm']:g} samples the freeform tops (neck, heads, "
+                            f"bump) at {samples:,} points, more than {MAX_FREEFORM_SAMPLES:,}; use a lower density")
     L, W, r = p["plate_length"], p["plate_width"], p["corner_radius"]
     if r >= min(L, W) / 2:
         raise RangesimError(f"{m}: corner_radius {r:g} mm must be less than half the plate ({min(L, W) / 2:g} mm)")

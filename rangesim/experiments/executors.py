@@ -27,6 +27,8 @@ from rangesim.core.errors import RangesimError
 
 #: set in worker processes by :func:`init_worker`: tasks use one thread
 _SINGLE_THREADED = False
+#: the most ``local:N`` Dask workers per available core
+MAX_LOCAL_WORKERS_PER_CORE = 8
 #: BLAS / OpenMP thread variables set to 1 for spawned workers (read when numpy loads)
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -154,8 +156,17 @@ class Executor:
             if n == 0:
                 self.kind = "serial"
             self.workers = n
+        elif self.kind == "local":
+            n, cores = int(self.address), available_cores()
+            if n > MAX_LOCAL_WORKERS_PER_CORE * cores:
+                # each is a process with its own Dr.Jit and scene: local:100000 hung starting them
+                raise RangesimError(f"--scheduler local:{n} asks for more than {MAX_LOCAL_WORKERS_PER_CORE} worker "
+                                    f"processes per core ({cores} cores here); a worker per core is the fastest")
+            if max_tasks is not None:  # as the local pool: no more processes than tasks
+                n = max(1, min(n, max_tasks))
+            self.address = self.workers = n
         else:
-            self.workers = self.address if self.kind == "local" else None
+            self.workers = None
         self._pool: ProcessPoolExecutor | None = None
         self._client = None
         self._cluster = None

@@ -1,0 +1,43 @@
+"""Parameters whose work grows without bound are refused before the work (an independent probe:
+a 0.001 mm thread pitch crashed the process in the CSG library, samples_per_mm = 1000 asked for
+24 GB, local:100000 hung starting Dask workers)."""
+from __future__ import annotations
+
+import pytest
+
+import rangesim as rs
+from rangesim.cad._green_piece import MAX_THREAD_VERTICES
+from rangesim.cad._renault_piece import MAX_FREEFORM_SAMPLES
+from rangesim.cad.models import MODELS
+from rangesim.experiments.executors import MAX_LOCAL_WORKERS_PER_CORE, Executor, available_cores
+
+
+def test_a_thread_too_fine_for_memory_is_refused_naming_it():
+    with pytest.raises(rs.RangesimError) as info:
+        MODELS["green_piece"](threads=[(0.0, 0.0, 6.0, 0.001)])
+    message = str(info.value)
+    # 12.7 mm / 0.001 mm x 16 sections per turn, + 2 at the faces, of 48 segments each
+    assert "203,202 helix sections" in message
+    assert f"{MAX_THREAD_VERTICES:,}" in message and "threads[0] pitch 0.001" in message
+
+
+def test_the_default_threads_are_far_under_the_thread_limit():
+    import math
+
+    sections = sum(math.ceil(12.7 / pitch * 16) + 2 for pitch in (1.75, 1.5, 1.25, 1.0, 0.8, 1.0, 1.5))
+    assert sections * 48 < MAX_THREAD_VERTICES / 8
+
+
+def test_a_freeform_density_too_fine_for_memory_is_refused():
+    with pytest.raises(rs.RangesimError, match=r"samples_per_mm 1000 .* more than 200,000"):
+        MODELS["renault_piece"](samples_per_mm=1000)
+    assert MAX_FREEFORM_SAMPLES == 200_000
+
+
+def test_local_dask_workers_are_bounded():
+    cores = available_cores()
+    with pytest.raises(rs.RangesimError, match="worker processes per core"):
+        Executor(scheduler=f"local:{MAX_LOCAL_WORKERS_PER_CORE * cores + 1}")
+    # within the limit: no more workers than tasks, as the local pool
+    assert Executor(scheduler="local:4", max_tasks=1).workers == 1
+    assert Executor(scheduler=f"local:{min(3, 8 * cores)}", max_tasks=10).workers == min(3, 8 * cores)
