@@ -41,3 +41,23 @@ def test_local_dask_workers_are_bounded():
     # within the limit: no more workers than tasks, as the local pool
     assert Executor(scheduler="local:4", max_tasks=1).workers == 1
     assert Executor(scheduler=f"local:{min(3, 8 * cores)}", max_tasks=10).workers == min(3, 8 * cores)
+
+
+@pytest.mark.parametrize(("body", "words"), [
+    ('units = "m"\n[[object]]\nname = "b"\nprimitive = "box"\nsize = [1, 1, 1]\ntranslate = [1e307, 0, 0]\n',
+     ["[[object]] 0 (b)", "overflow to infinity"]),
+    ('[[object]]\nname = "b"\nprimitive = "box"\nsize = [1e300, 1e300, 1e300]\n', ["[[object]] 0 (b)", "5e+299 mm"]),
+    ('[[object]]\nname = "b"\nprimitive = "box"\nsize = [10, 10, 10]\n[view]\nposition = [1e300, 0, 0]\n',
+     ["view.position", "1e+300 mm"]),
+])
+def test_scene_coordinates_beyond_the_world_are_refused(tmp_path, body, words):
+    """Finite numbers that overflow once units and scale apply (or that float32 rays cannot
+    resolve) were scanned into 'the camera sees no surface' or a view error without a file name."""
+    path = tmp_path / "scene.toml"
+    path.write_text(body)
+    with pytest.raises(rs.RangesimError) as info:
+        rs.load_scene(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and "1e+09 mm" in message
+    for word in words:
+        assert word in message, message

@@ -248,6 +248,23 @@ def _unit_scale(value: str, where: str, source) -> float:
     return UNITS_MM[value]
 
 
+#: the largest |coordinate| (mm) a scene may hold once units, scales and offsets are applied: the
+#: scan casts rays in float32, whose spacing there is 64 mm (a 1e307 m offset overflowed to
+#: infinity and the scan said "the camera sees no surface")
+MAX_WORLD_MM = 1e9
+
+
+def _in_world(values: np.ndarray, what: str, source) -> np.ndarray:
+    """``values`` (mm) if finite and within :data:`MAX_WORLD_MM`, else a one-line refusal."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        largest = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    if not largest <= MAX_WORLD_MM:  # NaN and infinity too
+        shown = "overflow to infinity" if not np.isfinite(largest) else f"reach {largest:.3g} mm"
+        raise RangesimError(f"{what}: coordinates {shown}, beyond the {MAX_WORLD_MM:.0e} mm a scene may span",
+                            source=source)
+    return values
+
+
 def _numbers(value, what: str, source) -> np.ndarray:
     """``value`` as float64 numbers, or a RangesimError naming ``what`` (a TOML string, table or
     ragged list where numbers belong)."""
@@ -286,8 +303,8 @@ def _scene_from_toml(path: Path) -> Scene:
         if not isinstance(v, dict):
             raise RangesimError("'view' must be a [view] table", source=path)
         check_keys(v, VIEW_KEYS, "[view]", path)
-        position = _vector(v, "position", None, "view", path) * scene_mm
-        target = _vector(v, "look_at", (0, 0, 0), "view", path) * scene_mm
+        position = _in_world(_vector(v, "position", None, "view", path) * scene_mm, "view.position", path)
+        target = _in_world(_vector(v, "look_at", (0, 0, 0), "view", path) * scene_mm, "view.look_at", path)
         up = _vector(v, "up", (0, 0, 1), "view", path)
         try:
             view = look_at(position, target, up)
@@ -338,7 +355,8 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
         mesh, origin = built.mesh, f"model:{t['model']}"
     else:
         try:
-            mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
+            with np.errstate(over="ignore", invalid="ignore"):  # sizes past the world are refused below
+                mesh, origin = make_primitive(str(t["primitive"]), t, source=path), str(t["primitive"])
         except RangesimError as exc:
             raise RangesimError(f"{where} ({name}): {str(exc).removeprefix(f'{path}: ')}", source=path) from None
     # the object's own units, else a model's millimetres (built-in models are made in mm:
@@ -353,13 +371,12 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
     albedo = float(albedo)
     if not 0.0 <= albedo <= 1.0:
         raise RangesimError(f"{where}.albedo must lie in 0..1, got {albedo}", source=path)
-    matrix = object_transform(
-        _vector(t, "translate", (0, 0, 0), where, path) * scene_mm,
-        _vector(t, "rotate_deg", (0, 0, 0), where, path),
-        scale * object_mm,
-    )
+    translate, rotate = _vector(t, "translate", (0, 0, 0), where, path), _vector(t, "rotate_deg", (0, 0, 0), where, path)
     mesh = mesh.copy()
-    mesh.apply_transform(matrix)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, in one line
+        matrix = object_transform(translate * scene_mm, rotate, scale * object_mm)
+        mesh.apply_transform(matrix)
+    _in_world(mesh.vertices, f"{where} ({name}) after units, scale and translate", path)
     material = check_material(t["material"], where, path) if "material" in t else {}
     obj = SceneObject(name, mesh, albedo=albedo, source=origin, material=material)
     if "model" in t:
