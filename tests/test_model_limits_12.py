@@ -61,3 +61,19 @@ def test_scene_coordinates_beyond_the_world_are_refused(tmp_path, body, words):
     assert message.startswith(f"{path}: ") and "1e+09 mm" in message
     for word in words:
         assert word in message, message
+
+
+@pytest.mark.parametrize(("params", "words"), [
+    ({"head_height": 1}, ["right head's rim", "not above the plate's top"]),
+    ({"plate_thickness": 100}, ["plate_thickness 100 mm"]),
+    ({"plate_thickness": 4}, ["must exceed 5 mm"]),
+    ({"neck_waist": 50}, ["neck_waist 50", "(0, 1]"]),
+    ({"head_x": 500}, ["heads", "past the plate"]),
+    ({"head_size": [1e-9, 1e-9]}, ["at least 1 mm"]),
+])
+def test_renault_layouts_whose_sub_parts_are_not_in_the_mesh_are_refused(params, words):
+    """The heads buried in the plate (or off it) were listed as features the mesh does not have."""
+    with pytest.raises(rs.RangesimError) as info:
+        MODELS["renault_piece"](**params)
+    for word in words:
+        assert word in str(info.value), str(info.value)

@@ -49,6 +49,8 @@ DEFAULTS: dict[str, Any] = {
 #: the most grid points of all freeform tops together (the default part: 4,081; 415,744 at
 #: 8 per mm took 12 s and 2 GB, and 1000 per mm asked for 24 GB)
 MAX_FREEFORM_SAMPLES = 200_000
+#: the smallest side of a head or the bump (mm)
+MIN_FREEFORM_MM = 1.0
 FLOOR_Z = 5.0  # freeform solids reach down into the plate, so the unions are clean
 
 
@@ -146,6 +148,30 @@ def _check_layout(p: dict) -> None:
     if r >= min(L, W) / 2:
         raise RangesimError(f"{m}: corner_radius {r:g} mm must be less than half the plate ({min(L, W) / 2:g} mm)")
     within(m, "the hole (hole_x, hole_radius)", float(p["hole_x"]), 0.0, p["hole_radius"], L / 2, W / 2)
+    if not 0 < p["neck_waist"] <= 1:
+        raise RangesimError(f"{m}: neck_waist {p['neck_waist']:g} must lie in (0, 1] (the waist's height as a share "
+                            "of the neck's)")
+    T = p["plate_thickness"]
+    if T <= FLOOR_Z:
+        raise RangesimError(f"{m}: plate_thickness {T:g} mm must exceed {FLOOR_Z:g} mm (the freeform solids reach "
+                            "down to that height inside the plate)")
+    # the heads and the bump: on the plate, and their rims above its top (a buried head's walls
+    # and rim would be listed as features the mesh does not have)
+    (hx, hy), (bx, by) = p["head_size"], p["bump_size"]
+    if min(hx, hy, bx, by) < MIN_FREEFORM_MM:  # a patch of a micrometre has no wall or rim to scan
+        raise RangesimError(f"{m}: head_size and bump_size must be at least {MIN_FREEFORM_MM:g} mm a side, got "
+                            f"{[hx, hy]} and {[bx, by]}")
+    for what, cx, cy, sx, sy in (("the heads (head_x, head_size)", abs(float(p["head_x"])), 0.0, hx, hy),
+                                 ("the bump (bump_y, bump_size)", 0.0, abs(float(p["bump_y"])), bx, by)):
+        if cx + sx / 2 > L / 2 or cy + sy / 2 > W / 2:
+            raise RangesimError(f"{m}: {what} reach past the plate ({L:g} x {W:g} mm)")
+    for what, surface in (("right head", _head_surface(p, 1)), ("left head", _head_surface(p, -1)),
+                          ("bump", _bump_surface(p))):
+        z = np.asarray(surface.control_points)[..., 2]
+        rim = min(z[0].min(), z[-1].min(), z[:, 0].min(), z[:, -1].min())  # a clamped patch's border
+        if rim <= T:
+            raise RangesimError(f"{m}: the {what}'s rim falls to {rim:g} mm, not above the plate's top "
+                                f"(plate_thickness {T:g} mm); raise head_height / bump_height or thin the plate")
 
 
 def _freeform(surface, size_x, size_y, density):
