@@ -38,6 +38,10 @@ CASES = {
     "zero focal length": (lambda a, m: m.update(K=[[0, 0, 1], [0, 0, 1], [0, 0, 1]]), "positive focal"),
     "K of the wrong shape": (lambda a, m: m.update(K=[1, 2, 3]), "3x3"),
     "NaN point at a valid pixel": (_nan_xyz, "1 valid pixels have NaN"),
+    "complex depth": (lambda a, m: a.update(depth=a["depth"].astype(np.complex64)), "depth must hold real numbers"),
+    "valid of 0.5": (lambda a, m: a.update(valid=np.full(a["valid"].shape, 0.5)), "valid must hold booleans"),
+    "status as floats": (lambda a, m: a.update(status=a["status"] + 0.5), "status must hold integers"),
+    "format version -1": (lambda a, m: a.update(rangesim_format_version=np.int64(-1)), "versions start at 1"),
 }
 
 

@@ -82,6 +82,23 @@ def read_npz(path: str | Path) -> RangeScan:
     return _scan_from_arrays(arrays, path)
 
 
+def _check_kind(field: str, values: np.ndarray | None, dtype: np.dtype, path: Path) -> None:
+    """A field's array must hold the kind of numbers the field is: a cast would silently drop a
+    complex depth's imaginary part or take a 0.5 in ``valid`` as True."""
+    if values is None:
+        return
+    kind = values.dtype.kind
+    if dtype.kind == "b":
+        ok = kind == "b" or (kind in "iu" and bool(np.isin(values, (0, 1)).all()))
+        need = "booleans (or 0 / 1)"
+    elif dtype.kind == "f":
+        ok, need = kind in "fiu", "real numbers"
+    else:
+        ok, need = kind in "iub", "integers"
+    if not ok:
+        raise RangesimError(f"array {field} must hold {need}, got {values.dtype}", path)
+
+
 def _scan_from_arrays(arrays: dict[str, np.ndarray], path: Path) -> RangeScan:
     try:
         version = int(arrays[VERSION_KEY]) if VERSION_KEY in arrays else FORMAT_VERSION
@@ -93,6 +110,8 @@ def _scan_from_arrays(arrays: dict[str, np.ndarray], path: Path) -> RangeScan:
             f" ({FORMAT_VERSION}); update rangesim",
             path,
         )
+    if version < 1:
+        raise RangesimError(f"corrupt {VERSION_KEY}: {version} (versions start at 1)", path)
     fields: dict[str, Any] = {}
     for field, _, _ in PIXEL_FIELDS:
         if field not in arrays:
@@ -100,6 +119,8 @@ def _scan_from_arrays(arrays: dict[str, np.ndarray], path: Path) -> RangeScan:
         fields[field] = arrays[field]
     for field, _, _ in OPTIONAL_PIXEL_FIELDS:
         fields[field] = arrays.get(field)
+    for field, dtype, _ in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
+        _check_kind(field, fields[field], np.dtype(dtype), path)
     try:
         meta = decode_meta(str(arrays["meta"])) if "meta" in arrays else {}
         pose = arrays["pose"] if "pose" in arrays else np.eye(4)
