@@ -77,3 +77,11 @@ def test_renault_layouts_whose_sub_parts_are_not_in_the_mesh_are_refused(params,
         MODELS["renault_piece"](**params)
     for word in words:
         assert word in str(info.value), str(info.value)
+
+
+def test_params_on_a_primitive_are_refused(tmp_path):
+    """A sweep's `object.box.params.thickness` on a primitive box was silently ignored."""
+    path = tmp_path / "scene.toml"
+    path.write_text('[[object]]\nname = "box"\nprimitive = "box"\nsize = [10, 10, 10]\n[object.params]\nthickness = 3\n')
+    with pytest.raises(rs.RangesimError, match=r"\(box\): params apply to a built-in model"):
+        rs.load_scene(path)

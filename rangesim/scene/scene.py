@@ -347,6 +347,9 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
         takes = ", ".join(PRIMITIVE_KEYS.get(kind, ())) or "none of them"
         raise RangesimError(f"{where} ({name}): {', '.join(foreign)} does not apply to a {kind} "
                             f"(its geometry keys: {takes})", source=path)
+    if "params" in t and "model" not in t:  # a sweep's params.thickness on a box was silently ignored
+        raise RangesimError(f"{where} ({name}): params apply to a built-in model (model = ...), not to a {kind}",
+                            source=path)
     if "mesh" in t:
         mesh_path = (path.parent / expand_data_path(str(t["mesh"]))).resolve()
         mesh, origin = load_mesh(mesh_path), str(mesh_path)
