@@ -61,3 +61,18 @@ def test_the_unedited_file_loads(tmp_path):
     path = _edited(tmp_path, lambda a, m: None)
     scan = rs.load_scan(path)
     assert scan.valid.any() and np.isfinite(scan.pose).all()
+
+
+@pytest.mark.parametrize(("lines", "words"), [
+    ("bmesh s.ply 0 0 0 0 0 0 1\nbmesh s.ply 0.1 0 0 0 0 0 1\n", "line 3: a second bmesh line for s.ply"),
+    ("bmesh s.ply 1e308 0 0 0 0 0 1\n", "line 2: the translation is out of range"),
+])
+def test_conf_files_that_place_a_scan_two_ways_or_nowhere_are_refused(tmp_path, lines, words):
+    from rangesim.recorded.conf import read_conf
+
+    conf = tmp_path / "s.conf"
+    conf.write_text("camera 0 0 0 0 0 0 1\n" + lines)
+    with pytest.raises(rs.RangesimError, match=words):
+        read_conf(conf)
+    conf.write_text("bmesh s.ply 0 0 0 0 0 0 1\nbmesh s.ply 0 0 0 0 0 0 1\n")  # the same line twice: fine
+    assert np.allclose(read_conf(conf)["s.ply"], np.eye(4))

@@ -23,6 +23,10 @@ __all__ = ["apply_conf", "conf_pose", "read_conf"]
 METRES_TO_MM = 1000.0
 
 
+#: the farthest a scan may sit from the world origin (mm): a kilometre
+MAX_TRANSLATION_MM = 1e6
+
+
 def read_conf(conf: str | Path) -> dict[str, np.ndarray]:
     """All ``bmesh`` poses of a Stanford ``.conf`` file.
 
@@ -65,6 +69,11 @@ def read_conf(conf: str | Path) -> dict[str, np.ndarray]:
         pose = np.eye(4)
         pose[:3, :3] = Rotation.from_quat(q).inv().as_matrix()
         pose[:3, 3] = t * METRES_TO_MM
+        if not np.isfinite(pose).all() or np.abs(pose[:3, 3]).max() > MAX_TRANSLATION_MM:
+            raise RangesimError(f"line {number}: the translation is out of range (at most "
+                                f"{MAX_TRANSLATION_MM / METRES_TO_MM:g} m)", conf)
+        if words[1] in poses and not np.allclose(poses[words[1]], pose):  # which one is meant?
+            raise RangesimError(f"line {number}: a second bmesh line for {words[1]} with another pose", conf)
         poses[words[1]] = pose
     return poses
 
