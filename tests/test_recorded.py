@@ -463,3 +463,14 @@ def test_msu_written_in_inches_reads_back_in_millimetres(tmp_path):
     assert back.meta["msu_units"] == "in"
     assert np.allclose(back.xyz[back.valid], scan.xyz[scan.valid], rtol=1e-5)
     assert np.allclose(rs.load_scan(path, units="mm").xyz[back.valid] * 25.4, scan.xyz[scan.valid], rtol=1e-5)
+
+
+def test_pcd_field_count_past_any_descriptor_is_refused(tmp_path):
+    """A COUNT of 1e9 ended in NumPy's 'dtype size in bytes must fit into a C int'."""
+    header = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z f\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 {}\n"
+              "WIDTH 1\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA binary\n")
+    path = tmp_path / "wide.pcd"
+    path.write_bytes(header.format(1_000_000_000).encode() + b"\0" * 64)
+    expect_error(path, r"field f COUNT 1,000,000,000 is more than 65,536 elements per point", call=rec.read_pcd)
+    path.write_bytes(header.format(308).encode() + struct.pack("<fff", 0.0, 0.0, 0.5) + b"\0" * 4 * 308)
+    assert rec.read_pcd(path)[1]["f"].shape == (1, 1, 308)  # PCL's VFH descriptor

@@ -47,6 +47,8 @@ _TYPES = {
     ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8",
     ("F", 4): "<f4", ("F", 8): "<f8",
 }
+#: the most elements one PCD field may hold per point
+MAX_FIELD_COUNT = 65536
 _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 #: fields that fill RangeScan arrays rather than the extras
 _SCAN_FIELDS = {"x", "y", "z", "normal_x", "normal_y", "normal_z", "intensity"}
@@ -233,6 +235,9 @@ def _read_header(raw: bytes, path: Path) -> PcdHeader:
             raise RangesimError(f"PCD header: field {name} has unsupported TYPE {kind!r} SIZE {size_word!r}", path)
         if count is None or count <= 0:
             raise RangesimError(f"PCD header: field {name} COUNT {count_word!r} is not a positive integer", path)
+        if count > MAX_FIELD_COUNT:  # PCL's widest descriptors (VFH) hold 308
+            raise RangesimError(f"PCD header: field {name} COUNT {count:,} is more than {MAX_FIELD_COUNT:,} "
+                                "elements per point", path)
         fields.append(PcdField(name, code, size, count))
     real = [f.name for f in fields if not f.padding]
     if len(set(real)) != len(real):
