@@ -19,8 +19,8 @@ have_llvm19() {
     return 1
 }
 
-have_libusb() {
-    ldconfig -p 2>/dev/null | grep -q libusb-1.0
+have_libusb() {  # a user's PATH may lack /sbin
+    { ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null; } | grep -q libusb-1.0
 }
 
 missing=""

@@ -240,3 +240,14 @@ def test_workers_with_a_scheduler_is_refused(tmp_path, capsys, command):
     _refused(capsys, [*args, "--out", tmp_path / "o", "--workers", "3", "--scheduler", "local:2"],
              "--workers 3", "--scheduler local:2")
     assert not (tmp_path / "o").exists()
+
+
+def test_detect_beside_a_broken_map_file(tmp_path, capsys, plate):
+    """An empty or corrupt *_edges.npz in the folder is no map of another scan: kept, no crash."""
+    out = tmp_path / "edges"
+    out.mkdir()
+    (out / "normal_edges.npz").write_bytes(b"")
+    (out / "curvature_edges.npz").write_bytes(b"PK\x03\x04 not a zip")
+    assert main(["detect", str(plate), "--method", "gradient", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert (out / "normal_edges.npz").read_bytes() == b"" and (out / "gradient_edges.npz").is_file()

@@ -224,3 +224,23 @@ def test_obj_index_zero_is_refused_among_good_faces(tmp_path, face):
     _refused(path, "line 7", "index 0", "start at 1")
     path.write_text("v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nvt 0 0\nf 1 2 3\nf 1 3 4\n")
     assert len(rs.load_scene(path).objects[0].mesh.faces) == 2  # zero coordinates are no index
+
+
+def test_valid_text_meshes_with_edges_or_comments_still_load(tmp_path):
+    """An OFF may list 1- and 2-vertex elements (trimesh drops them: fewer triangles than the
+    count line, yet no truncation), and an OBJ comment may hold a 0."""
+    box = trimesh.creation.box(extents=(10.0, 20.0, 30.0))
+    lines = ["OFF", f"{len(box.vertices)} {len(box.faces) + 1} 0"]
+    lines += [" ".join(f"{c:g}" for c in v) for v in box.vertices]
+    lines += [f"3 {a} {b} {c}" for a, b, c in box.faces] + ["2 0 1"]
+    off = tmp_path / "edges.off"
+    off.write_text("\n".join(lines) + "\n")
+    assert len(rs.load_scene(off).objects[0].mesh.faces) == 12
+    obj = tmp_path / "comment.obj"
+    obj.write_text("v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 2 3\nf 1 3 4\n# f 0 1 2\n")
+    assert len(rs.load_scene(obj).objects[0].mesh.faces) == 2
+    # trimesh cannot read a comment after a face; the refusal does not blame the 0 in it
+    obj.write_text("v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 2 3 # was 0\nf 1 3 4\n")
+    with pytest.raises(rs.RangesimError) as info:
+        rs.load_scene(obj)
+    assert "index 0" not in str(info.value)

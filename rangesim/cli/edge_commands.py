@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +66,7 @@ def _another_scans_map(path: Path, scan_id: str) -> bool:
     try:
         with np.load(path) as npz:
             return {"method", "mask", "scan"} <= set(npz.files) and str(npz["scan"]) != scan_id
-    except (OSError, ValueError):  # not an NPZ: not ours
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):  # not an NPZ (empty, broken): not ours
         return False
 
 

@@ -82,7 +82,9 @@ def _sigterm_as_interrupt() -> Iterator[None]:
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, before)
+        # None: the previous handler was not set from Python (an embedding host); leave ours
+        if before is not None:
+            signal.signal(signal.SIGTERM, before)
 
 #: modules adding subcommands: each has ``register(subparsers)`` that sets ``func`` (args -> exit code)
 COMMAND_MODULES: tuple[str, ...] = (

@@ -67,7 +67,9 @@ def cpu_flags() -> frozenset[str] | None:
 #: the oldest libLLVM Dr.Jit's CPU backend may use on a CPU with AVX-512: with Debian 12's
 #: LLVM 15 and 16, a kernel taking a float maximum (``dr.maximum``; Mitsuba's ray casts have
 #: them) makes LLVM abort the whole process ("LLVM ERROR: Cannot select: fmaximum", seen on
-#: an AMD EPYC Zen 4 with its 16-lane AVX-512 code); LLVM 19 compiles it
+#: an AMD EPYC Zen 4 with its 16-lane AVX-512 code); LLVM 19 compiles it (17 and 18 were not
+#: tried, so they are refused too: the rendered mode needs 19 on every CPU anyway,
+#: :func:`rangesim.sensor.rendered.check_backend`)
 MIN_LLVM_AVX512 = (19, 0, 0)
 
 

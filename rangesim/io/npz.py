@@ -90,7 +90,7 @@ def _check_kind(field: str, values: np.ndarray | None, dtype: np.dtype, path: Pa
     kind = values.dtype.kind
     if dtype.kind == "b":
         ok = kind == "b" or (kind in "iu" and bool(np.isin(values, (0, 1)).all()))
-        need = "booleans (or 0 / 1)"
+        need = "booleans (or integers 0 / 1)"
     elif dtype.kind == "f":
         ok, need = kind in "fiu", "real numbers"
     else:

@@ -68,7 +68,8 @@ def read_conf(conf: str | Path) -> dict[str, np.ndarray]:
             raise RangesimError(f"line {number}: the quaternion is zero", conf)
         pose = np.eye(4)
         pose[:3, :3] = Rotation.from_quat(q).inv().as_matrix()
-        pose[:3, 3] = t * METRES_TO_MM
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below
+            pose[:3, 3] = t * METRES_TO_MM
         if not np.isfinite(pose).all() or np.abs(pose[:3, 3]).max() > MAX_TRANSLATION_MM:
             raise RangesimError(f"line {number}: the translation is out of range (at most "
                                 f"{MAX_TRANSLATION_MM / METRES_TO_MM:g} m)", conf)
