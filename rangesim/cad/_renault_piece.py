@@ -148,9 +148,6 @@ def _check_layout(p: dict) -> None:
     if r >= min(L, W) / 2:
         raise RangesimError(f"{m}: corner_radius {r:g} mm must be less than half the plate ({min(L, W) / 2:g} mm)")
     within(m, "the hole (hole_x, hole_radius)", float(p["hole_x"]), 0.0, p["hole_radius"], L / 2, W / 2)
-    if not 0 < p["neck_waist"] <= 1:
-        raise RangesimError(f"{m}: neck_waist {p['neck_waist']:g} must lie in (0, 1] (the waist's height as a share "
-                            "of the neck's)")
     T = p["plate_thickness"]
     if T <= FLOOR_Z:
         raise RangesimError(f"{m}: plate_thickness {T:g} mm must exceed {FLOOR_Z:g} mm (the freeform solids reach "
