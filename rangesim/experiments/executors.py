@@ -272,6 +272,22 @@ class Executor:
             else:
                 yield i, result, None
 
+    def _submit(self, fn, payload):
+        """``pool.submit`` with SIGINT ignored while it runs: a submit may spawn a worker, which
+        then starts with SIGINT ignored from its first line (the initializer's own ignore comes
+        only after the worker's imports, and Ctrl-C during those printed a worker traceback)."""
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return self._pool.submit(fn, payload)
+        before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            return self._pool.submit(fn, payload)
+        finally:
+            if before is not None:
+                signal.signal(signal.SIGINT, before)
+
     def _run_pool(self, fn, payloads):
         assert self._pool is not None, "use the Executor as a context manager"
         # a window of pending tasks (not thousands of futures at once): 4 per worker
@@ -284,7 +300,7 @@ class Executor:
                     item = next(todo, None)
                     if item is None:
                         break
-                    pending[self._pool.submit(fn, item[1])] = item[0]
+                    pending[self._submit(fn, item[1])] = item[0]
                 if not pending:
                     return
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
