@@ -474,3 +474,18 @@ def test_pcd_field_count_past_any_descriptor_is_refused(tmp_path):
     expect_error(path, r"field f COUNT 1,000,000,000 is more than 65,536 elements per point", call=rec.read_pcd)
     path.write_bytes(header.format(308).encode() + struct.pack("<fff", 0.0, 0.0, 0.5) + b"\0" * 4 * 308)
     assert rec.read_pcd(path)[1]["f"].shape == (1, 1, 308)  # PCL's VFH descriptor
+
+
+def test_pcd_normals_are_unit_vectors_or_unknown(tmp_path):
+    """Zero, infinite or NaN normals at valid points were kept as they were; now they are unknown
+    (NaN) and a finite normal of another length is scaled to 1."""
+    header = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z normal_x normal_y normal_z\nSIZE 4 4 4 4 4 4\n"
+              "TYPE F F F F F F\nCOUNT 1 1 1 1 1 1\nWIDTH 4\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n")
+    path = tmp_path / "n.pcd"
+    path.write_text(header + "0 0 0.5 0 0 -1\n0.1 0 0.5 0 0 0\n0.2 0 0.5 0 0 inf\n"
+                    "0.3 0 0.5 0 3 -4\n")
+    scan = rec.read_pcd(path)[0]
+    assert scan.valid.all()
+    n = scan.normal[0]
+    assert np.array_equal(n[0], [0, 0, -1]) and np.isnan(n[1]).all() and np.isnan(n[2]).all()
+    assert np.allclose(n[3], [0, 0.6, -0.8])

@@ -87,6 +87,17 @@ class PcdHeader:
 
 
 # -- reading ---------------------------------------------------------------------------------
+def _unit_normals(normal: np.ndarray) -> np.ndarray:
+    """Normals as unit vectors: a zero or non-finite one is unknown (NaN, as PCL writes where it
+    has none), a finite one of another length is scaled to 1 (unit ones are kept to the bit)."""
+    normal = np.asarray(normal, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        length = np.linalg.norm(normal, axis=-1, keepdims=True)
+        unit = np.abs(length - 1.0) <= 1e-3
+        scaled = np.where(np.isfinite(length) & (length > 0), normal / length, np.nan)
+    return np.where(unit, normal, scaled)
+
+
 def read_pcd(path: str | Path, *, conf: str | Path | None = None,
              sensor: Any = None) -> tuple[RangeScan, dict[str, np.ndarray]]:
     """Read a PCD v0.7 file: the scan and its other fields.
@@ -140,7 +151,7 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None,
     xyz = np.stack([grid(a).astype(np.float64) for a in "xyz"], axis=-1) * _MM
     normal = None
     if all(f"normal_{a}" in columns and columns[f"normal_{a}"].ndim == 1 for a in "xyz"):
-        normal = np.stack([grid(f"normal_{a}") for a in "xyz"], axis=-1)
+        normal = _unit_normals(np.stack([grid(f"normal_{a}") for a in "xyz"], axis=-1))
     intensity = grid("intensity") if "intensity" in columns and columns["intensity"].ndim == 1 else None
     meta = recorded_meta(
         "pcd", path, "file", organized=h > 1, pcd_fields=names,
