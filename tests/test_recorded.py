@@ -425,6 +425,8 @@ def test_msu_bad_files(tmp_path):
     gz = tmp_path / "bad.msu.gz"
     gz.write_bytes(gzip.compress(b"2 rows\n3 cols\n\n" + b"1 " * 24)[:-8])
     expect_error(gz, r"corrupt gzip data")
+    path.write_text("2 rows\n3 cols\n\n1 0 2 1 1 0.5 " + "1 " * 18)  # flags 2 and 0.5 were "no surface"
+    expect_error(path, r"the flag image must hold 0 or 1; 2 values do not \(row 0, column 2: 2\)")
 
 
 # -- dispatch ------------------------------------------------------------------------------------------

@@ -93,6 +93,12 @@ def read_msu(path: str | Path, *, units: str | None = None, conf: str | Path | N
         units = written.group(1) if written else "mm"
     scale = unit_scale(units, path)
     images = values.reshape(4, rows, cols)
+    flags = images[0]
+    odd = ~np.isin(flags, (0, 1))
+    if odd.any():  # a flag of 2 or 0.5 is no flag: a misread or another layout, not "no surface"
+        r, c = np.argwhere(odd)[0]
+        raise RangesimError(f"the flag image must hold 0 or 1; {int(odd.sum()):,} values do not (row {r}, "
+                            f"column {c}: {flags[r, c]:g})", path)
     xyz = (np.moveaxis(images[1:], 0, -1) * scale).astype(np.float32)
     meta = recorded_meta("msu", path, "scanner", organized=True, msu_header=header, msu_units=units)
     scan = grid_scan(xyz, meta, valid=images[0] == 1)
