@@ -491,3 +491,15 @@ def test_pcd_normals_are_unit_vectors_or_unknown(tmp_path):
     n = scan.normal[0]
     assert np.array_equal(n[0], [0, 0, -1]) and np.isnan(n[1]).all() and np.isnan(n[2]).all()
     assert np.allclose(n[3], [0, 0.6, -0.8])
+
+
+def test_coordinates_past_float32_are_refused_not_dropped(tmp_path):
+    """1e300 m in a PCD (or 1e38 m in a range grid) overflowed float32 into 'no surface' with
+    only a NumPy warning; such a file is refused naming it."""
+    header = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+              "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n")
+    path = tmp_path / "far.pcd"
+    path.write_text(header + "0 0 0.5\n1e300 0 0.5\n")
+    expect_error(path, r"coordinates reach 1e\+303 mm, beyond what a scan's float32 holds", call=rec.read_pcd)
+    path.write_text(header + "0 0 0.5\n1e30 0 0.5\n")  # far, yet float32 holds it
+    assert rec.read_pcd(path)[0].valid.all()

@@ -52,6 +52,11 @@ def recorded_meta(fmt: str, path: Path, frame: str, **extra: Any) -> dict[str, A
     return {"units": "mm", "frame": frame, "source": {"format": fmt, "file": path.name}, **extra}
 
 
+#: the largest |coordinate| (mm) a recorded scan may hold: what float32, the scan's storage, can
+#: (far points lose precision first, which :func:`warn_float32_steps` says)
+MAX_RECORDED_MM = float(np.finfo(np.float32).max)
+
+
 def grid_scan(
     xyz: np.ndarray,
     meta: dict[str, Any],
@@ -85,8 +90,14 @@ def grid_scan(
         ``xyz_true`` None.
     """
     source = meta.get("source")
-    warn_float32_steps(xyz, source.get("file", "recording") if isinstance(source, dict) else "recording",
-                       "a scan stores float32: subtract an offset first (e.g. the points' centroid)")
+    name = source.get("file", "recording") if isinstance(source, dict) else "recording"
+    with np.errstate(invalid="ignore"):
+        largest = np.abs(np.asarray(xyz, dtype=np.float64))
+        largest = float(largest[np.isfinite(largest)].max(initial=0.0))
+    if largest > MAX_RECORDED_MM:  # float32 turned them into infinity: "no surface", with a warning
+        raise RangesimError(f"coordinates reach {largest:.3g} mm, beyond what a scan's float32 holds "
+                            f"({MAX_RECORDED_MM:.3g}): wrong units?", source=name)
+    warn_float32_steps(xyz, name, "a scan stores float32: subtract an offset first (e.g. the points' centroid)")
     xyz = np.asarray(xyz, dtype=np.float32)
     ok = np.isfinite(xyz).all(axis=-1)
     if valid is not None:

@@ -106,7 +106,7 @@ def cyberware_from(raw: bytes, header: PlyHeader, path: Path, *, conf: Any = Non
 
     hit = index >= 0
     columns = [names.index(a) for a in "xyz"]
-    xyz = np.full((cells, 3), np.nan, dtype=np.float32)
+    xyz = np.full((cells, 3), np.nan)  # float64 until grid_scan has checked the range
     xyz[hit] = table[index[hit]][:, columns] * METRES_TO_MM
     intensity = None
     if "intensity" in names:

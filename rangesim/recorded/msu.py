@@ -99,7 +99,7 @@ def read_msu(path: str | Path, *, units: str | None = None, conf: str | Path | N
         r, c = np.argwhere(odd)[0]
         raise RangesimError(f"the flag image must hold 0 or 1; {int(odd.sum()):,} values do not (row {r}, "
                             f"column {c}: {flags[r, c]:g})", path)
-    xyz = (np.moveaxis(images[1:], 0, -1) * scale).astype(np.float32)
+    xyz = np.moveaxis(images[1:], 0, -1) * scale  # float64: grid_scan checks the range, then stores float32
     meta = recorded_meta("msu", path, "scanner", organized=True, msu_header=header, msu_units=units)
     scan = grid_scan(xyz, meta, valid=images[0] == 1)
     return apply_conf(scan, conf, path)
