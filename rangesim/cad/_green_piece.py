@@ -172,7 +172,7 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     # plate, each a circle of `segments` vertices: a fine pitch makes millions of them (a
     # 0.001 mm pitch: 200,000 sections, and the CSG library crashed the process at ~3 GB)
     per_turn = float(p["divisions_per_turn"])
-    sections = [math.ceil(T / pitch * per_turn) + 2 for (_, _, _, pitch) in threads]
+    sections = [_thread_sections(T, pitch, per_turn) + 2 for (_, _, _, pitch) in threads]
     vertices = sum(sections) * float(p["segments"])
     if vertices > MAX_THREAD_VERTICES:
         finest = min(range(len(threads)), key=lambda k: threads[k][3])
@@ -216,6 +216,11 @@ def _groove_edges(name, start, angle, length, width, depth, top) -> list[Segment
     return out
 
 
+def _thread_sections(top: float, pitch: float, per_turn: float) -> int:
+    """Helix sections of a thread through a plate ``top`` mm thick (one per 1 / per_turn turn)."""
+    return max(1, int(math.ceil(top / pitch * per_turn)))
+
+
 def _thread_cutter(name, x, y, r_major, pitch, top, n_seg, per_turn):
     """The helical cutter of a tapped hole and its rim circles at the top and bottom faces."""
     depth = THREAD_DEPTH_PER_PITCH * pitch
@@ -224,7 +229,7 @@ def _thread_cutter(name, x, y, r_major, pitch, top, n_seg, per_turn):
     radius, offset = r_major - depth / 2, depth / 2
     # sections every `step` mm, with the bottom and top faces exactly on sections, so the rims
     # there are the (exact) rotated section and not an interpolation between two of them
-    n_inside = max(1, int(math.ceil(top / pitch * per_turn)))
+    n_inside = _thread_sections(top, pitch, per_turn)
     step = top / n_inside
     height = top + 2 * step
     section = manifold3d.CrossSection.circle(radius, n_seg).translate((offset, 0))

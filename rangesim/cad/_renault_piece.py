@@ -139,7 +139,7 @@ def _check_layout(p: dict) -> None:
         (size,) = tuples(m, key, p[key], ("x", "y"), many=False)
         positive(m, **{f"{key} x": size[0], f"{key} y": size[1]})
     grid = [(p["neck_length"], p["neck_width"]), tuple(p["head_size"]), tuple(p["head_size"]), tuple(p["bump_size"])]
-    samples = sum(max(8, int(sx * p["samples_per_mm"])) * max(8, int(sy * p["samples_per_mm"])) for sx, sy in grid)
+    samples = sum(_grid_points(sx, p["samples_per_mm"]) * _grid_points(sy, p["samples_per_mm"]) for sx, sy in grid)
     if samples > MAX_FREEFORM_SAMPLES:
         # the freeform tops are sampled on grids of size x density points per side
         raise RangesimError(f"{m}: samples_per_mm {p['samples_per_mm']:g} samples the freeform tops (neck, heads, "
@@ -171,8 +171,13 @@ def _check_layout(p: dict) -> None:
                                 f"(plate_thickness {T:g} mm); raise head_height / bump_height or thin the plate")
 
 
+def _grid_points(size: float, density: float) -> int:
+    """Samples of a freeform top along a side ``size`` mm long at ``density`` per mm (at least 8)."""
+    return max(8, int(size * density))
+
+
 def _freeform(surface, size_x, size_y, density):
-    return surface_solid(surface, max(8, int(size_x * density)), max(8, int(size_y * density)), FLOOR_Z)
+    return surface_solid(surface, _grid_points(size_x, density), _grid_points(size_y, density), FLOOR_Z)
 
 
 def _neck_surface(p, top):

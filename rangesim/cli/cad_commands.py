@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangesim.cli.common import build_model, check_suffix, check_writable, write_together
+from rangesim.cli.common import build_model, check_outputs, check_suffix, write_together
 
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off", ".glb")
 
@@ -18,9 +18,7 @@ def cmd_model(args: argparse.Namespace) -> int:
     if tree_path is not None:
         check_suffix(tree_path, (".json",), "a part tree")
     # every output checked before any is written: both files or neither
-    check_writable(out, "mesh")
-    if tree_path is not None:
-        check_writable(tree_path, "part tree")
+    check_outputs([(out, "mesh"), (tree_path, "part tree")])
     part = build_model(args.name, args.param)
     data = part.mesh.export(file_type=out.suffix.lower().lstrip("."))  # bytes (or str for OBJ)
     tree_text = json.dumps(part.to_dict(), indent=1) if tree_path is not None else None

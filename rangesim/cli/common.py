@@ -262,13 +262,8 @@ def check_outputs(outputs: Iterable[tuple[Path | str | None, str]],
 
 
 def check_out_files(folder: Path, names: Sequence[str], inputs: Iterable[Path | str | None] = ()) -> None:
-    """The files a command writes into ``folder``: none may be a directory or one of the command's
-    ``inputs`` (see :func:`check_outputs`), the folder must be creatable."""
-    check_writable(folder / (names[0] if names else "probe"))
-    for name in names:
-        target = folder / name
-        if target.is_dir():
-            raise RangesimError("cannot write the file: a directory of that name exists", source=target)
+    """The files a command writes into ``folder``: :func:`check_outputs` on each (none a
+    directory or one of the command's ``inputs``, the folder creatable)."""
     check_outputs([(folder / name, name) for name in names], inputs)
 
 

@@ -23,13 +23,13 @@ import argparse
 import importlib
 import json
 import os
+import signal
 import sys
 import time
 import tomllib
 import traceback
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -42,6 +42,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import check_pose
 from rangesim.core.memory import check_memory
 from rangesim.core.rangescan import RangeScan
+from rangesim.core.signals import signal_handler
 from rangesim.io import load_scan, save_scan
 from rangesim.sensor import intensity_image, load_sensor, preset_names, scan
 from rangesim.sensor._scan import BASE_BYTES, EmptyScanWarning
@@ -69,22 +70,6 @@ def _terminate(signum, frame) -> None:  # noqa: ARG001 -- a signal handler's sig
     raise Terminated()
 
 
-@contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """Within the block SIGTERM raises :class:`Terminated` (main thread only: Python's rule)."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    before = signal.signal(signal.SIGTERM, _terminate)
-    try:
-        yield
-    finally:
-        # None: the previous handler was not set from Python (an embedding host); leave ours
-        if before is not None:
-            signal.signal(signal.SIGTERM, before)
 
 #: modules adding subcommands: each has ``register(subparsers)`` that sets ``func`` (args -> exit code)
 COMMAND_MODULES: tuple[str, ...] = (
@@ -408,7 +393,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not _debug():
         warnings.showwarning = _show_warning
     try:
-        with _sigterm_as_interrupt():
+        with signal_handler(signal.SIGTERM, _terminate):
             return args.func(args)
     except Terminated:
         _error("terminated")

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangesim.cli.common import build_model, check_suffix, check_writable, write_together
+from rangesim.cli.common import build_model, check_outputs, check_suffix, write_together
 
 
 def cmd_volumes(args: argparse.Namespace) -> int:
@@ -17,9 +17,7 @@ def cmd_volumes(args: argparse.Namespace) -> int:
     if picture is not None:
         check_suffix(picture, (".png",), "a picture")
     # every output checked before any is written: both files or neither
-    check_writable(out, "volumetric model")
-    if picture is not None:
-        check_writable(picture, "picture")
+    check_outputs([(out, "volumetric model"), (picture, "picture")])
     part = build_model(args.name, args.param)
     model = volumetric_model(part.tree)
     writes = [(out, lambda tmp: Path(tmp).write_text(json.dumps(model, indent=1)))]

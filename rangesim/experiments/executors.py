@@ -277,16 +277,11 @@ class Executor:
         then starts with SIGINT ignored from its first line (the initializer's own ignore comes
         only after the worker's imports, and Ctrl-C during those printed a worker traceback)."""
         import signal
-        import threading
 
-        if threading.current_thread() is not threading.main_thread():
+        from rangesim.core.signals import signal_handler
+
+        with signal_handler(signal.SIGINT, signal.SIG_IGN):
             return self._pool.submit(fn, payload)
-        before = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            return self._pool.submit(fn, payload)
-        finally:
-            if before is not None:
-                signal.signal(signal.SIGINT, before)
 
     def _run_pool(self, fn, payloads):
         assert self._pool is not None, "use the Executor as a context manager"

@@ -11,6 +11,7 @@ fewer vertices or faces than its header says, an OBJ face index outside its vert
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -99,15 +100,10 @@ def _ply_row_complete(words: list[bytes], element: PlyElement) -> bool:
 def _off(path: Path) -> str | None:
     """A truncated OFF body: fewer complete vertex or face lines than its count line says."""
     with open(path, "rb") as f:
-        # trimesh reads OFF line by line: comments stripped, blank lines skipped, the counts
-        # after the OFF keyword on its own line or on the next
-        lines = (w for w in (line.split(b"#")[0].split() for line in f) if w)
-        first = next(lines, [b""])
-        counts = first[1:] or next(lines, [])
-        try:
-            n_vertices, n_faces = int(counts[0]), int(counts[1])
-        except (IndexError, ValueError):
+        lines, counts = _off_header(f)
+        if counts is None:
             return "OFF file has no vertex/face count line"
+        n_vertices, n_faces = counts
         expected = {"vertex": n_vertices, "face": n_faces}
         found = dict.fromkeys(expected, 0)
         for words in lines:
@@ -199,16 +195,23 @@ def _obj_quick(path: Path) -> str | None:
     return None
 
 
+def _off_header(f) -> tuple[Iterator[list[bytes]], tuple[int, int] | None]:
+    """An open OFF file's remaining lines (as words) and the vertex and face counts its count
+    line declares (None if it has none). trimesh reads OFF line by line: comments stripped,
+    blank lines skipped, the counts after the OFF keyword on its own line or on the next."""
+    lines = (w for w in (line.split(b"#")[0].split() for line in f) if w)
+    first = next(lines, [b""])
+    counts = first[1:] or next(lines, [])
+    try:
+        return lines, (int(counts[0]), int(counts[1]))
+    except (IndexError, ValueError):
+        return lines, None
+
+
 def _off_counts(path: Path) -> tuple[int, int] | None:
     """The vertex and face counts an OFF file's count line declares (None if it has none)."""
     with open(path, "rb") as f:
-        lines = (w for w in (line.split(b"#")[0].split() for line in f) if w)
-        first = next(lines, [b""])
-        counts = first[1:] or next(lines, [])
-        try:
-            return int(counts[0]), int(counts[1])
-        except (IndexError, ValueError):
-            return None
+        return _off_header(f)[1]
 
 
 def check_text_mesh(path: str | Path, n_vertices: int, n_faces: int) -> str | None:

@@ -101,7 +101,7 @@ def read_msu(path: str | Path, *, units: str | None = None, conf: str | Path | N
                             f"column {c}: {flags[r, c]:g})", path)
     xyz = np.moveaxis(images[1:], 0, -1) * scale  # float64: grid_scan checks the range, then stores float32
     meta = recorded_meta("msu", path, "scanner", organized=True, msu_header=header, msu_units=units)
-    scan = grid_scan(xyz, meta, valid=images[0] == 1)
+    scan = grid_scan(xyz, meta, valid=flags == 1)
     return apply_conf(scan, conf, path)
 
 

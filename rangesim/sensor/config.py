@@ -40,6 +40,11 @@ MAX_RENDER_DEPTH = 32
 #: dot per pixel, so dots this wide already overlap into a nearly flat field with nothing to match
 MAX_DOT_SIGMA_PX = 10.0
 
+def mid_range(range_table: Mapping[str, Any]) -> float:
+    """The middle of a ``[range]`` table's working range (mm): the reference distance."""
+    return 0.5 * (range_table["near"] + range_table["far"])
+
+
 def focal_px(width: int, fov_deg: float) -> float:
     """Focal length (px) of a pinhole camera ``width`` px wide with horizontal field ``fov_deg`` degrees."""
     return width / 2 / math.tan(math.radians(fov_deg) / 2)
@@ -169,8 +174,7 @@ class Sensor:
     def reference_distance(self) -> float:
         """Distance (mm) at which a white target facing both the laser and the camera (at this distance
         from each) returns signal 1: mid-range."""
-        r = self.params["range"]
-        return 0.5 * (r["near"] + r["far"])
+        return mid_range(self.params["range"])
 
     @property
     def tilt_rad(self) -> float:
@@ -307,8 +311,7 @@ def _validate(params: dict[str, dict[str, Any]], source, mode: str = "geometric"
                 "signal_contrast"):
         _number(params, "noise", key, source, nonneg=True)
     cam = params["camera"]
-    corr_px = params["noise"]["correlation_mm"] * focal_px(cam["width"], cam["fov_deg"]) / (
-        0.5 * (params["range"]["near"] + params["range"]["far"]))
+    corr_px = params["noise"]["correlation_mm"] * focal_px(cam["width"], cam["fov_deg"]) / mid_range(params["range"])
     if corr_px > max(cam["width"], cam["height"]):
         # a field correlated over more than the image is one offset of the whole scan (and its
         # smoothing kernel would outgrow memory): a calibration error, not speckle
