@@ -262,3 +262,13 @@ def test_kinect_twin_refusals_name_the_frame(tmp_path, capsys):
     frame = tmp_path / "frame.pcd"
     write_pcd(scan, frame, extras={"label": np.zeros(scan.shape, np.uint32)})  # no table label at all
     _refused(capsys, ["compare", frame, "--sensor", "kinect_v1", "--out", tmp_path / "d"], "frame.pcd", "table")
+
+
+def test_dataset_refuses_a_target_that_keeps_the_part_out_of_view(tmp_path, capsys):
+    """A target 2 m beside the part made every view empty (warnings only, exit 0): the cap's
+    cameras look at the target, the part outside their field of view or beyond their range."""
+    out = tmp_path / "ds"
+    _refused(capsys, ["dataset", "--scene", GREEN, "--views", "2", "--out", out, "--target", "2000", "0", "0",
+                      "--set", "camera.width=32", "--set", "camera.height=24", "--workers", "0", "--quiet"],
+             "field of view", "target [2000, 0, 0]", "empty")
+    assert not out.exists()

@@ -712,3 +712,51 @@ def test_pool_workers_exit_when_the_driver_is_killed(tmp_path):
                 os.kill(p, signal.SIGKILL)
             except OSError:
                 pass
+
+
+def _cone_sensor():
+    return rs.load_sensor("white_scanner").with_params({"camera.width": 64, "camera.height": 48})
+
+
+@pytest.mark.parametrize("inside", [True, False])
+def test_part_seen_from_cap_is_the_image_corner_cone(inside):
+    """With a cap of one pose (0 deg, one distance) the test is exact: a small part straight
+    along the image diagonal's corner ray plus or minus 0.5 deg is seen or not."""
+    import math
+
+    from rangesim.experiments.poses import _part_seen_from_cap
+
+    sensor = _cone_sensor()
+    K = sensor.K
+    half_diagonal = math.atan(math.hypot(K[0, 2] / K[0, 0], K[1, 2] / K[1, 1]))
+    d = 350.0  # camera at (0, 0, d) looking down -z at the origin
+    angle = half_diagonal + math.radians(-0.5 if inside else 0.5)
+    r = 0.05  # mm: 0.008 deg at 350 mm, far under the 0.5 deg margin
+    centre = np.array([d * math.tan(angle), 0.0, 0.0])  # angle off the optical axis at the camera
+    vertices = centre + r * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    cap = {"target": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "cap_deg": 0.0, "distance": [d, d]}
+    assert _part_seen_from_cap(cap, vertices, sensor) is inside
+
+
+def test_part_seen_from_cap_needs_the_working_range():
+    from rangesim.experiments.poses import _part_seen_from_cap
+
+    sensor = _cone_sensor()
+    near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
+    vertices = np.array([[-1.0, -1, -1], [1, 1, 1]])  # a 1.7 mm sphere at the target
+    for d, seen in ((near - 5, False), ((near + far) / 2, True), (far + 5, False)):
+        cap = {"target": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "cap_deg": 0.0, "distance": [d, d]}
+        assert _part_seen_from_cap(cap, vertices, sensor) is seen
+    # a cap of distances reaching into the range is seen
+    cap = {"target": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "cap_deg": 0.0, "distance": [10.0, far + 100]}
+    assert _part_seen_from_cap(cap, vertices, sensor)
+
+
+def test_sweep_refuses_a_target_away_from_the_part(sweep_dir, tmp_path):
+    import dataclasses
+
+    spec = load_sweep(sweep_dir / "sweep.toml")
+    spec = dataclasses.replace(spec, pose={**spec.pose, "target": [3000.0, 0.0, 0.0]})
+    with pytest.raises(RangesimError, match="field of view .* every view would be empty"):
+        run_sweep(spec, tmp_path / "out", workers=0, progress=False)
+    assert not (tmp_path / "out" / "results.csv").exists()

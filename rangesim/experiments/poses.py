@@ -164,6 +164,53 @@ def check_distance_in_range(cap: Mapping[str, Any], scene: Any, sensor: Any, sou
         raise RangesimError(
             f"distance {lo:g}-{hi:g} mm puts the whole part (radius {radius:.0f} mm around the target) outside "
             f"{sensor.name}'s working range {near:g}-{far:g} mm: every view would be empty", source=source)
+    if not _part_seen_from_cap(cap, part.vertices, sensor):
+        raise RangesimError(
+            f"the part is outside {sensor.name}'s field of view or working range {near:g}-{far:g} mm from every "
+            f"pose of the cap (target {_plain(cap['target'])}, distance {lo:g}-{hi:g} mm, cap "
+            f"{float(cap['cap_deg']):g} deg): every view would be empty; aim the target at the part", source=source)
+
+
+#: the grid of poses over a cap that :func:`_part_seen_from_cap` tries: polar angles, azimuths, distances
+CAP_GRID = (9, 24, 5)
+
+
+def _part_seen_from_cap(cap: Mapping[str, Any], vertices: np.ndarray, sensor: Any) -> bool:
+    """Whether the part's bounding sphere meets the camera's viewing cone and working range from
+    at least one pose of a grid over the cap (poses look at the target, as :func:`sample_view`'s).
+
+    The cone's half-angle is the image diagonal's (the corner pixel farthest from the principal
+    point) widened by the grid's angular spacing, so the test errs towards "seen": it refuses only
+    a cap from which the sphere stays outside the cone, or wholly before ``near`` or past ``far``,
+    everywhere.
+    """
+    lo_b, hi_b = vertices.min(axis=0), vertices.max(axis=0)
+    centre = (lo_b + hi_b) / 2.0
+    sphere = float(np.linalg.norm(vertices - centre, axis=1).max())
+    target = np.asarray(cap["target"], dtype=np.float64)
+    cap_rad = math.radians(float(cap["cap_deg"]))
+    n_polar, n_azimuth, n_distance = CAP_GRID
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, n_polar), np.arange(n_azimuth) / n_azimuth)
+    directions = cap_directions(u.ravel(), v.ravel(), np.asarray(cap["axis"], dtype=np.float64), cap["cap_deg"])
+    lo, hi = (float(x) for x in cap["distance"])
+    distances = np.linspace(lo, hi, n_distance)
+    positions = target + distances[:, None, None] * directions[None]  # (D, N, 3)
+    to_part = centre - positions
+    dist = np.linalg.norm(to_part, axis=-1)
+    K = sensor.K
+    corners = np.array([[0.0, 0.0], [sensor.width, 0.0], [0.0, sensor.height], [sensor.width, sensor.height]])
+    tan_corner = np.hypot((corners[:, 0] - K[0, 2]) / K[0, 0], (corners[:, 1] - K[1, 2]) / K[1, 1]).max()
+    spacing = cap_rad / (n_polar - 1) + math.sin(min(cap_rad, math.pi / 2)) * 2.0 * math.pi / n_azimuth
+    cone = math.atan(tan_corner) + spacing
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_off = np.einsum("dnk,nk->dn", to_part, -directions) / dist
+        off_axis = np.arccos(np.clip(cos_off, -1.0, 1.0))
+        widening = np.arcsin(np.clip(sphere / dist, 0.0, 1.0))
+    inside = dist <= sphere
+    in_cone = inside | (off_axis <= cone + widening)
+    near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
+    in_range = (dist - sphere <= far) & (dist + sphere >= near)
+    return bool(np.any(in_cone & in_range))
 
 
 def axis_from_angles(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
