@@ -33,6 +33,7 @@ def _nan_xyz(a, m):
 
 CASES = {
     "sensor not a table": (lambda a, m: m.update(sensor="nope"), "meta.sensor must be a table"),
+    "units in parsecs": (lambda a, m: m.update(units="parsec"), "meta.units is 'parsec'"),
     "NaN pose": (lambda a, m: a.update(pose=np.full((4, 4), np.nan)), "pose holds NaN"),
     "zero pose": (lambda a, m: a.update(pose=np.zeros((4, 4))), "singular rotation block"),
     "zero focal length": (lambda a, m: m.update(K=[[0, 0, 1], [0, 0, 1], [0, 0, 1]]), "positive focal"),
