@@ -1,6 +1,7 @@
 """RangeScan: the one currency type. Everything that makes range data returns one."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,7 +62,9 @@ class RangeScan:
     meta : dict
         Sensor parameters, seed, rangesim version, ``K`` (3x3 intrinsics as nested lists:
         pixel (row i, column j) looks along K^-1 (j + 0.5, i + 0.5, 1)), ``laser_origin``
-        (3,) in the camera frame, and anything a reader or the scanner adds.
+        (3,) in the camera frame, and anything a reader or the scanner adds. ``None`` is
+        taken as ``{}`` (like leaving it out); anything else that is not a dict, or a
+        ``sensor`` entry that is not a dict, is refused.
     xyz_true : (H, W, 3) float32 or None
         Noise-free surface point behind every pixel that hit a surface (whatever its
         status), camera frame; NaN on a miss. Ground truth for synthetic scans; None for
@@ -72,6 +75,14 @@ class RangeScan:
         :mod:`rangesim.sensor.stripe_noise`; block matching: :mod:`rangesim.sensor.matching_noise`,
         where a depth fattened over an edge errs by more than any noise law says);
         None where no model predicts it (recorded data).
+
+    Raises
+    ------
+    RangesimError
+        At construction, for a field of the wrong shape or holding values its dtype cannot
+        hold exactly (a status of 300, a part of 2**40 or 0.5, a NaN in ``valid``); a
+        plain cast would wrap or round them silently. Values that convert exactly are
+        converted (int64 labels in range, 0 / 1 for ``valid``, float64 depth to float32).
     """
 
     depth: np.ndarray
@@ -88,18 +99,41 @@ class RangeScan:
     sigma: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        h, w = np.shape(self.depth)[:2]
+        # the checks live in one function so the writers can re-run them on a scan whose
+        # fields were reassigned after construction (see checked_scan)
+        if self.meta is None:  # "no meta", as when the argument is left out
+            self.meta = {}
+        if not isinstance(self.meta, dict):
+            raise RangesimError(f"RangeScan.meta must be a dict, got {type(self.meta).__name__}")
+        sensor = self.meta.get("sensor")
+        if sensor is not None and not isinstance(sensor, dict):  # as load_scan refuses in a file
+            raise RangesimError(
+                f"RangeScan.meta.sensor must be a table (dict), got {type(sensor).__name__} {sensor!r:.60}"
+            )
+        depth = None if self.depth is None else _as_array("depth", self.depth)
+        if depth is None or depth.ndim != 2:
+            got = "None" if depth is None else f"shape {depth.shape}"
+            raise RangesimError(f"RangeScan.depth must be a 2-D (H, W) array, got {got}")
+        h, w = depth.shape
         for name, dtype, trailing in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
             value = getattr(self, name)
             if value is None:
+                if name in _REQUIRED:
+                    raise RangesimError(f"RangeScan.{name} is required, got None")
                 continue
-            value = np.asarray(value, dtype=dtype)
+            value = _exact_array(name, value, np.dtype(dtype))
             if value.shape != (h, w) + trailing:
                 raise RangesimError(
                     f"RangeScan.{name} has shape {value.shape}, expected {(h, w) + trailing}"
                 )
             setattr(self, name, value)
-        self.pose = np.asarray(self.pose, dtype=np.float64).reshape(4, 4)
+        try:
+            pose = np.asarray(self.pose, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise RangesimError(f"RangeScan.pose must be a 4x4 matrix of numbers ({exc})") from exc
+        if pose.size != 16:
+            raise RangesimError(f"RangeScan.pose must be a 4x4 matrix, got shape {pose.shape}")
+        self.pose = pose.reshape(4, 4)
 
     # -- shape and geometry ------------------------------------------------------------
     @property
@@ -139,12 +173,107 @@ class RangeScan:
         The file is written under a temporary name and renamed, so a failed write leaves
         no partial file. Returns the path written. The writers are those registered with
         :func:`rangesim.core.writers.register_writer` (``rangesim.io`` registers its own).
+        Fields reassigned since construction are checked again first (see :func:`checked_scan`).
         """
-        return save_scan(self, path)
+        return save_scan(self, path)  # which re-checks the fields (checked_scan)
 
     def __repr__(self) -> str:
-        h, w = self.shape
-        return (
-            f"RangeScan({h}x{w}, valid={int(self.valid.sum())}, "
-            f"sensor={self.meta.get('sensor', {}).get('name', '?')!r})"
-        )
+        # must not raise: fields and meta may have been reassigned after construction
+        h, w = (tuple(np.shape(self.depth)) + (0, 0))[:2]
+        try:
+            n_valid: int | str = int(np.count_nonzero(self.valid))
+        except (TypeError, ValueError):
+            n_valid = "?"
+        meta = self.meta if isinstance(self.meta, dict) else {}
+        sensor = meta.get("sensor")
+        name = sensor.get("name", "?") if isinstance(sensor, dict) else "?"
+        return f"RangeScan({h}x{w}, valid={n_valid}, sensor={name!r})"
+
+
+#: fields every scan has (the others in OPTIONAL_PIXEL_FIELDS may be None)
+_REQUIRED = frozenset(name for name, _, _ in PIXEL_FIELDS)
+
+
+def checked_scan(scan: Any, source: str | Path | None = None) -> RangeScan:
+    """``scan`` as a writer may use it: a RangeScan that passes the constructor's checks.
+
+    Fields can be reassigned after construction (``scan.valid = ...``); the writers call
+    this first, so every format refuses (or converts) the same values the constructor
+    does. Returns a shallow copy made through the constructor (arrays already of the right
+    dtype are not copied); ``scan`` itself is left unchanged.
+
+    Parameters
+    ----------
+    scan : RangeScan
+    source : str or Path, optional
+        The file being written; prefixed to a RangesimError's message.
+
+    Raises
+    ------
+    TypeError
+        If ``scan`` is not a RangeScan.
+    RangesimError
+        If a field fails the constructor's checks.
+    """
+    if not isinstance(scan, RangeScan):
+        # no path in the message: save_scan hands writers a temporary name
+        raise TypeError(f"can only write a RangeScan, got {type(scan).__name__}")
+    try:
+        return dataclasses.replace(scan)
+    except RangesimError as exc:
+        raise RangesimError(f"cannot write the scan: {exc}", source) from exc
+
+
+def _as_array(name: str, value: Any) -> np.ndarray:
+    """``np.asarray(value)``, refusing what is not an array of numbers (ragged lists, strings)."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # a ragged nested list
+        raise RangesimError(f"RangeScan.{name} is not an array of numbers ({exc})") from exc
+    if array.dtype.kind not in "biuf":  # complex, object, strings, dates
+        raise RangesimError(f"RangeScan.{name} must hold real numbers, got dtype {array.dtype}")
+    return array
+
+
+def _exact_array(name: str, value: Any, dtype: np.dtype) -> np.ndarray:
+    """``value`` as a ``dtype`` array, refusing any element the conversion would change.
+
+    A plain cast wraps 300 to 44 in a uint8 status, 2**40 to 0 in an int32 part and makes
+    NaN True in ``valid``. Float fields may lose float64 precision (as stored), not range.
+    """
+    array = _as_array(name, value)
+    if array.dtype == dtype:  # nothing to convert or check: no copy, no pass over the data
+        return array
+    kind = array.dtype.kind
+    if dtype.kind == "f":
+        with np.errstate(over="ignore"):
+            out = array.astype(dtype)
+        if kind == "f" and array.dtype.itemsize > dtype.itemsize:
+            overflow = np.isinf(out) & np.isfinite(array)
+            if overflow.any():
+                first = array[overflow].flat[0].item()
+                raise RangesimError(f"RangeScan.{name} holds {first!r}, beyond the {dtype.name} range")
+        return out
+    if dtype.kind == "b":
+        if kind != "b":
+            bad = (array != 0) & (array != 1)  # NaN is neither
+            if bad.any():
+                first = array[bad].flat[0].item()
+                raise RangesimError(f"RangeScan.{name} must hold booleans (or 0 / 1), found {first!r}")
+        return array.astype(dtype)
+    # integer fields
+    if kind == "f":
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.isfinite(array) & (np.trunc(array) == array))
+        if bad.any():
+            first = array[bad].flat[0].item()
+            raise RangesimError(f"RangeScan.{name} must hold integers, found {first!r}")
+    if kind != "b" and array.size:
+        info = np.iinfo(dtype)
+        low, high = array.min(), array.max()
+        if low < info.min or high > info.max:
+            first = (low if low < info.min else high).item()
+            raise RangesimError(
+                f"RangeScan.{name} holds {first!r}, outside the {dtype.name} range {info.min}..{info.max}"
+            )
+    return array.astype(dtype)

@@ -75,6 +75,9 @@ def save_scan(scan: Any, path: str | Path) -> Path:
         supported = ", ".join(sorted(WRITERS)) or "none (import rangesim.io to register the scan formats)"
         what = f"{path.suffix!r} files" if path.suffix else "files without an extension"
         raise RangesimError(f"cannot write scans as {what}; supported: {supported}", path)
+    from rangesim.core.rangescan import checked_scan  # rangescan imports this module
+
+    scan = checked_scan(scan, path)  # fields reassigned since construction pass its checks again
     pose = getattr(scan, "pose", None)
     if pose is not None and not np.all(np.isfinite(pose)):  # no reader takes such a pose back
         raise RangesimError("cannot write the scan: its pose holds NaN or infinity", path)

@@ -25,7 +25,7 @@ import numpy as np
 import OpenEXR
 
 from rangesim.core.errors import RangesimError
-from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan
+from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan, checked_scan
 
 FORMAT_VERSION = 1
 META_ATTR = "rangesim_meta"
@@ -138,9 +138,13 @@ def write_exr(scan: RangeScan, path: str | Path) -> None:
 
     Raises
     ------
+    TypeError
+        If ``scan`` is not a RangeScan.
     RangesimError
-        If a value cannot be stored exactly, or meta is not JSON-serialisable.
+        If a field reassigned since construction fails the constructor's checks, a value
+        cannot be stored exactly, or meta is not JSON-serialisable.
     """
+    scan = checked_scan(scan, path)  # fields may have been reassigned since construction
     h, w = scan.shape
     if h == 0 or w == 0:
         raise RangesimError(f"cannot write an empty {h}x{w} scan as EXR", path)

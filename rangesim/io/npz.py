@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from rangesim.core.errors import RangesimError
-from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan
+from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan, checked_scan
 from rangesim.io.exr import decode_meta, encode_meta
 
 FORMAT_VERSION = 1
@@ -32,13 +32,24 @@ def write_npz(scan: RangeScan, path: str | Path) -> None:
     scan : RangeScan
     path : str or Path
         Target file, written as given (numpy's habit of appending ``.npz`` is avoided).
+
+    Raises
+    ------
+    TypeError
+        If ``scan`` is not a RangeScan.
+    RangesimError
+        If a field reassigned since construction fails the constructor's checks, or meta
+        is not JSON-serialisable.
     """
+    # fields may have been reassigned since construction: checked (and converted) as the
+    # constructor does, so every array below already has its field's dtype and shape
+    scan = checked_scan(scan, path)
     arrays: dict[str, np.ndarray] = {}
-    for field, dtype, _ in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
+    for field, _, _ in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
         value = getattr(scan, field)
         if value is not None:
-            arrays[field] = np.asarray(value, dtype=dtype)
-    arrays["pose"] = np.asarray(scan.pose, dtype=np.float64)
+            arrays[field] = value
+    arrays["pose"] = scan.pose
     arrays["meta"] = np.array(encode_meta(scan.meta, path))
     arrays[VERSION_KEY] = np.array(FORMAT_VERSION)
     # a file object, because np.savez appends ".npz" to any path not ending in exactly that

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.core.rangescan import RangeScan
+from rangesim.core.rangescan import RangeScan, checked_scan
 
 #: vertex layout, in file order
 VERTEX_DTYPE = np.dtype(
@@ -58,7 +58,15 @@ def write_ply(scan: RangeScan, path: str | Path) -> None:
         ``xyz`` and ``normal`` (camera frame) and ``intensity``.
     path : str or Path
         Target file.
+
+    Raises
+    ------
+    TypeError
+        If ``scan`` is not a RangeScan.
+    RangesimError
+        If a field reassigned since construction fails the constructor's checks.
     """
+    scan = checked_scan(scan, path)  # fields may have been reassigned since construction
     mask = scan.valid
     vertices = np.empty(int(np.count_nonzero(mask)), dtype=VERTEX_DTYPE)
     xyz, normal = scan.xyz[mask], scan.normal[mask]
