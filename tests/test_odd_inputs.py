@@ -284,7 +284,7 @@ def test_cli_features_takes_one_radius_as_the_api_does(tmp_path):
 # -- parameters of the curvature and pcl functions: RangesimError naming them, never garbage ---------
 @pytest.mark.parametrize(("call", "words"), [
     (lambda s, m: rs.curvature.curvature_scan(s, max_dist=-1), "max_dist must be a finite distance > 0"),  # all NaN
-    (lambda s, m: rs.curvature.curvature_scan(s, window=4), "window must be an odd integer >= 3"),
+    (lambda s, m: rs.curvature.curvature_scan(s, window=4), "window must be an odd whole number from 3 to 255"),
     (lambda s, m: rs.curvature.curvature_scan(s, min_points=2), "min_points must be"),
     (lambda s, m: rs.curvature.curvature_mesh(m, radius=-1), "radius must be a finite distance > 0"),  # all NaN
     (lambda s, m: rs.curvature.curvature_mesh(m, rings=0), "rings must be"),

@@ -127,8 +127,17 @@ def project_circle(center, normal, radius: float, K: np.ndarray) -> np.ndarray |
     -------
     (6,) conic coefficients (a, b, c, d, e, f) of a x^2 + b x y + c y^2 + d x + e y + f = 0 in
     pixel-centre coordinates (x = column, y = row, integers at pixel centres), or None when
-    the circle's plane passes through the camera centre (seen edge-on).
+    the circle's plane passes through the camera centre (seen edge-on) or any of the circle
+    lies at or behind the camera's plane (z <= 0: its image is then no ellipse, and a circle
+    wholly behind the camera would give the conic of its mirror image in front).
     """
+    n = np.asarray(normal, dtype=np.float64)
+    n_len = float(np.linalg.norm(n))
+    if not n_len > 0:
+        return None
+    # the circle's nearest approach to the plane z = 0: centre z less radius x the in-plane reach along z
+    if float(center[2]) - radius * np.sqrt(max(0.0, 1.0 - (n[2] / n_len) ** 2)) <= 0:
+        return None
     e1, e2 = circle_basis(normal)
     shift = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]])
     # the circle's plane maps to the image by H (x_img ~ H (cos, sin, 1)); the unit circle

@@ -73,14 +73,19 @@ def whole(value: Any, name: str, lo: int = 0, hi: float = math.inf, *, unit: str
     return int(v)
 
 
+#: largest stencil or block a detector takes, pixels: per-pixel work and memory grow with its
+#: square (a 999 px curvature window on a 30 x 32 scan asked for 21 GiB)
+MAX_WINDOW_PX = 255
+
+
 def odd_window(value: Any, name: str, *, none: bool = True) -> int | None:
-    """An odd stencil or block size of at least 3 pixels (None passes: the default)."""
+    """An odd stencil or block size of 3 to :data:`MAX_WINDOW_PX` pixels (None passes: the default)."""
     if value is None and none:
         return None
     v = _real(value)
-    if v is None or not math.isfinite(v) or v != int(v) or v < 3 or int(v) % 2 == 0:
-        raise RangesimError(f"{name} must be an odd whole number >= 3 (pixels){' or None' if none else ''}, "
-                            f"got {value!r:.60}")
+    if v is None or not math.isfinite(v) or v != int(v) or not 3 <= v <= MAX_WINDOW_PX or int(v) % 2 == 0:
+        raise RangesimError(f"{name} must be an odd whole number from 3 to {MAX_WINDOW_PX} (pixels)"
+                            f"{' or None' if none else ''}, got {value!r:.60}")
     return int(v)
 
 

@@ -12,8 +12,8 @@ from rangesim.curvature.quadric import fit_quadric_grid_batch
 
 __all__ = ["curvature_scan"]
 
-#: pixels (centres) per batch: bounds the (window^2, n) temporaries to a few MB each
-_CHUNK_PIXELS = 1 << 15
+#: points (pixels x window^2) per batch: bounds the (3, window^2, n) temporaries to a few MB each
+_CHUNK_VALUES = 25 << 15
 
 
 def _xyz_valid(scan: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -86,9 +86,7 @@ def curvature_scan(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
-    window = P.whole(window, "window", 3)
-    if window % 2 == 0:
-        raise RangesimError(f"window must be an odd integer >= 3, got {window}")
+    window = P.odd_window(window, "window", none=False)
     min_points = P.whole(min_points, "min_points", 6, none=True)  # a quadric has 6 coefficients
     max_dist = P.number(max_dist, "max_dist", 0, lo_open=True, what="distance", unit="mm", none=True)
     if min_points is None:
@@ -103,20 +101,18 @@ def curvature_scan(
     out = {key: np.full((h, w), np.nan) for key in ("K", "H", "k1", "k2")}
     out.update({key: np.full((h, w, 3), np.nan) for key in ("normal", "dir1", "dir2")})
     out["n_points"] = np.zeros((h, w), np.int64)
-    rows_per_chunk = max(1, _CHUNK_PIXELS // max(w, 1))
-    for i0 in range(0, h, rows_per_chunk):
-        i1 = min(i0 + rows_per_chunk, h)
-        sel = valid[i0:i1]
-        if not sel.any():
-            continue
-        centres = grid[i0:i1][sel]                                   # (n, 3)
-        pts = blocks[i0:i1][sel].reshape(-1, 3, window * window)     # (n, 3, k)
-        pts = np.ascontiguousarray(pts.transpose(1, 2, 0))           # (3, k, n) copy
+    rows, cols = np.nonzero(valid)
+    per_batch = max(1, _CHUNK_VALUES // (window * window))  # the batch's (3, k, n) copies stay a few MB
+    for b0 in range(0, rows.size, per_batch):
+        i, j = rows[b0:b0 + per_batch], cols[b0:b0 + per_batch]
+        centres = grid[i, j]                                         # (n, 3)
+        pts = blocks[i, j].reshape(-1, 3, window * window)           # (n, 3, k)
+        pts = np.ascontiguousarray(pts.transpose(1, 2, 0))           # (3, k, n)
         weights = np.isfinite(pts).all(axis=0).astype(np.float64)
         if max_dist is not None:
             dist = np.sqrt(((pts - centres.T[:, None, :]) ** 2).sum(axis=0))
             weights[~(dist <= max_dist)] = 0.0
         fit = fit_quadric_grid_batch(centres, pts, weights, -centres, min_points)
         for key in ("K", "H", "k1", "k2", "normal", "dir1", "dir2", "n_points"):
-            out[key][i0:i1][sel] = fit[key]
+            out[key][i, j] = fit[key]
     return out

@@ -1028,7 +1028,7 @@ def gradient(
         Either way no crease is kept within :data:`JUMP_CLEARANCE` (2) px of a jump
         (occluding or occluded side): the crest beside a jump is the jump itself.
     sigma : float, optional
-        Gaussian pre-smoothing of the depth, pixels, >= 0 (0: none). Noisy scans need it: the
+        Gaussian pre-smoothing of the depth, pixels, 0 to 42.5 (0: none). Noisy scans need it: the
         response's noise is ~1.4 sigma_z / footprint unsmoothed. Default (None): 0 on
         noise-free scans, else ``clip(4 * noise, 1, 3)`` px for a depth noise of ``noise``
         footprints (1 px at the White Scanner preset's 0.25; also under
@@ -1089,7 +1089,8 @@ def gradient(
                          none=True)
     jump_threshold, max_search = P.jump_rule(jump_threshold, max_search)
     nms = P.flag(nms, "nms")
-    sigma = P.number(sigma, "sigma", 0, unit="pixels", none=True)
+    # the kernel reaches 3 sigma: no wider than the largest window a detector takes
+    sigma = P.number(sigma, "sigma", 0, P.MAX_WINDOW_PX / 6, unit="pixels", none=True)
     jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels")
     stride = P.whole(stride, "stride", 1, unit="pixels", none=True)
     z, valid = scan_depth(scan)

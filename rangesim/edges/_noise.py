@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from rangesim.core import params as P
+from rangesim.core.errors import RangesimError
 from rangesim.core.quantisation import depth_quantum, looks_continuous
 from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
@@ -232,7 +233,13 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     if fp is None:
         fp = pixel_geometry(scan, z).footprint
     z = np.asarray(z, np.float32)
+    fp = np.asarray(fp, np.float32)
+    if z.ndim != 2 or fp.shape != z.shape:
+        raise RangesimError(f"z and fp must be (H, W) arrays of one shape, got {z.shape} and {fp.shape}")
     quantum = depth_quantum(z) if quantum is UNKNOWN else quantum
+    if quantum is not None and np.shape(quantum) != z.shape:
+        raise RangesimError(f"quantum must be None or an (H, W) array like z {z.shape} (mm per pixel), "
+                            f"got {quantum!r:.40}")
     predicted = getattr(scan, "sigma", None) if scan is not None else None
     if predicted is not None:
         sub = (slice(None, None, 4), slice(None, None, 4))

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate._edge_scores import _as_mask_labels, check_tolerance, edge_scores
@@ -164,6 +165,7 @@ def score_edges(
     >>> sorted(s["per_label"]), bool(s["f1"] > 0.7)
     (['concave', 'convex', 'jump'], True)
     """
+    ignore_data_boundary = P.flag(ignore_data_boundary, "ignore_data_boundary")
     if truth is None:
         if scene is None:
             raise RangesimError("score_edges needs the scene behind the scan, or truth=")

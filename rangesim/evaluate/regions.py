@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
+
 
 def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, background: int = 0) -> np.ndarray:
     """(H, W) bool: pixels next to a pixel of another segment.
@@ -22,9 +24,14 @@ def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, backg
     boundary is two pixels wide; score it with a tolerance of at least 1 pixel.
     """
     labels = np.asarray(labels)
+    if labels.ndim != 2:
+        raise RangesimError(f"labels must be an (H, W) array, got shape {labels.shape}")
     ok = labels != background
     if valid is not None:
-        ok &= np.asarray(valid, dtype=bool)
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != labels.shape:
+            raise RangesimError(f"valid has shape {valid.shape} but labels {labels.shape}")
+        ok &= valid
     out = np.zeros(labels.shape, dtype=bool)
     for axis in (0, 1):
         a = [slice(None)] * 2

@@ -3,6 +3,7 @@ the edge points that straight lines leave over), or model-free (arcs of smooth e
 fitted and grown: :mod:`._arc_ellipses`)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -137,11 +138,28 @@ def predict_ellipses(scan: Any, circles3d: list, world: bool = True) -> list[tup
     inv = np.linalg.inv(np.asarray(scan.pose, float)) if world else np.eye(4)
     R, t = inv[:3, :3], inv[:3, 3]
     out = []
-    for c in circles3d:
+    for i, c in enumerate(circles3d):
+        _check_circle3d(c, i)
         conic = project_circle(R @ np.asarray(c.center, float) + t, R @ np.asarray(c.normal, float), c.radius, scan.K)
         if conic is not None and ellipse_from_conic(conic) is not None:
             out.append((c.name, conic / (np.sign(conic[0]) * np.linalg.norm(conic))))  # a > 0
     return out
+
+
+def _check_circle3d(c: Any, index: int) -> None:
+    """Refuse a circle that is not a Circle3D-like record with a finite centre, a non-zero
+    normal and a positive radius (tuples raised AttributeError; a negative radius was projected)."""
+    try:
+        center = np.asarray(c.center, dtype=np.float64)
+        normal = np.asarray(c.normal, dtype=np.float64)
+        radius = float(c.radius)
+    except (AttributeError, TypeError, ValueError):
+        raise RangesimError(f"circles3d[{index}] must be a Circle3D (name, center, normal, radius), "
+                            f"got {type(c).__name__} {c!r:.60}") from None
+    if center.shape != (3,) or normal.shape != (3,) or not (np.isfinite(center).all() and np.isfinite(normal).all()):
+        raise RangesimError(f"circles3d[{index}] needs a finite (3,) center and normal")
+    if not np.linalg.norm(normal) > 0 or not (math.isfinite(radius) and radius > 0):
+        raise RangesimError(f"circles3d[{index}] needs a non-zero normal and a positive radius, got radius {radius:g}")
 
 
 def _scene_circles(scene: Any) -> list:
