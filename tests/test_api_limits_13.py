@@ -133,3 +133,105 @@ def test_estimate_depth_noise_checks_its_arrays():
                           (dict(scan=scan, quantum=-1), "quantum must be None or an")):
         with pytest.raises(rs.RangesimError, match=words):
             rs.edges.estimate_depth_noise(**kwargs)
+
+
+# -- scenes built in Python ----------------------------------------------------------------------
+def test_scene_objects_are_checked_when_built():
+    from rangesim.scene.scene import Scene, SceneObject
+
+    box = trimesh.creation.box((10, 10, 10))
+    with pytest.raises(rs.RangesimError, match="albedo must be a finite reflectance in"):
+        SceneObject("b", box, albedo=float("nan"))  # scanned to 0 valid pixels before
+    with pytest.raises(rs.RangesimError, match="mesh must be a trimesh.Trimesh"):
+        SceneObject("b", None)
+    with pytest.raises(rs.RangesimError, match=r"face_labels must be \(12,\) integers"):
+        SceneObject("b", box, face_labels=np.zeros(5, int), labels=["x"])
+    with pytest.raises(rs.RangesimError, match="face_labels must index its 1 labels"):
+        SceneObject("b", box, face_labels=np.full(12, 5), labels=["x"])
+    with pytest.raises(rs.RangesimError, match="at least one object"):
+        Scene([])
+    bad = box.copy()
+    bad.vertices[0] = np.nan
+    with pytest.raises(rs.RangesimError, match="NaN or infinite vertex"):
+        Scene([SceneObject("b", bad)])  # "view position and look_at coincide" at scan time before
+    assert Scene([SceneObject("b", box, albedo=1)]).objects[0].albedo == 1.0
+
+
+# -- PCD's LZF streams -------------------------------------------------------------------------------
+def test_lzf_refuses_sizes_no_stream_can_hold():
+    """A back reference's 3 bytes give at most 264 bytes: 88 per compressed byte."""
+    from rangesim.recorded.lzf import LZFError, lzf_decompress, lzf_store
+
+    packed = lzf_store(b"abc")
+    assert lzf_decompress(packed, 3) == b"abc"
+    for size in (10**12, -1, 88 * len(packed) + 1):  # 10**12 raised MemoryError before
+        with pytest.raises(LZFError, match="at most 88 per compressed byte"):
+            lzf_decompress(packed, size)
+    run = bytes([0]) + b"a" + bytes([0xE0, 255, 0])  # 'a', then 264 copies of the byte 1 back
+    assert lzf_decompress(run, 265) == b"a" * 265 and len(run) * 88 >= 265
+
+
+# -- twins ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("name", "value", "words"), [
+    ("theta_deg", float("nan"), "theta_deg must be a finite number in (-90, 90)"),
+    ("min_cos", 2.0, "min_cos must be a finite number in [0, 1]"),
+    ("sigma_mm", -1.0, "sigma_mm must be a finite number >= 0"),
+    ("camera_views", 10**6, "camera_views must be 1 or 2"),
+    ("camera_views", 0, "camera_views must be"),
+])
+def test_twin_parameters_are_checked(name, value, words):
+    """Each of these made a twin with no valid pixel, silently."""
+    from rangesim.twin.stage import check_twin_param
+
+    with pytest.raises(rs.RangesimError, match=words.replace("(", r"\(").replace(")", r"\)")
+                       .replace("[", r"\[").replace("]", r"\]")):
+        check_twin_param(name, value)
+    assert check_twin_param("theta_deg", -29.0) == -29.0 and check_twin_param("camera_views", 2) == 2
+
+
+def test_twin_stage_and_calibration_options_are_checked(tmp_path):
+    from rangesim.twin.calibration import calibrate
+    from rangesim.twin.comparison import check_detector_names
+    from rangesim.twin.stage import TwinStage, load_mesh_mm
+
+    box = trimesh.creation.box((10, 10, 10))
+    for scale in (float("nan"), 0, -1):
+        with pytest.raises(rs.RangesimError, match="mesh_scale must be a finite scale > 0"):
+            load_mesh_mm(box, scale)
+    assert np.allclose(load_mesh_mm(box, 2.0).extents, 20.0)
+    scan = rs.datasets.plate_scan(width=32, height=30)
+    with pytest.raises(rs.RangesimError, match="side must be 1, -1 or None"):
+        TwinStage(scan, box, None, side=0)  # ZeroDivisionError before
+    with pytest.raises(rs.RangesimError, match="unknown detector.*'nope'"):
+        check_detector_names(["nope"])  # KeyError after the whole twin before
+    assert check_detector_names(None)[0] == "gradient" and check_detector_names("normal") == ["normal"]
+    with pytest.raises(rs.RangesimError, match="theta_deg must be a finite number"):
+        calibrate(scan, box, None, theta_grid=[1e6], refine=False)  # returned theta 1e6 before
+    with pytest.raises(rs.RangesimError, match="cannot fit nope: choose from"):
+        calibrate(scan, box, None, params="nope")  # "cannot fit n, o, p, e" before
+
+
+# -- sweeps built in Python ------------------------------------------------------------------------
+def test_run_sweep_checks_a_spec_built_in_python(tmp_path):
+    import dataclasses
+
+    from rangesim.experiments import run_sweep
+    from rangesim.experiments.sweep_file import check_spec, load_sweep
+
+    from pathlib import Path
+
+    target = Path(__file__).resolve().parents[1] / "scenes" / "flat_target.toml"
+    (tmp_path / "s.toml").write_text(f'scenes = ["{target}"]\nsensors = ["white_scanner"]\n[set]\n'
+                                      '"camera.width" = 16\n"camera.height" = 12\n')
+    spec = load_sweep(tmp_path / "s.toml")
+    for change, words in ((dict(views=-1), "views must be an integer >= 0"),
+                          (dict(views=2.5), "views must be an integer"),
+                          (dict(seed=-1), "seed must be an integer >= 0"),
+                          (dict(pose={"cap_deg": -5}), r"\[pose\]"),
+                          (dict(pose={"zz": 1}), r"\[pose\]")):
+        with pytest.raises(rs.RangesimError, match=words):
+            run_sweep(dataclasses.replace(spec, **change), tmp_path / "out", workers=0, progress=False)
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(rs.RangesimError, match="sweep .toml file or a SweepSpec, got dict"):
+        run_sweep({"name": "t"}, tmp_path / "out")
+    assert check_spec(spec) == spec

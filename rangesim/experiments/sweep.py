@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -22,7 +23,7 @@ from rangesim.experiments.results import (
     write_table,
     write_task_file,
 )
-from rangesim.experiments.sweep_file import SweepSpec, load_sweep
+from rangesim.experiments.sweep_file import SweepSpec, check_spec, load_sweep
 from rangesim.experiments.tasks import run_sweep_task
 
 
@@ -107,7 +108,12 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
         only retries the failed ones).
     """
     start = time.perf_counter()
-    spec = sweep if isinstance(sweep, SweepSpec) else load_sweep(sweep)
+    if isinstance(sweep, SweepSpec):
+        spec = check_spec(sweep)  # built or changed in Python: what load_sweep checks in a file
+    elif isinstance(sweep, (str, os.PathLike)):
+        spec = load_sweep(sweep)
+    else:
+        raise RangesimError(f"run_sweep takes a sweep .toml file or a SweepSpec, got {type(sweep).__name__}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)

@@ -36,6 +36,7 @@ sensor key (``noise.sigma_px``, ``laser.baseline``, ``camera.width``, ...).
 """
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import itertools
 import math
@@ -350,9 +351,38 @@ def load_sweep(path: str | Path) -> SweepSpec:
         repeats=repeats, seed=seed, detectors=detectors, tolerance_px=tolerance, crease_deg=crease,
         snr_window=window, raw=data,
     )
+    return check_spec(spec)
+
+
+def check_spec(spec: SweepSpec) -> SweepSpec:
+    """The checks of :func:`load_sweep` on a spec's fields, for a SweepSpec built or changed in
+    Python (``dataclasses.replace(spec, views=-1)`` ran one view; ``seed=-1`` and
+    ``views=2.5`` failed deep in the planner): its counts, seed, tolerances and pose table,
+    the number of tasks, and every sensor and pose combination of the grid. Returns ``spec``
+    with its pose table in checked form."""
+    if not isinstance(spec, SweepSpec):
+        raise RangesimError(f"a sweep is a sweep .toml file or a SweepSpec, got {type(spec).__name__}")
+    path = spec.path
+    fields = {name: getattr(spec, name) for name in ("views", "repeats", "seed", "snr_window", "tolerance_px",
+                                                       "crease_deg")}
+    _int(fields, "views", 1, path, 0)
+    _int(fields, "repeats", 1, path, 1)
+    _int(fields, "seed", 0, path, 0)
+    _int(fields, "snr_window", 3, path, 2)
+    _float(fields, "tolerance_px", 2.0, path, at_most=MAX_TOLERANCE_PX)
+    if _float(fields, "crease_deg", 20.0, path, positive=True, at_most=180.0) >= 180.0:
+        raise RangesimError(f"crease_deg must be below 180 degrees, got {spec.crease_deg!r}", source=path)
+    if not isinstance(spec.pose, dict):
+        raise RangesimError("[pose] must be a table", source=path)
+    try:
+        pose = check_pose_table(spec.pose, source=None)
+    except RangesimError as exc:
+        raise RangesimError(f"[pose] {exc}", source=path) from exc
+    if pose != spec.pose:
+        spec = dataclasses.replace(spec, pose=pose)
     if spec.n_tasks > MAX_TASKS:
         raise RangesimError(f"the sweep plans {spec.n_tasks:,} scans (at most {MAX_TASKS:,})", source=path)
-    if views == 0 and (pose or any(key_kind(k)[0] == "pose" for k in [*grid, *fixed])):
+    if spec.views == 0 and (spec.pose or any(key_kind(k)[0] == "pose" for k in [*spec.grid, *spec.fixed])):
         raise RangesimError("views = 0 scans from the scene's own view: pose keys have no meaning",
                             source=path)
     _check_values(spec)

@@ -20,6 +20,9 @@ import numpy as np
 
 __all__ = ["LZFError", "lzf_decompress", "lzf_store"]
 
+#: most output bytes per input byte an LZF stream can give (264 from a 3-byte back reference)
+MAX_EXPANSION = 88
+
 
 class LZFError(ValueError):
     """A corrupt or truncated LZF stream (callers add the file name)."""
@@ -48,7 +51,13 @@ def lzf_decompress(data: bytes | bytearray | memoryview, size: int) -> bytes:
     """
     data = bytes(data)
     n = len(data)
-    out = bytearray(size)
+    # a back reference's 3 bytes give at most 264 (2 + 7 + 255) bytes out, a literal's c + 2
+    # bytes give c + 1: a size beyond 88 bytes per input byte cannot come out of this stream
+    # (and would be allocated before the first token: a header's 10**12 raised MemoryError)
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 0 <= size <= MAX_EXPANSION * n:
+        raise LZFError(f"expected {size!r:.30} decompressed bytes from {n:,} compressed ones: at most "
+                       f"{MAX_EXPANSION} per compressed byte fit an LZF stream")
+    out = bytearray(int(size))
     ip = op = 0
     try:
         while ip < n:

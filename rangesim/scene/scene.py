@@ -12,6 +12,7 @@ from typing import Any, Iterable
 import numpy as np
 import trimesh
 
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import look_at, object_transform
 from rangesim.core.tomlfile import check_keys, read_toml
@@ -60,6 +61,23 @@ class SceneObject:
     labels: list[str] = field(default_factory=list)
     features: Any = None
 
+    def __post_init__(self) -> None:
+        # what load_scene checks in a scene file, for objects built in Python (a NaN albedo
+        # scanned to 0 valid pixels, a None mesh or face labels of another length crashed later)
+        if not (hasattr(self.mesh, "vertices") and hasattr(self.mesh, "faces")):
+            raise RangesimError(f"object {self.name!r}: mesh must be a trimesh.Trimesh, got {type(self.mesh).__name__}")
+        albedo = P.number(self.albedo, f"object {self.name!r}: albedo", 0, 1, what="reflectance")
+        self.albedo = float(albedo)
+        if self.face_labels is not None:
+            labels = np.asarray(self.face_labels)
+            n_faces = len(self.mesh.faces)
+            if labels.shape != (n_faces,) or labels.dtype.kind not in "iu":
+                raise RangesimError(f"object {self.name!r}: face_labels must be ({n_faces},) integers, one per "
+                                    f"triangle, got {labels.dtype} of shape {labels.shape}")
+            if labels.size and (labels.min() < 0 or labels.max() >= max(len(self.labels), 1)):
+                raise RangesimError(f"object {self.name!r}: face_labels must index its {len(self.labels)} "
+                                    f"labels, got values {int(labels.min())}..{int(labels.max())}")
+
     @property
     def watertight(self) -> bool:
         """True for a closed, consistently wound mesh (its back faces are never visible).
@@ -97,6 +115,19 @@ class Scene:
     source: str = "scene"
     source_units: str | None = None
     _mitsuba: Any = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.objects, SceneObject) or not all(isinstance(o, SceneObject) for o in self.objects):
+            raise RangesimError("Scene takes a list of SceneObject")
+        self.objects = list(self.objects)
+        if not self.objects:
+            raise RangesimError("a scene needs at least one object")
+        for obj in self.objects:
+            bounds = obj.mesh.bounds  # cached by trimesh: one pass per mesh
+            if bounds is None:
+                raise RangesimError(f"object {obj.name!r} has no vertices")
+            if not np.all(np.isfinite(bounds)):
+                raise RangesimError(f"object {obj.name!r} has NaN or infinite vertex coordinates")
 
     @property
     def bounds(self) -> np.ndarray:

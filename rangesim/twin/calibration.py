@@ -18,7 +18,7 @@ import numpy as np
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.twin.realism import robust_std
-from rangesim.twin.stage import TwinStage
+from rangesim.twin.stage import TwinStage, check_twin_param
 
 __all__ = ["calibrate", "robust_std", "range_residuals", "mask_iou", "search_geometry"]
 
@@ -189,10 +189,13 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
         from rangesim.twin.joint import calibrate_views
 
         return calibrate_views(list(recorded), mesh, sensor)
-    params = tuple(params)
+    params = (params,) if isinstance(params, str) else tuple(params)  # "sigma_mm" is one name, not 8
     unknown = [p for p in params if p not in FITTABLE]
     if unknown:
         raise RangesimError(f"cannot fit {', '.join(unknown)}: choose from {', '.join(FITTABLE)}")
+    for name, grid in (("theta_deg", theta_grid), ("alpha_deg", alpha_grid)):
+        for value in (() if grid is None else grid):  # a grid of 1e6 degrees came back as the fit
+            check_twin_param(name, value)
     if stage is None:
         stage = TwinStage(recorded, mesh, sensor)
     values = stage.params(**(initial or {}))

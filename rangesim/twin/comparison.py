@@ -54,6 +54,19 @@ def residual_stats(residuals: np.ndarray) -> dict[str, float]:
     }
 
 
+def check_detector_names(detectors: Iterable[str] | None) -> list[str]:
+    """The detector names asked for (all when None), refused in one line when one is unknown."""
+    from rangesim.edges import DETECTORS
+
+    if detectors is None:
+        return list(DETECTORS)
+    names = [detectors] if isinstance(detectors, str) else list(detectors)
+    unknown = [n for n in names if n not in DETECTORS]
+    if unknown:
+        raise RangesimError(f"unknown detector(s) {', '.join(map(repr, unknown))}; known: {', '.join(DETECTORS)}")
+    return names
+
+
 def edge_agreement(recorded: RangeScan, twin_scan: RangeScan, detectors: Iterable[str] | None = None,
                    tolerance_px: float = EDGE_TOLERANCE_PX, edge_maps: dict | None = None) -> dict[str, dict]:
     """Per detector: scores of the twin's edge map against the recording's.
@@ -64,7 +77,7 @@ def edge_agreement(recorded: RangeScan, twin_scan: RangeScan, detectors: Iterabl
     from rangesim.evaluate import edge_scores
 
     out = {}
-    for name in (detectors if detectors is not None else DETECTORS):
+    for name in check_detector_names(detectors):
         # the twin shares the recording's grid: a detector's note on it (pcl_organized on a
         # scanner-frame grid) is said once, not once per scan
         with warnings.catch_warnings(record=True) as notes:
@@ -169,6 +182,7 @@ def compare(recorded: RangeScan, mesh: Any, sensor: Any = None, *, params: dict[
         :func:`compare_scans` metrics plus ``params`` (the twin's parameters) and
         ``calibration`` (the fit's IoU and fitted names, when fitted).
     """
+    check_detector_names(detectors)  # before the stage's ray casts and the calibration
     bar = Progress(4, "compare", unit="step")  # stage, calibration, twin scan, metrics
     with bar:
         if stage is None:

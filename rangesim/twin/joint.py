@@ -228,12 +228,15 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
 
     if isinstance(recordings, RangeScan) or len(recordings) == 0:
         raise RangesimError("calibrate_views needs a list of one or more recorded scans")
+    names = list(names) if names is not None else [str(r.meta.get("source", f"view {k}")) for k, r in
+                                                    enumerate(recordings)]
+    if len(names) != len(recordings) or (stages is not None and len(stages) != len(recordings)):
+        raise RangesimError(f"calibrate_views got {len(recordings)} recordings but {len(names)} names"
+                            + ("" if stages is None else f" and {len(stages)} stages") + ": one each")
+    max_evaluations = P.whole(max_evaluations, "max_evaluations", 1)
     base_sensor = load_sensor(sensor)
     if stages is None:
         stages = [TwinStage(rec, mesh, base_sensor) for rec in recordings]
-    names = list(names) if names is not None else [str(r.meta.get("source", f"view {k}")) for k, r in
-                                                    enumerate(recordings)]
-    max_evaluations = P.whole(max_evaluations, "max_evaluations", 1)
     iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
     check_overlap(iou, "the best twin's valid-mask IoU", plural=True)
     geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos, "camera_views": views}

@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core import params as P
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
@@ -84,12 +85,37 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
 
     check_mesh_arrays(mesh, source)
     mesh = mesh.copy()
-    if scale == "auto":
+    if isinstance(scale, str) and scale == "auto":
         extent = float(np.ptp(mesh.vertices, axis=0).max())
         ref = 0.0 if reference is None or len(reference) == 0 else float(np.ptp(reference, axis=0).max())
         scale = 1000.0 if extent < 5.0 and ref > 5.0 else 1.0
+    # 0, negative or NaN scales made an empty or mirrored twin without a word
+    scale = P.number(scale, "mesh_scale", 0, lo_open=True, what="scale", unit='mm per mesh unit, or "auto"')
     mesh.apply_scale(float(scale))
     return mesh
+
+
+#: the twin's parameters and their ranges (lo, hi, open at both ends, unit)
+TWIN_PARAM_RANGES = {
+    "theta_deg": (-90.0, 90.0, True, "degrees"),   # the camera's angle off the sheet, x-z plane
+    "alpha_deg": (-90.0, 90.0, True, "degrees"),   # the laser sheet's tilt, y-z plane
+    "sigma_mm": (0.0, math.inf, False, "mm"),      # legacy white range noise
+    "min_cos": (0.0, 1.0, False, ""),              # grazing-dropout cosine threshold
+}
+
+
+def check_twin_param(name: str, value: Any) -> float | int:
+    """``value`` checked for the twin parameter ``name`` (:data:`TWIN_PARAM_RANGES`;
+    ``camera_views`` 1 or 2)."""
+    if name == "camera_views":
+        v = P.whole(value, "camera_views", 1)
+        if v > 2:
+            raise RangesimError(f"camera_views must be 1 or 2, got {value!r:.40}")
+        return v
+    if name not in TWIN_PARAM_RANGES:
+        raise RangesimError(f"unknown twin parameter {name!r}; known: {', '.join(TWIN_PARAM_RANGES)}, camera_views")
+    lo, hi, open_, unit = TWIN_PARAM_RANGES[name]
+    return P.number(value, name, lo, hi, lo_open=open_, hi_open=open_, unit=unit)
 
 
 def _as_sensor(sensor: Any):
@@ -276,6 +302,8 @@ class TwinStage:
         from rangesim.core.backend import mitsuba
         from rangesim.scene.mitsuba_scene import numpy_to_mitsuba_mesh
 
+        if side is not None and (isinstance(side, bool) or side not in (1, -1)):
+            raise RangesimError(f"side must be 1, -1 or None (both tried), got {side!r:.40}")
         self.recorded = recorded
         self.sensor = sensor = _as_sensor(sensor)
         self.defaults = _sensor_defaults(sensor)
@@ -417,8 +445,12 @@ class TwinStage:
 
     # -- the twin ------------------------------------------------------------------------
     def params(self, **given: float | None) -> dict[str, float | None]:
+        """The sensor's twin parameters with ``given`` ones (not None) in their place, checked:
+        a NaN angle, a ``min_cos`` over 1 or a view count of 0 made an empty twin silently."""
         out = dict(self.defaults)
-        out.update({k: float(v) for k, v in given.items() if v is not None})
+        for name, value in given.items():
+            if value is not None:
+                out[name] = check_twin_param(name, value)
         return out
 
     @property
