@@ -235,3 +235,10 @@ def test_run_sweep_checks_a_spec_built_in_python(tmp_path):
     with pytest.raises(rs.RangesimError, match="sweep .toml file or a SweepSpec, got dict"):
         run_sweep({"name": "t"}, tmp_path / "out")
     assert check_spec(spec) == spec
+
+
+def test_a_sensor_changed_twice_is_modified_once():
+    sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 32}).with_params({"camera.height": 24})
+    with pytest.raises(rs.RangesimError) as info:
+        sensor.with_params({"camera.width": -1})
+    assert str(info.value).count("(modified)") == 1 and "white_scanner.toml (modified): camera.width" in str(info.value)

@@ -203,7 +203,9 @@ class Sensor:
                 raise RangesimError(f"cannot set {dotted}: {table!r} is not a table", source=self.source)
             else:
                 data[table][key] = value
-        return sensor_from_dict(data, source=f"{self.source} (modified)")
+        source = str(self.source)
+        # changed twice is still "modified", once
+        return sensor_from_dict(data, source=source if source.endswith(" (modified)") else f"{source} (modified)")
 
 
 def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
