@@ -242,3 +242,13 @@ def test_a_sensor_changed_twice_is_modified_once():
     with pytest.raises(rs.RangesimError) as info:
         sensor.with_params({"camera.width": -1})
     assert str(info.value).count("(modified)") == 1 and "white_scanner.toml (modified): camera.width" in str(info.value)
+
+
+def test_ellipses_check_seed_and_explained(plate):
+    scan, _ = plate
+    edges = rs.edges.gradient(scan)
+    with pytest.raises(rs.RangesimError, match="seed must be an integer"):
+        rs.features.ellipses(edges, seed=float("nan"))
+    with pytest.raises(rs.RangesimError, match=r"explained\[0\] must be a found line, circle or arc"):
+        rs.features.ellipses(edges, explained=(1, 2))  # explained nothing, silently, before
+    assert len(rs.features.ellipses(edges, seed=3)) == len(rs.features.ellipses(edges))

@@ -310,6 +310,11 @@ def ellipses(
     remove_explained = P.flag(remove_explained, "remove_explained")
     if not isinstance(explained, (tuple, list)):
         raise RangesimError(f"explained must be a tuple of found lines, circles or arcs, not {type(explained).__name__}")
+    for k, f in enumerate(explained):  # numbers were silently explained nothing
+        if not (hasattr(f, "radius") and hasattr(f, "center")) and not (hasattr(f, "start") and hasattr(f, "end")):
+            raise RangesimError(f"explained[{k}] must be a found line, circle or arc (start and end, or centre "
+                                f"and radius), got {type(f).__name__} {f!r:.40}")
+    P.whole(seed, "seed", 0)  # not used (no random sampling); kept checked for the callers passing it
     P.number(band_px, "band_px", 0, lo_open=True, unit="pixels", none=True)
     min_points = P.whole(min_points, "min_points", 5)
     P.number(min_support, "min_support", 0, 1, what="share")
