@@ -199,3 +199,50 @@ def test_truncated_stripe_error_only_where_an_outline_crosses_the_row():
         assert scan.sigma[inner, c].min() > 0.5 and np.sqrt(np.mean(err[inner, c] ** 2)) > 0.5
     for r in (r0, r1):  # top and bottom: what the inside gets
         assert scan.sigma[r, along].max() <= inside + 1e-6 and np.sqrt(np.mean(err[r, along] ** 2)) < 0.02
+
+
+def _outline_spread(width_mm: float, gain: float, seeds: int = 8):
+    """Depth errors (seeds, 2 x rows), predicted std and cosine of the laser's incidence (2 x
+    rows,) on the left and right outline columns of an 80 mm plate facing the camera, only the
+    partial-stripe term on."""
+    sensor = make_sensor(**{"noise.edge_gain": gain, "laser.stripe_width": width_mm, "noise.min_signal": 0.0})
+    errs = []
+    for seed in range(seeds):
+        scan = rs.scan([plane(80.0)], sensor, pose=top_down_pose(350.0), seed=seed)
+        rows, cols = np.flatnonzero(scan.valid.any(1)), np.flatnonzero(scan.valid.any(0))
+        inner = slice(rows[0] + 3, rows[-1] - 2)
+        sides = [cols[0], cols[-1]]
+        errs.append((scan.depth - scan.xyz_true[..., 2])[inner][:, sides].T.ravel())
+    points = scan.xyz_true[inner][:, sides].transpose(1, 0, 2).reshape(-1, 3).astype(np.float64)
+    to_laser = sensor.laser_origin - points
+    cos_i = to_laser[:, 2] * -1 / np.linalg.norm(to_laser, axis=1)  # the plate's normal faces the camera: -z
+    return np.array(errs), scan.sigma[inner][:, sides].T.ravel(), np.abs(cos_i)
+
+
+def test_truncated_stripe_term_is_a_spread_of_its_stated_size():
+    """The partial-stripe term is a random error of std g m sigma_s phi(t) / Phi(t) (pixels;
+    sigma_s = s / (2.355 cos i), t = delta / sigma_s, delta = half a footprint z / f at the
+    outline column) on top of the fixed shift the mixed-pixel model gives there (``scan.sigma``
+    is the RMS error about the truth: both in quadrature). So: without it (g = 0) the outline
+    errors are that shift, the same for every seed; with it, their spread about the shift
+    follows sqrt(sigma^2 - shift^2); and that spread scales between two stripe widths as
+    sigma_s phi(t) / Phi(t) does (m and dz/du cancel in the ratio, pixel by pixel). The outline
+    test above passes at g = 0 too (the fixed shift alone)."""
+    from scipy.special import ndtr
+
+    def law(width, cos_i):
+        sigma_s = width / (2.0 * math.sqrt(2.0 * math.log(2.0)) * cos_i)
+        t = 0.5 * (350.0 / make_sensor().focal_px) / sigma_s
+        return sigma_s * np.exp(-0.5 * t * t) / math.sqrt(2 * math.pi) / ndtr(t)
+
+    spreads = {}
+    for width, seeds in ((2.0, 8), (3.0, 1)):
+        shift, _, _ = _outline_spread(width, 0.0, seeds=2)
+        assert np.abs(shift[1] - shift[0]).max() < 1e-4 and np.abs(shift).mean() > 0.1  # shifted, not spread
+        err, sigma, cos_i = _outline_spread(width, 1.0, seeds=seeds)
+        spreads[width] = np.sqrt(sigma.astype(np.float64) ** 2 - shift[0].astype(np.float64) ** 2)
+        if seeds > 1:
+            z = (err - shift[0]) / spreads[width]
+            assert 0.85 < z.std() < 1.15, z.std()  # 8 seeds x ~140 outline pixels
+    assert 0.8 < cos_i.min() and cos_i.max() < 0.99  # the laser is 150 mm aside: both sides differ
+    np.testing.assert_allclose(spreads[3.0] / spreads[2.0], law(3.0, cos_i) / law(2.0, cos_i), rtol=0.01)
