@@ -22,10 +22,12 @@ from typing import Any
 import manifold3d
 import numpy as np
 
+from rangesim.cad import _layout
 from rangesim.cad._layout import positive, tuples, within
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Segment3D
-from rangesim.cad.models import MODELS
+from rangesim.cad.models import MAX_DIVISIONS_PER_TURN, MAX_SEGMENTS, MODELS
 from rangesim.cad.part import BuiltPart, build_part, difference, solid
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 #: default dimensions (mm, degrees): a plausible 4 x 3 x 0.5 inch part
@@ -145,6 +147,8 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     """The holes, dent, scratches and threads as tuples of numbers, each on the plate (a feature
     off it would be listed as a rim the mesh does not have)."""
     m = "green_piece"
+    segments = P.whole(p["segments"], f"{m}: segments", 3, MAX_SEGMENTS)
+    per_turn = P.whole(p["divisions_per_turn"], f"{m}: divisions_per_turn", 1, MAX_DIVISIONS_PER_TURN)
     holes = tuples(m, "holes", p["holes"], ("x", "y", "radius"))
     for k, (x, y, r) in enumerate(holes, start=1):
         positive(m, **{f"holes[{k - 1}] radius": r})
@@ -155,7 +159,9 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     if depth >= min(2 * radius, T):
         raise RangesimError(f"{m}: dent depth {depth:g} mm must be less than the sphere's diameter and the "
                             f"thickness {T:g} mm")
-    within(m, "dent", x, y, math.sqrt(radius**2 - (radius - depth) ** 2), L / 2, W / 2)
+    # its widest section below the top: the rim, or the sphere's equator when deeper than its radius
+    dent_reach = radius if depth > radius else math.sqrt(radius**2 - (radius - depth) ** 2)
+    within(m, "dent", x, y, dent_reach, L / 2, W / 2)
     scratches = tuples(m, "scratches", p["scratches"], ("x", "y", "angle_deg", "length", "width", "depth"))
     for k, (x, y, angle, length, width, depth) in enumerate(scratches, start=1):
         positive(m, **{f"scratches[{k - 1}] length": length, f"scratches[{k - 1}] width": width,
@@ -171,17 +177,28 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     # each thread is a helix of sections every 1 / divisions_per_turn of a turn through the
     # plate, each a circle of `segments` vertices: a fine pitch makes millions of them (a
     # 0.001 mm pitch: 200,000 sections, and the CSG library crashed the process at ~3 GB)
-    per_turn = float(p["divisions_per_turn"])
     sections = [_thread_sections(T, pitch, per_turn) + 2 for (_, _, _, pitch) in threads]
-    vertices = sum(sections) * float(p["segments"])
+    vertices = sum(sections) * float(segments)
     if vertices > MAX_THREAD_VERTICES:
         finest = min(range(len(threads)), key=lambda k: threads[k][3])
         raise RangesimError(
             f"{m}: the threads would need {vertices:,.0f} vertices (at most {MAX_THREAD_VERTICES:,}): "
             f"{sum(sections):,} helix sections (thickness / pitch x divisions_per_turn; threads[{finest}] pitch "
-            f"{threads[finest][3]:g} mm alone {sections[finest]:,}) of {int(p['segments'])} segments; use a coarser "
+            f"{threads[finest][3]:g} mm alone {sections[finest]:,}) of {segments} segments; use a coarser "
             "pitch or fewer divisions_per_turn or segments")
-    return {"holes": holes, "dent": dent, "scratches": scratches, "threads": threads}
+    # a hole, thread, dent or scratch overlapping another cuts away (or swallows) its rims
+    footprints = [(f"holes[{k}]", _layout.circle(x, y, r)) for k, (x, y, r) in enumerate(holes)]
+    footprints += [(f"threads[{k}]", _layout.circle(x, y, r)) for k, (x, y, r, _) in enumerate(threads)]
+    footprints.append(("dent", _layout.circle(dent[0], dent[1], dent_reach)))
+    for k, (x, y, angle, length, width, _) in enumerate(scratches):
+        a = math.radians(angle)
+        along, across = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)]) * width / 2
+        start, end = np.array([x, y]), np.array([x, y]) + length * along
+        footprints.append((f"scratches[{k}]", _layout.polygon([start - across, end - across, end + across,
+                                                                start + across])))
+    _layout.apart(m, footprints)
+    return {"holes": holes, "dent": dent, "scratches": scratches, "threads": threads, "segments": segments,
+            "divisions_per_turn": per_turn}
 
 
 def _along(start, angle_deg, distance) -> tuple[float, float]:

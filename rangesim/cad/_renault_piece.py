@@ -19,11 +19,13 @@ from typing import Any
 import manifold3d
 import numpy as np
 
+from rangesim.cad import _layout
 from rangesim.cad._layout import positive, tuples, within
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Curve3D, Segment3D
 from rangesim.cad.freeform import height_patch, surface_solid
-from rangesim.cad.models import MODELS
+from rangesim.cad.models import MAX_PARAM_MAGNITUDE, MAX_SEGMENTS, MODELS
 from rangesim.cad.part import BuiltPart, build_part, difference, solid, union
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 DEFAULTS: dict[str, Any] = {
@@ -86,6 +88,7 @@ def renault_piece(**params) -> BuiltPart:
     if unknown:
         raise RangesimError(f"unknown renault_piece parameter(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
     p = {**DEFAULTS, **params}
+    p["segments"] = P.whole(p["segments"], "renault_piece: segments", 3, MAX_SEGMENTS)
     _check_layout(p)
     L, W, T = p["plate_length"], p["plate_width"], p["plate_thickness"]
     r, n_seg = p["corner_radius"], int(p["segments"])
@@ -129,12 +132,15 @@ def renault_piece(**params) -> BuiltPart:
 
 
 def _check_layout(p: dict) -> None:
-    """Sizes that are sizes, the corner radius under half the plate, the holes on it (a hole off
-    the plate would be listed as a rim the mesh does not have)."""
+    """Sizes that are sizes, the corner radius under half the plate, the holes, the neck, the heads
+    and the bump on it and clear of each other (a hole off the plate or under the neck would be
+    listed as a rim the mesh does not have, a head over the plate's edge covers edges listed there)."""
     m = "renault_piece"
     sizes = ("plate_length", "plate_width", "plate_thickness", "corner_radius", "hole_radius", "neck_length",
              "neck_width", "neck_height", "neck_waist", "head_height", "bump_height", "samples_per_mm")
     positive(m, **{k: p[k] for k in sizes})
+    for key in ("hole_x", "head_x", "bump_y"):  # positions: any finite number
+        P.number(p[key], f"{m}: {key}", -MAX_PARAM_MAGNITUDE, MAX_PARAM_MAGNITUDE, what="number", unit="mm")
     for key in ("head_size", "bump_size"):
         (size,) = tuples(m, key, p[key], ("x", "y"), many=False)
         positive(m, **{f"{key} x": size[0], f"{key} y": size[1]})
@@ -158,10 +164,34 @@ def _check_layout(p: dict) -> None:
     if min(hx, hy, bx, by) < MIN_FREEFORM_MM:  # a patch of a micrometre has no wall or rim to scan
         raise RangesimError(f"{m}: head_size and bump_size must be at least {MIN_FREEFORM_MM:g} mm a side, got "
                             f"{[hx, hy]} and {[bx, by]}")
-    for what, cx, cy, sx, sy in (("the heads (head_x, head_size)", abs(float(p["head_x"])), 0.0, hx, hy),
-                                 ("the bump (bump_y, bump_size)", 0.0, abs(float(p["bump_y"])), bx, by)):
-        if cx + sx / 2 > L / 2 or cy + sy / 2 > W / 2:
-            raise RangesimError(f"{m}: {what} reach past the plate ({L:g} x {W:g} mm)")
+    gap = _layout.MIN_GAP_MM
+    head_x, bump_y, hole_x, hr = (float(p[k]) for k in ("head_x", "bump_y", "hole_x", "hole_radius"))
+    nx, ny = float(p["neck_length"]) / 2, float(p["neck_width"]) / 2
+    neck = _layout.box(-nx, -ny, nx, ny)
+    heads = [_layout.box(side * head_x - hx / 2, -hy / 2, side * head_x + hx / 2, hy / 2) for side in (1, -1)]
+    bump = _layout.box(-bx / 2, bump_y - by / 2, bx / 2, bump_y + by / 2)
+    holes = [_layout.circle(-hole_x, 0.0, hr), _layout.circle(hole_x, 0.0, hr)]
+    # on the plate (its rounded outline), clear of its edges: a sub-part at or over an edge
+    # covers the plate's edges listed there
+    for what, footprints in (("the heads (head_x, head_size)", heads), ("the bump (bump_y, bump_size)", [bump]),
+                             ("the neck (neck_length, neck_width)", [neck]),
+                             ("the holes (hole_x, hole_radius)", holes)):
+        if min(_layout.clearance_in_rounded_rect(f, L / 2, W / 2, r) for f in footprints) < gap:
+            verb = "reach" if len(footprints) > 1 else "reaches"
+            raise RangesimError(f"{m}: {what} {verb} past the plate ({L:g} x {W:g} mm, corner_radius {r:g} mm) or "
+                                f"within {gap:g} mm of its edge")
+    # the holes apart and clear of the freeform sub-parts (which would cover their top rims); the
+    # heads, the bump and the neck apart (each would cover the other's walls), except the neck's
+    # ends, which run into the heads below their rims
+    names = {"hole_1": "hole_1 (hole_x, hole_radius)", "hole_2": "hole_2 (hole_x, hole_radius)",
+             "neck": "the neck (neck_length, neck_width)", "right": "the right head (head_x, head_size)",
+             "left": "the left head (head_x, head_size)", "bump": "the back bump (bump_y, bump_size)"}
+    shapes = {"hole_1": holes[0], "hole_2": holes[1], "neck": neck, "right": heads[0], "left": heads[1],
+              "bump": bump}
+    for one, other in (("hole_1", "hole_2"), *((h, k) for h in ("hole_1", "hole_2")
+                                               for k in ("neck", "right", "left", "bump")),
+                       ("right", "left"), ("right", "bump"), ("left", "bump"), ("neck", "bump")):
+        _layout.clear(m, names[one], shapes[one], names[other], shapes[other])
     for what, surface in (("right head", _head_surface(p, 1)), ("left head", _head_surface(p, -1)),
                           ("bump", _bump_surface(p))):
         z = np.asarray(surface.control_points)[..., 2]
@@ -169,6 +199,20 @@ def _check_layout(p: dict) -> None:
         if rim <= T:
             raise RangesimError(f"{m}: the {what}'s rim falls to {rim:g} mm, not above the plate's top "
                                 f"(plate_thickness {T:g} mm); raise head_height / bump_height or thin the plate")
+    neck_top = float(np.asarray(_neck_surface(p, T).control_points)[..., 2].max())
+    for key, head, side in (("right", heads[0], 1), ("left", heads[1], -1)):
+        if _layout.gap(head, neck) >= 0:
+            continue
+        # the neck runs into the head: past its walls' corner edges, and below its rim
+        for corner in head[1]:
+            _layout.clear(m, f"the corner edge at ({corner[0]:g}, {corner[1]:g}) of {names[key]}",
+                          _layout.circle(*corner, 0.0), names["neck"], neck)
+        z = np.asarray(_head_surface(p, side).control_points)[..., 2]
+        rim = min(z[0].min(), z[-1].min(), z[:, 0].min(), z[:, -1].min())
+        if rim <= neck_top:
+            raise RangesimError(f"{m}: the neck (neck_height {p['neck_height']:g} mm) rises to {neck_top:g} mm where "
+                                f"it meets the {key} head, whose rim falls to {rim:g} mm: it would break through the "
+                                "head's rim; lower the neck or raise head_height")
 
 
 def _grid_points(size: float, density: float) -> int:

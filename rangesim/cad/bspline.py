@@ -40,6 +40,7 @@ import numpy as np
 import trimesh
 from scipy.interpolate import make_interp_spline, make_lsq_spline
 
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 try:  # scipy >= 1.12
@@ -55,6 +56,9 @@ SECOND_ORDER: tuple[tuple[int, int], ...] = ((0, 0), (1, 0), (0, 1), (2, 0), (1,
 #: ``|Su x Sv|`` below this fraction of ``|Su|^2 + |Sv|^2`` is a singular point (a pole,
 #: where one tangent is zero up to rounding: cos(pi/2) = 6e-17), not a real surface direction
 _SINGULAR = 1e-12
+#: the most vertices :func:`tessellate_surface` makes (n_u x n_v, 1000 x 1000): about 0.6 GB and
+#: 2 s (100,000 x 100,000 asked for 75 GiB)
+MAX_TESSELLATION_VERTICES = 1_000_000
 
 
 def unit_normals(Su: np.ndarray, Sv: np.ndarray) -> np.ndarray:
@@ -255,7 +259,7 @@ def tessellate_surface(surface: ParametricSurface, n_u: int = 33, n_v: int = 33)
     surface : ParametricSurface
         Any surface of this module's interface (B-spline, NURBS, Coons patch).
     n_u, n_v : int
-        Vertices along u and v (>= 2).
+        Vertices along u and v (>= 2), at most :data:`MAX_TESSELLATION_VERTICES` in all.
 
     Returns
     -------
@@ -265,10 +269,16 @@ def tessellate_surface(surface: ParametricSurface, n_u: int = 33, n_v: int = 33)
         the limit normal to ~1e-7, taken just inside the domain); ``vertex_attributes`` hold the
         exact ``"K", "H", "k1", "k2"`` (NaN where singular) and the parameters ``"u", "v"``.
     """
+    sizes = []
     for name, n in (("n_u", n_u), ("n_v", n_v)):
-        if int(n) != n or n < 2:
-            raise RangesimError(f"tessellation needs {name} >= 2 vertices, got {n}")
-    n_u, n_v = int(n_u), int(n_v)
+        try:
+            sizes.append(P.whole(n, name, 2))
+        except RangesimError:
+            raise RangesimError(f"tessellation needs {name} >= 2 vertices (a whole number), got {n!r:.60}") from None
+    n_u, n_v = sizes
+    if n_u * n_v > MAX_TESSELLATION_VERTICES:
+        raise RangesimError(f"tessellation of n_u x n_v = {n_u:,} x {n_v:,} vertices is more than the "
+                            f"{MAX_TESSELLATION_VERTICES:,} allowed (1000 x 1000, about 0.6 GB of memory); use fewer")
     (u0, u1), (v0, v1) = surface.domain
     uu, vv = np.meshgrid(np.linspace(u0, u1, n_u), np.linspace(v0, v1, n_v), indexing="ij")
     u, v = uu.ravel(), vv.ravel()

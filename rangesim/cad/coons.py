@@ -21,6 +21,7 @@ import numpy as np
 from scipy.interpolate import BSpline, make_interp_spline
 
 from rangesim.cad.bspline import ParametricSurface, Partials
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 #: corner name -> (c-curve, its parameter, d-curve, its parameter)
@@ -210,6 +211,7 @@ def coons_patch(
     .. [1] S. A. Coons, "Surfaces for computer-aided design of space forms", MIT Project MAC,
        MAC-TR-41 (1967).
     """
+    tol = P.number(tol, "coons_patch: tol", 0, what="number", unit="relative corner mismatch")
     curves = {
         name: BoundaryCurve(curve, name, samples)
         for name, curve in (("c0", c0), ("c1", c1), ("d0", d0), ("d1", d1))

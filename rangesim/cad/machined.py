@@ -28,9 +28,11 @@ from typing import Any
 import manifold3d
 import numpy as np
 
+from rangesim.cad import _layout
 from rangesim.cad.features import AnalyticFeatures, Circle3D, Segment3D
-from rangesim.cad.models import MODELS
+from rangesim.cad.models import MAX_PARAM_MAGNITUDE, MAX_SEGMENTS, MODELS
 from rangesim.cad.part import BuiltPart, build_part, difference, solid, union
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 __all__ = ["machined_design", "machined_part", "feature_type", "HOLE_RADII", "ROUND_TYPES"]
@@ -193,7 +195,12 @@ def machined_part(seed: int = 0, *, segments: int = 64, **design: Any) -> BuiltP
     Raises
     ------
     RangesimError
-        An unknown key, or dimensions that are not positive.
+        An unknown key, dimensions that are not finite and positive, ``segments`` out of range,
+        or an override whose listed features the mesh would not have: a feature off the
+        plate's flat top (past its outline or its chamfer or fillet, or into the step), two
+        features closer than 0.5 mm (one cuts or covers the other's rims), an ``outline``
+        not "plain", "chamfer" or "fillet", an ``outline_size`` over 0.49 x the plate (its
+        thickness too for a chamfer), a step on a chamfered plate or no wider than its fillet.
 
     Examples
     --------
@@ -207,12 +214,12 @@ def machined_part(seed: int = 0, *, segments: int = 64, **design: Any) -> BuiltP
     unknown = sorted(set(design) - set(base))
     if unknown:
         raise RangesimError(f"unknown machined_part parameter(s) {', '.join(unknown)}; known: {', '.join(base)}")
-    if isinstance(segments, bool) or int(segments) != segments or not 3 <= segments <= 4096:
-        raise RangesimError(f"machined_part: segments must be an integer in 3..4096, got {segments!r}")
+    segments = P.whole(segments, "machined_part: segments", 3, MAX_SEGMENTS)
     p = {**base, **design}
+    for key in ("length", "width", "thickness"):
+        P.number(p[key], f"machined_part: {key}", 0, MAX_PARAM_MAGNITUDE, lo_open=True, what="positive number",
+                 unit="mm")
     L, W, T = (float(p[k]) for k in ("length", "width", "thickness"))
-    if min(L, W, T) <= 0:
-        raise RangesimError("machined_part: length, width and thickness must be positive")
     if design:  # the random layouts hold by construction; a user's override is checked
         _check_design(p, L, W, T)
     n = int(segments)
@@ -281,69 +288,123 @@ def machined_part(seed: int = 0, *, segments: int = 64, **design: Any) -> BuiltP
     return build_part("machined_part", tree, feats, {**p, "seed": int(seed), "segments": n})
 
 
+#: the largest chamfer or fillet, relative to the plate (its thickness for a chamfer, its smaller
+#: side for both): the outline keeps a flat top and straight sides between its corners
+_MAX_OUTLINE_FRACTION = 0.49
+#: the outlines a plate may have
+OUTLINES = ("plain", "chamfer", "fillet")
+
+
 def _check_design(p: dict[str, Any], L: float, W: float, T: float) -> None:
-    """Refuse, in one line naming the feature, an override whose feature lies off the plate
-    (its rims would be listed as features the mesh does not have) or has a size that is not
-    positive (a raw LinAlgError or a degenerate mesh before); a blind hole must end inside the
-    plate, a step and a slot cut less than its thickness."""
+    """Refuse, in one line naming the feature, an override whose listed features the mesh would
+    not have: a feature off the plate's flat top (past its outline, chamfer or fillet, or into the
+    step), two features that overlap (one cuts or covers the other's rims), a chamfer or fillet
+    too large for the plate, or a size that is not positive (a raw LinAlgError or a degenerate
+    mesh before); a blind hole must end inside the plate, a step and a slot cut less than its
+    thickness."""
     def fail(what: str, text: str) -> None:
         raise RangesimError(f"machined_part: {what} {text}")
 
-    def numbers(what: str, value: Any, n: int) -> list[float]:
+    def numbers(what: str, value: Any, n: int, size: int | None = None) -> list[float]:
+        size = n if size is None else size
         try:
+            if isinstance(value, (str, bytes, dict)) or len(value) != size:
+                raise TypeError
             vals = [float(v) for v in value[:n]]
         except (TypeError, ValueError, IndexError):
-            fail(what, f"must be {n} numbers, got {value!r}")
-        if len(vals) != n or not all(math.isfinite(v) for v in vals):
-            fail(what, f"must be {n} finite numbers, got {value!r}")
+            fail(what, f"must be {size} values, got {value!r:.80}")
+        if any(isinstance(v, (bool, np.bool_)) for v in value[:n]) or not all(math.isfinite(v) for v in vals):
+            fail(what, f"must be {n} finite numbers, got {value!r:.80}")
         return vals
 
-    def inside(what: str, x: float, y: float, rx: float, ry: float) -> None:
-        if abs(x) + rx > L / 2 + 1e-9 or abs(y) + ry > W / 2 + 1e-9:
-            fail(what, f"at ({x:g}, {y:g}) reaching {rx:g} x {ry:g} mm does not lie on the {L:g} x {W:g} mm plate")
+    def items(key: str) -> list:
+        value = p[key]
+        if not isinstance(value, (list, tuple)):
+            fail(key, f"must be a list, got {value!r:.80}")
+        return list(value)
 
     def positive(what: str, **values: float) -> None:
         for key, v in values.items():
             if v <= 0:
                 fail(what, f"{key} must be positive, got {v:g}")
 
+    outline = P.choice(p["outline"], "machined_part: outline", OUTLINES)
+    size = float(P.number(p["outline_size"], "machined_part: outline_size", 0, what="number", unit="mm"))
+    limit = _MAX_OUTLINE_FRACTION * min(L, W, T if outline == "chamfer" else math.inf)
+    if outline != "plain" and size > limit:
+        fail(f"outline_size {size:g} mm", f"is too large for a {outline}: at most {_MAX_OUTLINE_FRACTION:g} x the "
+             f"plate's {'thickness and ' if outline == 'chamfer' else ''}smaller side, {limit:g} mm")
+    chamfer = size if outline == "chamfer" else 0.0
+    fillet = size if outline == "fillet" else 0.0
+    x_end = L / 2
     if p["step"]:
         s, d = numbers("step", p["step"], 2)
         positive("step", width=s, depth=d)
         if s >= L or d >= T:
             fail("step", f"({s:g} x {d:g} mm) must be narrower than the plate and shallower than its {T:g} mm")
+        if chamfer:
+            fail("step", "cannot be cut into a chamfered plate (outline 'chamfer'); use 'plain' or 'fillet'")
+        if not fillet < s < L - fillet:
+            fail("step", f"width {s:g} mm must exceed the fillet's {fillet:g} mm and leave more than it of the plate")
+        x_end = L / 2 - s
+    gap = _layout.MIN_GAP_MM
+    shapes: list[tuple[str, tuple]] = []
+
+    def place(what: str, shape: tuple, x: float, y: float, rx: float, ry: float) -> None:
+        """The footprint on the flat top: inside the outline less its chamfer or fillet, left of the step."""
+        if _layout.clearance_in_rounded_rect(shape, L / 2 - chamfer, W / 2 - chamfer, fillet) < gap:
+            edge = f"{gap:g} mm inside its {f'{size:g} mm {outline}' if chamfer or fillet else 'edges'}"
+            fail(what, f"at ({x:g}, {y:g}) reaching {rx:g} x {ry:g} mm does not lie on the {L:g} x {W:g} mm "
+                 f"plate's flat top ({edge})")
+        if p["step"] and _layout.reach_x(shape)[1] > x_end - gap:
+            fail(what, f"at ({x:g}, {y:g}) reaching {rx:g} x {ry:g} mm runs into the step: it must end {gap:g} mm "
+                 f"before x = {x_end:g} mm")
+        shapes.append((what, shape))
+
+    def rect(what: str, x: float, y: float, hx: float, hy: float) -> None:
+        place(what, _layout.box(x - hx, y - hy, x + hx, y + hy), x, y, hx, hy)
+
     if p["slot"]:
-        x, y, length, width, depth = numbers("slot", p["slot"], 5)
+        x, y, length, width, depth = numbers("slot", p["slot"], 5, 6)
         positive("slot", length=length, width=width, depth=depth)
-        along = p["slot"][5] if len(p["slot"]) > 5 else None
+        along = p["slot"][5]
         if along not in ("x", "y"):
             fail("slot", f"runs along 'x' or 'y', got {along!r}")
-        inside("slot", x, y, *((length / 2, width / 2) if along == "x" else (width / 2, length / 2)))
         if depth >= T:
             fail("slot", f"depth {depth:g} mm must be under the plate's {T:g} mm")
-    for k, hole in enumerate(p["holes"], start=1):
-        x, y, r = numbers(f"hole {k}", hole, 3)
-        depth = hole[3] if len(hole) > 3 else None
+        rect("slot", x, y, *((length / 2, width / 2) if along == "x" else (width / 2, length / 2)))
+    for k, hole in enumerate(items("holes"), start=1):
+        x, y, r = numbers(f"hole {k}", hole, 3, 4)
+        depth = hole[3]
         positive(f"hole {k}", radius=r)
-        inside(f"hole {k}", x, y, r, r)
-        if depth is not None and not 0 < float(depth) < T:
+        try:
+            P.number(depth, "depth", 0, T, lo_open=True, hi_open=True, none=True)
+        except RangesimError:
             fail(f"hole {k}", f"depth {depth!r} must lie in 0..{T:g} mm (None: through)")
-    for kind, items in (("boss", p["bosses"]), ("cylinder", p["cylinders"])):
-        for k, item in enumerate(items, start=1):
+        place(f"hole {k}", _layout.circle(x, y, r), x, y, r, r)
+    sunk = [] if T > _SINK_MM else [what for what in ("bosses", "cylinders", "lying") if p[what]] + (
+        ["wedge"] if p["wedge"] else [])
+    if sunk:
+        fail(f"thickness {T:g} mm", f"must exceed {_SINK_MM:g} mm, the depth {', '.join(sunk)} sink into the plate")
+    for kind, key in (("boss", "bosses"), ("cylinder", "cylinders")):
+        for k, item in enumerate(items(key), start=1):
             x, y, r, h = numbers(f"{kind} {k}", item, 4)
             positive(f"{kind} {k}", radius=r, height=h)
-            inside(f"{kind} {k}", x, y, r, r)
+            place(f"{kind} {k}", _layout.circle(x, y, r), x, y, r, r)
     if p["wedge"]:
         x, y, length, width, height = numbers("wedge", p["wedge"], 5)
         positive("wedge", length=length, width=width, height=height)
-        inside("wedge", x, y, length / 2, width / 2)
-    for k, item in enumerate(p["lying"], start=1):
-        x, y, r, length = numbers(f"lying cylinder {k}", item, 4)
-        along = item[4] if len(item) > 4 else None
+        rect("wedge", x, y, length / 2, width / 2)
+    for k, item in enumerate(items("lying"), start=1):
+        x, y, r, length = numbers(f"lying cylinder {k}", item, 4, 5)
+        along = item[4]
         positive(f"lying cylinder {k}", radius=r, length=length)
         if along not in ("x", "y"):
             fail(f"lying cylinder {k}", f"lies along 'x' or 'y', got {along!r}")
-        inside(f"lying cylinder {k}", x, y, *((length / 2, r) if along == "x" else (r, length / 2)))
+        if _LYING_AXIS * r >= T:  # it would reach through the plate's bottom
+            fail(f"lying cylinder {k}", f"radius {r:g} mm must be under {1 / _LYING_AXIS:g} x the plate's {T:g} mm")
+        rect(f"lying cylinder {k}", x, y, *((length / 2, r) if along == "x" else (r, length / 2)))
+    _layout.apart("machined_part", shapes)
 
 
 def _plate_solid(L: float, W: float, T: float, outline: str, size: float, n: int) -> manifold3d.Manifold:
@@ -352,12 +413,12 @@ def _plate_solid(L: float, W: float, T: float, outline: str, size: float, n: int
     if outline == "plain" or size <= 0:
         return manifold3d.Manifold.cube((L, W, T)).translate((-L / 2, -W / 2, 0))
     if outline == "fillet":
-        r = min(size, 0.49 * min(L, W))
+        r = size  # at most 0.49 min(L, W): checked with the design
         section = manifold3d.CrossSection.square((L - 2 * r, W - 2 * r), True).offset(
             r, manifold3d.JoinType.Round, 2.0, n)
         return manifold3d.Manifold.extrude(section, T)
     if outline == "chamfer":
-        c = min(size, 0.49 * T)
+        c = size  # at most 0.49 min(L, W, T): checked with the design
         low = manifold3d.Manifold.cube((L, W, T - c)).translate((-L / 2, -W / 2, 0))
         # a frustum whose sides move in by c over its height c: 45 degree faces
         cap = manifold3d.Manifold.extrude(manifold3d.CrossSection.square((L, W), True), c, 0, 0.0,

@@ -249,10 +249,19 @@ def surface_points(
     h = parse_length(resolution, positive=True, what="resolution")
     if ends not in ENDS:
         raise RangesimError(f"ends must be one of {', '.join(ENDS)}, got {ends!r}")
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if not (hasattr(mesh, "vertices") and hasattr(mesh, "faces")):
+        raise RangesimError(f"surface_points needs a triangle mesh (a trimesh.Trimesh, or vertices and faces), "
+                            f"got a {type(mesh).__name__}")
+    try:
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+    except (TypeError, ValueError):
+        raise RangesimError("surface_points needs a mesh's vertices and faces as arrays of numbers") from None
     if faces.ndim != 2 or faces.shape[1:] != (3,) or len(faces) == 0:
         raise RangesimError("cannot sample an empty mesh (no triangles)")
+    if vertices.ndim != 2 or vertices.shape[1:] != (3,) or faces.min() < 0 or faces.max() >= len(vertices):
+        raise RangesimError(f"surface_points needs (n, 3) vertices and faces indexing them, got {vertices.shape} "
+                            f"vertices and face indices {faces.min()}..{faces.max()}")
     if not np.all(np.isfinite(vertices)):
         raise RangesimError("cannot sample a mesh with NaN or infinite vertex coordinates")
     tri = vertices[faces]                                        # (F, 3 corners, 3 xyz)
