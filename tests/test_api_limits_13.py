@@ -214,11 +214,10 @@ def test_twin_stage_and_calibration_options_are_checked(tmp_path):
 # -- sweeps built in Python ------------------------------------------------------------------------
 def test_run_sweep_checks_a_spec_built_in_python(tmp_path):
     import dataclasses
+    from pathlib import Path
 
     from rangesim.experiments import run_sweep
     from rangesim.experiments.sweep_file import check_spec, load_sweep
-
-    from pathlib import Path
 
     target = Path(__file__).resolve().parents[1] / "scenes" / "flat_target.toml"
     (tmp_path / "s.toml").write_text(f'scenes = ["{target}"]\nsensors = ["white_scanner"]\n[set]\n'
@@ -252,3 +251,31 @@ def test_ellipses_check_seed_and_explained(plate):
     with pytest.raises(rs.RangesimError, match=r"explained\[0\] must be a found line, circle or arc"):
         rs.features.ellipses(edges, explained=(1, 2))  # explained nothing, silently, before
     assert len(rs.features.ellipses(edges, seed=3)) == len(rs.features.ellipses(edges))
+
+
+def test_legitimate_inputs_the_new_checks_keep(plate):
+    """What an independent review of the checks above found refused and should not be."""
+    from rangesim.scene.scene import Scene, SceneObject
+    from rangesim.twin.stage import load_mesh_mm
+
+    scan, _ = plate
+    edges = rs.edges.gradient(scan)
+    assert len(rs.features.ellipses(edges, seed=None)) == len(rs.features.ellipses(edges))  # seed is unused
+    box = trimesh.creation.box((10, 10, 10))
+    SceneObject("b", box, face_labels=np.arange(12))  # labels without names are not read
+    assert len(Scene(SceneObject(f"b{k}", box) for k in range(2)).objects) == 2  # a generator
+    assert np.allclose(load_mesh_mm(box, "1000").extents, 10000.0)  # a scale as text
+
+
+def test_a_spec_with_numpy_numbers_is_taken_as_python_numbers(tmp_path):
+    import dataclasses
+    from pathlib import Path
+
+    from rangesim.experiments.sweep_file import check_spec, load_sweep
+
+    target = Path(__file__).resolve().parents[1] / "scenes" / "flat_target.toml"
+    (tmp_path / "s.toml").write_text(f'scenes = ["{target}"]\nsensors = ["white_scanner"]\n')
+    spec = check_spec(dataclasses.replace(load_sweep(tmp_path / "s.toml"), views=np.int64(2), seed=np.int64(7),
+                                          tolerance_px=np.float32(2)))
+    assert (spec.views, spec.seed, spec.tolerance_px) == (2, 7, 2.0)
+    assert type(spec.views) is int and type(spec.seed) is int and type(spec.tolerance_px) is float

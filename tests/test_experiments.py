@@ -760,3 +760,20 @@ def test_sweep_refuses_a_target_away_from_the_part(sweep_dir, tmp_path):
     with pytest.raises(RangesimError, match="field of view .* every view would be empty"):
         run_sweep(spec, tmp_path / "out", workers=0, progress=False)
     assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_part_seen_from_cap_takes_the_range_in_depth():
+    """The working range bounds depth along the optical axis: a part 12.8 deg off the axis at
+    depth 440 mm lies 451 mm away, past white_scanner's far (450 mm) in a straight line, and is
+    seen (a distance rule refused it)."""
+    from rangesim.experiments.poses import _part_seen_from_cap
+
+    sensor = _cone_sensor()
+    assert sensor.params["range"]["far"] == 450.0
+    d = 440.0  # camera at (0, 0, d) looking down -z at the origin
+    centre = np.array([100.0, 0.0, 0.0])
+    vertices = centre + 0.05 * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    cap = {"target": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "cap_deg": 0.0, "distance": [d, d]}
+    assert np.hypot(100.0, d) > 450.0 and _part_seen_from_cap(cap, vertices, sensor)
+    cap["distance"] = [455.0, 455.0]  # now its depth is past far too
+    assert not _part_seen_from_cap(cap, vertices, sensor)

@@ -35,8 +35,8 @@ HW = (30, 32)
 REFUSED = {
     "status of 300": ({"status": np.full(HW, 300)}, "RangeScan.status holds 300, outside the uint8 range 0..255"),
     "negative status": ({"status": np.full(HW, -1)}, "RangeScan.status holds -1, outside the uint8 range"),
-    "NaN valid": ({"valid": np.full(HW, np.nan)}, "RangeScan.valid must hold booleans (or 0 / 1), found nan"),
-    "valid of 2": ({"valid": np.full(HW, 2)}, "RangeScan.valid must hold booleans (or 0 / 1), found 2"),
+    "NaN valid": ({"valid": np.full(HW, np.nan)}, "RangeScan.valid must hold booleans (or 0 / 1, or integers"),
+    "valid of 0.5": ({"valid": np.full(HW, 0.5)}, "non-zero is True), found 0.5"),
     "part of 2**40": ({"part": np.full(HW, 2**40)}, "RangeScan.part holds 1099511627776, outside the int32 range"),
     "face of 0.5": ({"face": np.full(HW, 0.5)}, "RangeScan.face must hold integers, found 0.5"),
     "NaN part": ({"part": np.full(HW, np.nan)}, "RangeScan.part must hold integers, found nan"),
@@ -74,6 +74,9 @@ def test_values_that_convert_exactly_are_accepted(scan):
     for name in ("valid", "status", "part", "face", "depth", "intensity"):
         assert getattr(made, name).dtype == getattr(scan, name).dtype, name
         assert np.array_equal(getattr(made, name), getattr(scan, name), equal_nan=True), name
+    # an OpenCV-style 0 / 255 uint8 mask: non-zero is valid
+    mask255 = scan.valid.astype(np.uint8) * 255
+    np.testing.assert_array_equal(RangeScan(**_fields(scan, valid=mask255)).valid, scan.valid)
     # float 0 / 1 in valid (as an EXR channel holds it) and bool labels still convert
     assert RangeScan(**_fields(scan, valid=scan.valid.astype(np.float32))).valid.dtype == np.bool_
     assert RangeScan(**_fields(scan, part=scan.valid)).part.max() == 1

@@ -255,11 +255,14 @@ def _exact_array(name: str, value: Any, dtype: np.dtype) -> np.ndarray:
                 raise RangesimError(f"RangeScan.{name} holds {first!r}, beyond the {dtype.name} range")
         return out
     if dtype.kind == "b":
-        if kind != "b":
-            bad = (array != 0) & (array != 1)  # NaN is neither
+        # integers: non-zero is True (an OpenCV-style 0 / 255 mask); floats only 0 or 1 (NaN, which
+        # a cast makes True, is neither)
+        if kind == "f":
+            bad = (array != 0) & (array != 1)
             if bad.any():
                 first = array[bad].flat[0].item()
-                raise RangesimError(f"RangeScan.{name} must hold booleans (or 0 / 1), found {first!r}")
+                raise RangesimError(f"RangeScan.{name} must hold booleans (or 0 / 1, or integers: non-zero is "
+                                    f"True), found {first!r}")
         return array.astype(dtype)
     # integer fields
     if kind == "f":

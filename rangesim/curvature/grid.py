@@ -53,7 +53,7 @@ def curvature_scan(
         A RangeScan (``scan.xyz`` and ``scan.valid`` are used; camera frame, mm) or a bare
         point grid in a frame whose origin is the viewpoint, NaN for missing points.
     window : int
-        Odd block size in pixels (>= 3).
+        Odd block size in pixels (3 to 255).
     min_points : int, optional
         Least number of valid pixels in the block; fewer gives NaN. Default: just over
         half the block (13 of 25 for ``window=5``), at least 6.

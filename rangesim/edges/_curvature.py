@@ -150,7 +150,7 @@ def curvature(
         :data:`DEFAULT_RELATIVE_THRESHOLD` = 0.5 / R (a 90 degree corner responds with
         ~1 / R in both directions, a crease leaks ~0.3 / R).
     window : int, optional
-        Odd fit-block size, pixels (>= 3). Default (None): 5 (7 on scans that carry their noise
+        Odd fit-block size, pixels (3 to 255). Default (None): 5 (7 on scans that carry their noise
         model's ``sigma`` and whose depth noise is :data:`NOISY_BLOCK_NOISE` = 0.5 pixel
         footprints or more), or on block-matched scans
         (``meta["sensor"]`` with ``mode = "structured_light"``) :func:`matching_block` of

@@ -119,7 +119,7 @@ def normal(
         tuning seeds: hole walls and cylinders bend a pair of blocks by about 2 r kappa), and
         each pixel needs ``k`` = 4 times its fitted normals' predicted angle noise above it.
     window : int, optional
-        Odd stencil size of the normal estimate, pixels (>= 3): differences over
+        Odd stencil size of the normal estimate, pixels (3 to 255): differences over
         ``window // 2`` pixels. Default (None): 3 on noise-free scans, else
         ``2 ceil(12 noise) + 1`` clipped to 3..9 for a depth noise of ``noise`` footprints
         (7 at the preset's 0.25).

@@ -231,7 +231,7 @@ def pcl_organized(
     edge_types : tuple of str
         Classes that enter ``mask`` (PCL's ``setEdgeType``): any of :data:`EDGE_TYPES`.
     normal_window : int, optional
-        Odd stencil size of the normal estimate, pixels (>= 3): ``2h + 1`` at the sensor's
+        Odd stencil size of the normal estimate, pixels (3 to 255): ``2h + 1`` at the sensor's
         scale. Default (None): 3 on clean laser scans, else ``2h + 1`` with ``h`` as above
         (9 on the block-matched presets).
     distance_mm : float or (H, W) float array, optional

@@ -181,8 +181,8 @@ def _part_seen_from_cap(cap: Mapping[str, Any], vertices: np.ndarray, sensor: An
 
     The cone's half-angle is the image diagonal's (the corner pixel farthest from the principal
     point) widened by the grid's angular spacing, so the test errs towards "seen": it refuses only
-    a cap from which the sphere stays outside the cone, or wholly before ``near`` or past ``far``,
-    everywhere.
+    a cap from which the sphere stays outside the cone, or wholly before ``near`` or past ``far``
+    in depth along the optical axis (the range the scanner applies), everywhere.
     """
     lo_b, hi_b = vertices.min(axis=0), vertices.max(axis=0)
     centre = (lo_b + hi_b) / 2.0
@@ -209,7 +209,11 @@ def _part_seen_from_cap(cap: Mapping[str, Any], vertices: np.ndarray, sensor: An
     inside = dist <= sphere
     in_cone = inside | (off_axis <= cone + widening)
     near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
-    in_range = (dist - sphere <= far) & (dist + sphere >= near)
+    # the working range bounds depth along the optical axis, not distance: the sphere's nearest
+    # depth is at most dist cos(the least off-axis angle it spans) - sphere (an off-centre part
+    # farther than far in a straight line can lie within it); its farthest at most dist + sphere
+    nearest_depth = dist * np.cos(np.clip(off_axis - widening, 0.0, None)) - sphere
+    in_range = (nearest_depth <= far) & (dist + sphere >= near)
     return bool(np.any(in_cone & in_range))
 
 

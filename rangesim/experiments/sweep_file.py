@@ -363,8 +363,9 @@ def check_spec(spec: SweepSpec) -> SweepSpec:
     if not isinstance(spec, SweepSpec):
         raise RangesimError(f"a sweep is a sweep .toml file or a SweepSpec, got {type(spec).__name__}")
     path = spec.path
-    fields = {name: getattr(spec, name) for name in ("views", "repeats", "seed", "snr_window", "tolerance_px",
-                                                       "crease_deg")}
+    # NumPy numbers as the Python numbers they are (np.int64(2) views; JSON takes only the latter)
+    fields = {name: (v.item() if isinstance(v, np.generic) else v) for name in ("views", "repeats", "seed",
+              "snr_window", "tolerance_px", "crease_deg") for v in (getattr(spec, name),)}
     _int(fields, "views", 1, path, 0)
     _int(fields, "repeats", 1, path, 1)
     _int(fields, "seed", 0, path, 0)
@@ -378,8 +379,9 @@ def check_spec(spec: SweepSpec) -> SweepSpec:
         pose = check_pose_table(spec.pose, source=None)
     except RangesimError as exc:
         raise RangesimError(f"[pose] {exc}", source=path) from exc
-    if pose != spec.pose:
-        spec = dataclasses.replace(spec, pose=pose)
+    changed = {name: v for name, v in fields.items() if type(v) is not type(getattr(spec, name))}
+    if pose != spec.pose or changed:
+        spec = dataclasses.replace(spec, pose=pose, **changed)
     if spec.n_tasks > MAX_TASKS:
         raise RangesimError(f"the sweep plans {spec.n_tasks:,} scans (at most {MAX_TASKS:,})", source=path)
     if spec.views == 0 and (spec.pose or any(key_kind(k)[0] == "pose" for k in [*spec.grid, *spec.fixed])):

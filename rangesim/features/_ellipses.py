@@ -314,7 +314,7 @@ def ellipses(
         if not (hasattr(f, "radius") and hasattr(f, "center")) and not (hasattr(f, "start") and hasattr(f, "end")):
             raise RangesimError(f"explained[{k}] must be a found line, circle or arc (start and end, or centre "
                                 f"and radius), got {type(f).__name__} {f!r:.40}")
-    P.whole(seed, "seed", 0)  # not used (no random sampling); kept checked for the callers passing it
+    P.whole(seed, "seed", 0, none=True)  # not used (no random sampling); kept checked for the callers passing it
     P.number(band_px, "band_px", 0, lo_open=True, unit="pixels", none=True)
     min_points = P.whole(min_points, "min_points", 5)
     P.number(min_support, "min_support", 0, 1, what="share")

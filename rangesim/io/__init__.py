@@ -97,8 +97,8 @@ def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
     """Refuse a scan file whose contents every reader of it would trip over later, in one line.
 
     The pose must be finite with a non-singular rotation block (a NaN pose was printed and
-    used, a zero one made every world point the origin), ``meta["units"]`` (when present) ``"mm"``,
-    ``meta["sensor"]`` a table, ``meta["K"]``
+    used, a zero one made every world point the origin), ``meta["units"]`` (when present) ``"mm"``
+    (``meta["sensor"]`` a table: the RangeScan constructor refuses another), ``meta["K"]``
     (when present) a finite 3x3 matrix with positive focal lengths, and every valid pixel's
     ``xyz`` finite (a NaN point counted as measured).
 
@@ -119,9 +119,6 @@ def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
     units = scan.meta.get("units", "mm")
     if units != "mm":  # every reader of a scan takes its coordinates as millimetres
         raise RangesimError(f"the scan's meta.units is {units!r:.40}: rangesim scans are in millimetres (\"mm\")", path)
-    sensor = scan.meta.get("sensor")
-    if sensor is not None and not isinstance(sensor, dict):
-        raise RangesimError(f"the scan's meta.sensor must be a table, got {type(sensor).__name__} {sensor!r:.60}", path)
     if scan.meta.get("K") is not None:
         try:
             K = np.asarray(scan.meta["K"], dtype=np.float64)

@@ -74,7 +74,8 @@ class SceneObject:
             if labels.shape != (n_faces,) or labels.dtype.kind not in "iu":
                 raise RangesimError(f"object {self.name!r}: face_labels must be ({n_faces},) integers, one per "
                                     f"triangle, got {labels.dtype} of shape {labels.shape}")
-            if labels.size and (labels.min() < 0 or labels.max() >= max(len(self.labels), 1)):
+            # (without label names the labels are not read: Scene.subpart_image)
+            if self.labels and labels.size and (labels.min() < 0 or labels.max() >= len(self.labels)):
                 raise RangesimError(f"object {self.name!r}: face_labels must index its {len(self.labels)} "
                                     f"labels, got values {int(labels.min())}..{int(labels.max())}")
 
@@ -117,9 +118,11 @@ class Scene:
     _mitsuba: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if isinstance(self.objects, SceneObject) or not all(isinstance(o, SceneObject) for o in self.objects):
+        if isinstance(self.objects, SceneObject):
+            raise RangesimError("Scene takes a list of SceneObject, got one SceneObject")
+        self.objects = list(self.objects)  # (a generator is read once, here)
+        if not all(isinstance(o, SceneObject) for o in self.objects):
             raise RangesimError("Scene takes a list of SceneObject")
-        self.objects = list(self.objects)
         if not self.objects:
             raise RangesimError("a scene needs at least one object")
         for obj in self.objects:

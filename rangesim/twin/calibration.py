@@ -218,7 +218,8 @@ def calibrate(recorded: RangeScan | Sequence[RangeScan], mesh: Any, sensor: Any 
             raise RangesimError("no recorded point lies on the mesh: cannot fit sigma_mm")
         values["sigma_mm"] = rec_noise
     return {
-        **{k: float(values[k]) for k in FITTABLE},
+        # sigma_mm stays None when not fitted and the sensor's noise model applies (float(None) raised)
+        **{k: None if values[k] is None else float(values[k]) for k in FITTABLE},
         "iou": float(iou),
         "fitted": list(params) + (["min_cos"] if fit_cos and "min_cos" not in params else []),
         "recorded_noise_mm": float(rec_noise),

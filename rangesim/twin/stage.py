@@ -85,7 +85,12 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
 
     check_mesh_arrays(mesh, source)
     mesh = mesh.copy()
-    if isinstance(scale, str) and scale == "auto":
+    if isinstance(scale, str) and scale != "auto":
+        try:  # "1000", as a command line gives it
+            scale = float(scale)
+        except ValueError:
+            raise RangesimError(f'mesh_scale must be a number > 0 or "auto", got {scale!r:.40}') from None
+    if isinstance(scale, str):
         extent = float(np.ptp(mesh.vertices, axis=0).max())
         ref = 0.0 if reference is None or len(reference) == 0 else float(np.ptp(reference, axis=0).max())
         scale = 1000.0 if extent < 5.0 and ref > 5.0 else 1.0
