@@ -86,7 +86,7 @@ def test_a_chamfer_or_fillet_within_the_limits_lists_its_edges_on_the_mesh(kw):
      ["hole 1 at (58, 0)", "plate's flat top", "3 mm chamfer"]),
     ({"outline": "fillet", "outline_size": 20.0, "step": None, "holes": [(58.0, 34.0, 1.0, None)]},
      ["hole 1", "20 mm fillet"]),
-    ({"holes": [(0.0, 0.0, 3.0)]}, ["hole 1 must be 4 values"]),                        # was an unpacking error
+    ({"holes": [(0.0, 0.0)]}, ["hole 1 must be (x, y, radius[, depth or None])"]),                             # was an unpacking error
     ({"holes": 5}, ["holes must be a list"]),
     ({"holes": [(0.0, 0.0, 3.0, "deep")]}, ["hole 1 depth 'deep'"]),
     ({"thickness": 0.8, "step": None, "holes": [], "bosses": [(0.0, 0.0, 3.0, 4.0)]}, ["thickness 0.8 mm", "must exceed 1 mm"]),
@@ -230,3 +230,12 @@ def test_footprint_gaps():
     # a disc on the core's corner (3, 1) has 2 - r to spare
     assert _layout.clearance_in_rounded_rect(_layout.circle(3, 1, 0.5), 5, 3, 2) == pytest.approx(1.5)
     assert _layout.clearance_in_rounded_rect(_layout.box(4, 2, 4.9, 2.9), 5, 3, 2) < 0  # in the rounded-off corner
+
+
+def test_a_three_value_hole_is_a_through_hole():
+    """TOML (the CLI's --param) has no None for a through hole's depth: (x, y, radius) is one."""
+    three = rs.cad.machined_part(0, holes=[(-40.0, 0.0, 3.0)])
+    four = rs.cad.machined_part(0, holes=[(-40.0, 0.0, 3.0, None)])
+    assert {c.name for c in three.features.circles} == {c.name for c in four.features.circles}
+    assert {"through_hole_1_top", "through_hole_1_bottom"} <= {c.name for c in three.features.circles}
+    np.testing.assert_array_equal(three.mesh.vertices, four.mesh.vertices)

@@ -102,8 +102,8 @@ def machined_design(seed: int) -> dict[str, Any]:
         The keyword arguments of :func:`machined_part` (mm, degrees): ``length``,
         ``width``, ``thickness``, ``outline`` ("plain", "chamfer" or "fillet") and
         ``outline_size``, ``step`` (width, depth) or None, ``slot`` (x, y, length, width,
-        depth, along) or None, ``holes`` [(x, y, radius, depth or None for through)],
-        ``bosses`` and ``cylinders`` [(x, y, radius, height)], ``wedge`` (x, y, length,
+        depth, along) or None, ``holes`` [(x, y, radius, depth or None for through); three
+        values (x, y, radius) are a through hole too], ``bosses`` and ``cylinders`` [(x, y, radius, height)], ``wedge`` (x, y, length,
         width, height) or None (rising towards +x), ``lying`` [(x, y, radius, length,
         along)].
 
@@ -216,6 +216,9 @@ def machined_part(seed: int = 0, *, segments: int = 64, **design: Any) -> BuiltP
         raise RangesimError(f"unknown machined_part parameter(s) {', '.join(unknown)}; known: {', '.join(base)}")
     segments = P.whole(segments, "machined_part: segments", 3, MAX_SEGMENTS)
     p = {**base, **design}
+    if isinstance(design.get("holes"), (list, tuple)):
+        # (x, y, radius) is a through hole: TOML (the CLI's --param) has no None for the depth
+        p["holes"] = [(*h, None) if isinstance(h, (list, tuple)) and len(h) == 3 else h for h in design["holes"]]
     for key in ("length", "width", "thickness"):
         P.number(p[key], f"machined_part: {key}", 0, MAX_PARAM_MAGNITUDE, lo_open=True, what="positive number",
                  unit="mm")
@@ -374,6 +377,8 @@ def _check_design(p: dict[str, Any], L: float, W: float, T: float) -> None:
             fail("slot", f"depth {depth:g} mm must be under the plate's {T:g} mm")
         rect("slot", x, y, *((length / 2, width / 2) if along == "x" else (width / 2, length / 2)))
     for k, hole in enumerate(items("holes"), start=1):
+        if not isinstance(hole, (list, tuple)) or len(hole) != 4:  # (three values were made four above)
+            fail(f"hole {k}", f"must be (x, y, radius[, depth or None]), got {hole!r:.80}")
         x, y, r = numbers(f"hole {k}", hole, 3, 4)
         depth = hole[3]
         positive(f"hole {k}", radius=r)
