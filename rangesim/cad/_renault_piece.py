@@ -192,27 +192,32 @@ def _check_layout(p: dict) -> None:
                                                for k in ("neck", "right", "left", "bump")),
                        ("right", "left"), ("right", "bump"), ("left", "bump"), ("neck", "bump")):
         _layout.clear(m, names[one], shapes[one], names[other], shapes[other])
-    for what, surface in (("right head", _head_surface(p, 1)), ("left head", _head_surface(p, -1)),
-                          ("bump", _bump_surface(p))):
-        z = np.asarray(surface.control_points)[..., 2]
-        rim = min(z[0].min(), z[-1].min(), z[:, 0].min(), z[:, -1].min())  # a clamped patch's border
+    rims = {key: _rim_height(surface) for key, surface in (("right", _head_surface(p, 1)),
+                                                            ("left", _head_surface(p, -1)),
+                                                            ("bump", _bump_surface(p)))}
+    for what, rim in (("right head", rims["right"]), ("left head", rims["left"]), ("bump", rims["bump"])):
         if rim <= T:
             raise RangesimError(f"{m}: the {what}'s rim falls to {rim:g} mm, not above the plate's top "
                                 f"(plate_thickness {T:g} mm); raise head_height / bump_height or thin the plate")
     neck_top = float(np.asarray(_neck_surface(p, T).control_points)[..., 2].max())
-    for key, head, side in (("right", heads[0], 1), ("left", heads[1], -1)):
+    for key, head in (("right", heads[0]), ("left", heads[1])):
         if _layout.gap(head, neck) >= 0:
             continue
         # the neck runs into the head: past its walls' corner edges, and below its rim
         for corner in head[1]:
             _layout.clear(m, f"the corner edge at ({corner[0]:g}, {corner[1]:g}) of {names[key]}",
                           _layout.circle(*corner, 0.0), names["neck"], neck)
-        z = np.asarray(_head_surface(p, side).control_points)[..., 2]
-        rim = min(z[0].min(), z[-1].min(), z[:, 0].min(), z[:, -1].min())
+        rim = rims[key]
         if rim <= neck_top:
             raise RangesimError(f"{m}: the neck (neck_height {p['neck_height']:g} mm) rises to {neck_top:g} mm where "
                                 f"it meets the {key} head, whose rim falls to {rim:g} mm: it would break through the "
                                 "head's rim; lower the neck or raise head_height")
+
+
+def _rim_height(surface: Any) -> float:
+    """The lowest point of a clamped B-spline patch's border (its control net's border), mm."""
+    z = np.asarray(surface.control_points)[..., 2]
+    return float(min(z[0].min(), z[-1].min(), z[:, 0].min(), z[:, -1].min()))
 
 
 def _grid_points(size: float, density: float) -> int:

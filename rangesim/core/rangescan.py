@@ -99,8 +99,8 @@ class RangeScan:
     sigma: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        # the checks live in one function so the writers can re-run them on a scan whose
-        # fields were reassigned after construction (see checked_scan)
+        # the writers re-run these checks on a scan whose fields were reassigned after
+        # construction (checked_scan: a copy made through this constructor)
         if self.meta is None:  # "no meta", as when the argument is left out
             self.meta = {}
         if not isinstance(self.meta, dict):

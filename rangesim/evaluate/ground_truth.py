@@ -176,7 +176,8 @@ def check_scene_of_scan(scan: RangeScan, scene: Any, R: np.ndarray, t: np.ndarra
     hit = (part >= 0) & np.isfinite(truth).all(axis=-1)
     if not hit.any():
         return
-    world = (truth[hit] - t) @ R  # camera -> world: x_w = R^T (x_c - t)
+    hits = truth[hit]
+    world = (hits - t) @ R  # camera -> world: x_w = R^T (x_c - t)
     k_hit, f_hit = part[hit], face[hit]
     on_face = np.zeros(k_hit.size, dtype=bool)
     for k in np.unique(k_hit):
@@ -192,7 +193,7 @@ def check_scene_of_scan(scan: RangeScan, scene: Any, R: np.ndarray, t: np.ndarra
         corner = np.asarray(mesh.vertices, dtype=np.float64)[np.asarray(mesh.faces)[f, 0]]
         off = np.abs(np.einsum("nk,nk->n", world[mine] - corner, normals))
         # plus float32's rounding of world coordinates far from the origin (Mitsuba's vertices)
-        tol = FACE_TOL_MM + FACE_TOL_REL * np.abs(truth[hit][mine, 2]) + 1e-6 * np.abs(world[mine]).max(axis=1)
+        tol = FACE_TOL_MM + FACE_TOL_REL * np.abs(hits[mine, 2]) + 1e-6 * np.abs(world[mine]).max(axis=1)
         on_face[mine] = off <= tol
     share = float(np.count_nonzero(on_face)) / on_face.size
     if share < MIN_ON_FACE:
