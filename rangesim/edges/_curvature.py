@@ -10,7 +10,7 @@ from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.curvature import curvature_edges, curvature_scan
 from rangesim.edges._curvature_chords import matched_creases
-from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities, with_gap_creases
 from rangesim.edges._grid import pad_last2, padded_view
 from rangesim.edges._matching_scale import matching_window
 from rangesim.edges._noise import (
@@ -239,7 +239,8 @@ def curvature(
         labels = np.where(mean > 0, EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
     labels[disc.rim] = RIM
     labels[jump] = EdgeLabel.JUMP
-    mask = (points | jump | disc.rim) & valid
+    offset = disc.offsets_at(jump | disc.rim)
+    mask = with_gap_creases(points | jump | disc.rim, labels, disc, offset) & valid
     labels[~mask] = 0
     params = {
         "rule": rule, "full_block": bool(full_block), "threshold": None if threshold is None else float(threshold),
@@ -249,7 +250,7 @@ def curvature(
     }
     params.update(info)
     return EdgeMap(mask=mask, labels=labels, strength=strength, direction=direction,
-                   method="curvature", params=params, offset=disc.offsets_at(jump | disc.rim))
+                   method="curvature", params=params, offset=offset)
 
 
 def _block_points(scan: Any, z: np.ndarray, valid: np.ndarray, disc: Any, geo: Any, window: int,

@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
+from rangesim.edges._gap_folds import FoldTest, gap_fold_test
 from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
 from rangesim.edges._noise import depth_quantum, predicted_noise
 from rangesim.edges._pair_kernels import pair_tests, search_gaps
@@ -28,7 +30,7 @@ from rangesim.edges._thinning import thin_staircases
 
 __all__ = [
     "JUMP_THRESHOLD", "QUANTUM_STEPS", "SIGMA_STEPS", "Discontinuities", "discontinuities", "empty_pixels",
-    "find_discontinuities", "segment_broken",
+    "find_discontinuities", "segment_broken", "with_gap_creases",
 ]
 
 #: the detectors' default jump rule, in pixel footprints: a step between neighbours deeper
@@ -69,6 +71,10 @@ SHADOW_DEPTH_PX = 1
 #: and was checked there and on the machined parts' tuning seeds 0-7 before the one run on
 #: the report seeds, so the Green Piece figures are not held out for it
 SPECK_PX = 6
+
+#: detectors mark the two ends of a gap that a face the scanner did not measure explains as
+#: creases (:mod:`~._gap_folds`)
+GAP_FOLDS = True
 
 #: RangeScan.status code of a pixel whose camera ray hit no surface
 #: (:class:`rangesim.core.constants.Status` ``MISS``; the value, so that this analysis
@@ -146,8 +152,13 @@ def discontinuities(
     empty, certain = empty_pixels(scan, np.isfinite(z))
     shadows = shadow_gaps(scan, z, geo.footprint, sigma, quantum) if geo.perspective else None
     unlit, caster_test = shadows if shadows is not None else (None, None)
+    # what the threshold adds to the jump rule's footprints (quanta, noise): once over a gap
+    fold_test = (gap_fold_test(scan, geo.footprint, float(jump_threshold),
+                               thr - np.float32(jump_threshold) * geo.footprint)
+                 if geo.perspective and GAP_FOLDS else None)
     disc = find_discontinuities(z, thr, max_search, perspective=geo.perspective, folds=True,
-                                empty=empty, empty_certain=certain, unlit=unlit, caster_test=caster_test)
+                                empty=empty, empty_certain=certain, unlit=unlit, caster_test=caster_test,
+                                fold_test=fold_test)
     disc.noise, disc.quantum = sigma, quantum
     # 1 px lines, as the truth's contours: every pixel beside a ragged gap is a jump, and
     # the inner corners of the 4-connected staircases that leaves match no true pixel
@@ -155,7 +166,37 @@ def discontinuities(
     kept = thin_staircases(marks, keep_corners=True)
     disc.occluding &= kept
     disc.rim &= kept
+    # a face the scanner did not measure: its near end a convex crease, its far end (the
+    # occluded side, thinned the same way) a concave one
+    far = disc.occluded & disc.gap_fold & ~disc.occluding & ~disc.rim
+    far &= thin_staircases(far, keep_corners=True)
+    creases = np.zeros(z.shape, np.uint8)
+    creases[far] = EdgeLabel.CONCAVE
+    creases[disc.occluding & disc.gap_fold] = EdgeLabel.CONVEX
+    disc.gap_creases = creases
     return disc, geo
+
+
+def with_gap_creases(mask: np.ndarray, labels: np.ndarray, disc: "Discontinuities",
+                     offset: np.ndarray | None = None) -> np.ndarray:
+    """A detector's edge mask with the gap creases of ``disc`` (:mod:`~._gap_folds`) added;
+    ``labels`` (H, W) uint8 set to their type in place (over a jump's), and ``offset``
+    (H, W, 2), if given, to the contour offsets of the far ends (the foot lies towards the
+    gap, as a jump's contour does).
+
+    Returns
+    -------
+    (H, W) bool
+    """
+    creases = disc.gap_creases
+    if creases is None or not creases.any():
+        return mask
+    at = creases > 0
+    labels[at] = creases[at]
+    if offset is not None:
+        far = np.flatnonzero(creases == EdgeLabel.CONCAVE)
+        offset.reshape(-1, 2)[far] = disc.contour.reshape(-1, 2)[far]
+    return mask | at
 
 
 @dataclass
@@ -197,6 +238,15 @@ class Discontinuities:
         the expected position of the contour it borders (:func:`contour_offsets`); 0
         elsewhere. A jump lies somewhere between the pixel's centre and its neighbour's
         across it, so the pixel's centre is half a pixel spacing off, always to one side.
+    gap_fold : (H, W) bool
+        Occluding and occluded pixels whose jump was found across a gap that a face the
+        scanner did not measure explains (:mod:`~._gap_folds`; ``fold_test`` of
+        :func:`find_discontinuities`).
+    gap_creases : (H, W) uint8 or None
+        Set by :func:`discontinuities`: EdgeLabel CONVEX at the near end of such a face
+        (an occluding pixel, which stays one), CONCAVE at its far end (occluded pixels,
+        thinned to 1 px lines), 0 elsewhere; the detectors add them
+        (:func:`with_gap_creases`).
     """
 
     occluding: np.ndarray
@@ -208,12 +258,16 @@ class Discontinuities:
     noise: np.ndarray | None = None
     contour: np.ndarray | None = None
     quantum: np.ndarray | None = None
+    gap_fold: np.ndarray | None = None
+    gap_creases: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.rim is None:
             self.rim = np.zeros(self.occluding.shape, bool)
         if self.contour is None:
             self.contour = np.zeros(self.occluding.shape + (2,), np.float32)
+        if self.gap_fold is None:
+            self.gap_fold = np.zeros(self.occluding.shape, bool)
 
     def offsets_at(self, where: np.ndarray) -> np.ndarray:
         """``contour`` at the pixels ``where`` (H, W) bool, 0 elsewhere: an
@@ -254,6 +308,7 @@ def find_discontinuities(
     empty_certain: bool = False,
     unlit: np.ndarray | None = None,
     caster_test: "CasterTest | None" = None,
+    fold_test: "FoldTest | None" = None,
 ) -> Discontinuities:
     """Jump edges: neighbours whose depths differ by more than a threshold; and rims.
 
@@ -348,6 +403,10 @@ def find_discontinuities(
         would have no caster between it and the light: that gap cannot be the surface
         continued (:mod:`~._self_shadow`; a through-hole whose inside the laser cannot
         reach). Without them such a pixel is no edge, as described above.
+    fold_test : optional
+        :func:`~._gap_folds.gap_fold_test` for this scan: a jump found across a gap of at
+        least 2 steps is a *gap fold* (``gap_fold``) where the test calls the gap a face the
+        scanner did not measure (:mod:`~._gap_folds`); its pixel stays occluding or occluded.
 
     Returns
     -------
@@ -388,6 +447,7 @@ def find_discontinuities(
     across = []  # (rows, cols, x, y): a vector towards the other side, any length; last wins
     nan_boundary = np.zeros((h, w), bool)
     rim = np.zeros((h, w), bool)
+    gap_fold = np.zeros((h, w), bool)
 
     ii, jj = nonzero2(has_invalid)
     if ii.size:
@@ -448,6 +508,14 @@ def find_discontinuities(
         nan_boundary[si[~ok], sj[~ok]] = True
         jump = occl | occd
         direction[si[jump], sj[jump]] = np.mod(np.arctan2(sy[jump], sx[jump]), np.pi)
+        if fold_test is not None:
+            f = np.flatnonzero(jump & (found_s >= 2))
+            # the found pixel, as the search stepped to it (float32 products, rounded half to even)
+            steps = found_s[f].astype(np.float32)
+            ai = si[f] + np.rint(sy[f] * steps).astype(np.intp)
+            aj = sj[f] + np.rint(sx[f] * steps).astype(np.intp)
+            f = f[fold_test(si[f], sj[f], z0[f], ai, aj, found_z[f])]
+            gap_fold[si[f], sj[f]] = True
         # either side of a jump across a gap: the contour lies towards the gap
         across.append((si[jump], sj[jump], sx[jump], sy[jump]))
         if shade is not None:
@@ -530,7 +598,8 @@ def find_discontinuities(
     if across:
         ci, cj, cx, cy = (np.concatenate(v) for v in zip(*across))
         contour[ci, cj] = contour_offsets(np.column_stack([cx, cy]), connectivity)
-    return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim, contour=contour)
+    return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim, contour=contour,
+                           gap_fold=gap_fold)
 
 
 def _continued(z0: np.ndarray, slope: np.ndarray, steps, perspective: bool) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.edges._differences import central_difference
-from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities, with_gap_creases
 from rangesim.edges._gradient_steps import step_smooth, tap5_sum
 from rangesim.edges._grid import shift
 from rangesim.edges._matching_scale import matching_window, ridge_sigma, rounding_gain, strided_responses
@@ -1257,6 +1257,6 @@ def gradient(
         "sigma": float(sigma), "max_search": int(max_search), "stride": stride,
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=bend, direction=direction,
-                   offset=offset,
+    mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
+    return EdgeMap(mask=mask, labels=labels, strength=bend, direction=direction, offset=offset,
                    method="gradient", params=params)

@@ -13,7 +13,7 @@ from skimage.morphology import thin as skeleton_thin
 from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities, with_gap_creases
 from rangesim.edges._grid import NEIGHBOURS
 from rangesim.edges._line_fit_sl import sl_creases
 from rangesim.edges._line_rings import ring_edges, ring_strides
@@ -436,8 +436,11 @@ def line_fit(
     }
     if window is not None:
         params.update(matching_window=int(window), bend_noise=float(sl_info["bend_noise"]))
+    offset = disc.offsets_at(disc.occluding | disc.rim)
+    edge = with_gap_creases(edge, labels, disc, offset)
+    strength[edge & valid] = 1.0
     return EdgeMap(mask=edge & valid, labels=labels, strength=strength, method="line_fit",
-                   params=params, offset=disc.offsets_at(disc.occluding | disc.rim))
+                   params=params, offset=offset)
 
 
 def _point_edges(xyz: np.ndarray, z: np.ndarray, valid: np.ndarray, stride: np.ndarray | None,

@@ -9,7 +9,7 @@ from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
 from rangesim.edges._differences import dot3, measured_normals
-from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities
+from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities, with_gap_creases
 from rangesim.edges._grid import AXES, pad_last2, padded_view
 from rangesim.edges._matching_scale import matching_window
 from rangesim.edges._noise import (
@@ -249,7 +249,7 @@ def normal(
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=strength,
+    return EdgeMap(mask=with_gap_creases(crease | jump | rim, labels, disc, offset) & valid, labels=labels, strength=strength,
                    method="normal", params=params, offset=offset)
 
 
@@ -306,7 +306,7 @@ def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_thresho
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise), "noise_gain": [float(g) for g in bends.gains],
     }
-    return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=bends.strength,
+    return EdgeMap(mask=with_gap_creases(crease | jump | rim, labels, disc, offset) & valid, labels=labels, strength=bends.strength,
                    method="normal", params=params, offset=offset)
 
 
@@ -337,5 +337,5 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=(crease | jump | rim) & valid, labels=labels, strength=res["strength"],
+    return EdgeMap(mask=with_gap_creases(crease | jump | rim, labels, disc, offset) & valid, labels=labels, strength=res["strength"],
                    method="normal", params=params, offset=offset)

@@ -1,0 +1,161 @@
+"""A face the scanner did not measure: creases at both ends of its gap, not a jump.
+
+Scenes of their own kind, not used to choose the rule (:mod:`rangesim.edges._gap_folds`):
+
+* the test's two criteria on analytic points: the face a gap would be is a jump when it is
+  steeper than the jump rule (cot 15 deg footprints of depth per footprint across), and a
+  shadow when its far end lies on the light's ray through its near end;
+* a block 60 x 40 x 20 mm on a table seen from 45 degrees above its front wall, with the
+  wall's pixels dropped out (a block matcher's lost wall): the four crease detectors mark
+  the wall's top as a convex crease and its foot as a concave one, as the ground truth does,
+  and no jump along it; the same gap called laser shadow (the scan's status) leaves the foot
+  unmarked, as does a detector without the rule.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import trimesh
+from scipy import ndimage
+
+import rangesim as rs
+import rangesim.edges._discontinuities as D
+from rangesim.core.constants import EdgeLabel, Status
+from rangesim.core.geometry import look_at
+from rangesim.edges import curvature, gradient, line_fit, normal
+from rangesim.edges._gap_folds import SHADOW_LINE_PX, gap_fold_test
+from tests.conftest import world_heights
+
+F = 500.0
+K = np.array([[F, 0, 64.0], [0, F, 48.0], [0, 0, 1]])
+SENSOR = {"mode": "geometric", "laser": {"baseline": 100.0, "sweep": "rotating"}, "range": {"near": 200, "far": 600}}
+COT15 = 1.0 / math.tan(math.radians(15.0))
+
+
+class _Scan:
+    """What the test reads of a scan: its camera, its light and (here) no status."""
+
+    def __init__(self, sensor=SENSOR):
+        self.meta = {"K": K, "sensor": sensor}
+        self.status = None
+
+
+def _pixel(x, y, z):
+    """(row, col) of the camera-frame point (x, y, z), mm, and the point itself."""
+    return np.array([y / z * F + 48.0 - 0.5]), np.array([x / z * F + 64.0 - 0.5])
+
+
+def test_a_face_steeper_than_the_jump_rule_is_a_jump():
+    fp = np.full((96, 128), 400.0 / F)            # footprint at 400 mm, mm
+    test = gap_fold_test(_Scan(), fp, COT15)
+    # B at pixel (40, 40), A 6 px down its column: the face joining them runs across the
+    # light's rays (the light is on the camera's x axis), so only the slope decides
+    bi, bj, ai, aj = np.array([40]), np.array([40]), np.array([46]), np.array([40])
+    lateral = 6 * fp[0, 0]
+    for excess, face in ((0.98, True), (1.02, False)):
+        za = np.array([400.0 - excess * COT15 * lateral])
+        assert test(bi, bj, np.array([400.0]), ai, aj, za)[0] == face, excess
+    # what the threshold adds (quanta, noise) is allowed once over the gap
+    test = gap_fold_test(_Scan(), fp, COT15, extra=1.0)
+    za = np.array([400.0 - COT15 * lateral - 0.9])
+    assert test(bi, bj, np.array([400.0]), ai, aj, za)[0]
+
+
+def test_a_gap_whose_ends_lie_on_one_ray_of_the_light_is_a_shadow():
+    fp = np.full((96, 128), 400.0 / F)
+    test = gap_fold_test(_Scan(), fp, COT15)
+    light = np.array([100.0, 0.0, 0.0])
+    a = np.array([-10.0, -5.0, 390.0])             # the near end (the would-be caster)
+    ray = (a - light) / np.linalg.norm(a - light)
+
+    def fold(b):
+        (ai, aj), (bi, bj) = _pixel(*a), _pixel(*b)
+        # the pixels' centres lie within half a pixel of the points: the test works on those
+        return test(np.rint(bi).astype(int), np.rint(bj).astype(int), np.array([b[2]]),
+                    np.rint(ai).astype(int), np.rint(aj).astype(int), np.array([a[2]])).item()
+
+    b_on = a + 8.0 * ray                           # the shadow's end, 8 mm on along the ray
+    assert not fold(b_on)
+    # moved off the ray by more than SHADOW_LINE_PX footprints and the pixels' rounding
+    # (across it, in y), it is a face
+    assert fold(b_on + np.array([0.0, (SHADOW_LINE_PX + 2.0) * fp[0, 0], 0.0]))
+
+
+def test_no_light_or_camera_no_test():
+    fp = np.ones((4, 4))
+    assert gap_fold_test(_Scan({"mode": "stage"}), fp, COT15) is None
+    blind = _Scan()
+    blind.meta = {"sensor": SENSOR}
+    assert gap_fold_test(blind, fp, COT15) is None
+
+
+# -- a block's front wall dropped out ------------------------------------------------------------
+
+BLOCK = (60.0, 40.0, 20.0)
+
+
+@pytest.fixture(scope="module")
+def block_scene():
+    block = trimesh.creation.box(BLOCK).apply_translation((0, 0, BLOCK[2] / 2))
+    table = trimesh.creation.box((400, 400, 2)).apply_translation((0, 0, -1))
+    return rs.load_scene([block, table])
+
+
+@pytest.fixture(scope="module")
+def block_scan(block_scene):
+    sensor = rs.load_sensor("white_scanner").with_params(
+        {"camera.width": 256, "camera.height": 192, "noise.sigma_px": 0.0, "noise.speckle_contrast": 0.0,
+         "noise.quantization_px": 0.0})
+    # 45 degrees above the front wall (its normal -y): the wall is seen at 45 degrees slant
+    eye = (0.0, -260.0, 270.0)
+    return rs.scan(block_scene, sensor, pose=look_at(eye, (0.0, 0.0, 10.0), up=(0, 0, 1)), seed=0)
+
+
+def _dropped(scan, status):
+    """The scan with its block's front-wall pixels unmeasured (``status``)."""
+    height = world_heights(scan)
+    front = (scan.part == 0) & scan.valid & (height > 0.3) & (height < BLOCK[2] - 0.3)
+    assert front.sum() > 300, "the wall should be seen"
+    valid = scan.valid & ~front
+    st = np.asarray(scan.status).copy()
+    st[front] = status
+    return dataclasses.replace(scan, valid=valid, depth=np.where(valid, scan.depth, np.nan).astype(scan.depth.dtype),
+                               status=st), front
+
+
+def _near(mask, where, px=1.5):
+    """Share of the ``where`` pixels with a ``mask`` pixel within ``px``."""
+    d = ndimage.distance_transform_edt(~mask)
+    return float((d[where] <= px).mean())
+
+
+@pytest.mark.parametrize("detector", [gradient, normal, line_fit, curvature])
+def test_a_dropped_wall_has_a_convex_top_and_a_concave_foot(detector, block_scan, block_scene, monkeypatch):
+    scan, front = _dropped(block_scan, Status.DROPOUT)
+    truth = rs.evaluate.visible_truth(scan, block_scene)
+    ring = ndimage.binary_dilation(front, np.ones((3, 3), bool)) & ~front
+    foot = (truth == EdgeLabel.CONCAVE) & ring
+    top = (truth == EdgeLabel.CONVEX) & ring
+    assert foot.sum() > 40 and top.sum() > 40, "the truth has both creases beside the gap"
+    # and no jump but at the wall's two ends, where the side walls turn away
+    assert ((truth == EdgeLabel.JUMP) & ring).sum() <= 4
+    em = detector(scan)
+    assert _near(em.mask & (em.labels == EdgeLabel.CONCAVE), foot) >= 0.8
+    assert _near(em.mask & (em.labels == EdgeLabel.CONVEX), top) >= 0.8
+    assert _near(em.mask & (em.labels == EdgeLabel.JUMP), top | foot) <= 0.2
+    # without the rule the foot is no edge and the top a jump
+    monkeypatch.setattr(D, "GAP_FOLDS", False)
+    bare = detector(scan)
+    assert _near(bare.mask, foot) <= 0.2
+    assert _near(bare.mask & (bare.labels == EdgeLabel.JUMP), top) >= 0.8
+
+
+def test_the_same_gap_in_laser_shadow_leaves_the_foot_alone(block_scan):
+    scan, front = _dropped(block_scan, Status.SHADOW)
+    ring = ndimage.binary_dilation(front, np.ones((3, 3), bool)) & ~front
+    table_side = ring & (world_heights(scan) < 1.0)
+    em = gradient(scan)
+    assert _near(em.mask, table_side, 1.0) <= 0.2
