@@ -2,9 +2,10 @@
 
 Scenes of their own kind, not used to choose the rule (:mod:`rangesim.edges._gap_folds`):
 
-* the test's two criteria on analytic points: the face a gap would be is a jump when it is
-  steeper than the jump rule (cot 15 deg footprints of depth per footprint across), and a
-  shadow when its far end lies on the light's ray through its near end;
+* the test's two criteria on analytic pairs of pixels: the face a gap would be is a jump when
+  it is steeper than the jump rule (cot 15 deg footprints of depth per footprint across), and
+  no face when a pixel the search crossed is anything but a dropout (shadow, no surface: a
+  recording's missing pixels, out of range);
 * a block 60 x 40 x 20 mm on a table seen from 45 degrees above its front wall, with the
   wall's pixels dropped out (a block matcher's lost wall): the four crease detectors mark
   the wall's top as a convex crease and its foot as a concave one, as the ground truth does,
@@ -26,70 +27,62 @@ import rangesim.edges._discontinuities as D
 from rangesim.core.constants import EdgeLabel, Status
 from rangesim.core.geometry import look_at
 from rangesim.edges import curvature, gradient, line_fit, normal
-from rangesim.edges._gap_folds import SHADOW_LINE_PX, gap_fold_test
+from rangesim.edges._gap_folds import STATUS_DROPOUT, gap_fold_test
 from tests.conftest import world_heights
 
 F = 500.0
 K = np.array([[F, 0, 64.0], [0, F, 48.0], [0, 0, 1]])
-SENSOR = {"mode": "geometric", "laser": {"baseline": 100.0, "sweep": "rotating"}, "range": {"near": 200, "far": 600}}
 COT15 = 1.0 / math.tan(math.radians(15.0))
 
 
 class _Scan:
-    """What the test reads of a scan: its camera, its light and (here) no status."""
+    """What the test reads of a scan: its status (every pixel a dropout here)."""
 
-    def __init__(self, sensor=SENSOR):
-        self.meta = {"K": K, "sensor": sensor}
-        self.status = None
+    def __init__(self, shape=(96, 128)):
+        self.meta = {"K": K}
+        self.status = np.full(shape, STATUS_DROPOUT, np.uint8)
 
 
-def _pixel(x, y, z):
-    """(row, col) of the camera-frame point (x, y, z), mm, and the point itself."""
-    return np.array([y / z * F + 48.0 - 0.5]), np.array([x / z * F + 64.0 - 0.5])
+def _call(test, b, a, zb, za):
+    """The test on the pair B (row, col) -> A found along the straight line between them."""
+    (bi, bj), (ai, aj) = b, a
+    steps = max(abs(ai - bi), abs(aj - bj))
+    return test(np.array([bi]), np.array([bj]), np.array([zb]), np.array([ai]), np.array([aj]), np.array([za]),
+                np.array([(ai - bi) / steps], np.float32), np.array([(aj - bj) / steps], np.float32),
+                np.array([float(steps)])).item()
 
 
 def test_a_face_steeper_than_the_jump_rule_is_a_jump():
     fp = np.full((96, 128), 400.0 / F)            # footprint at 400 mm, mm
     test = gap_fold_test(_Scan(), fp, COT15)
-    # B at pixel (40, 40), A 6 px down its column: the face joining them runs across the
-    # light's rays (the light is on the camera's x axis), so only the slope decides
-    bi, bj, ai, aj = np.array([40]), np.array([40]), np.array([46]), np.array([40])
-    lateral = 6 * fp[0, 0]
+    lateral = 6 * fp[0, 0]                        # B at (40, 40), A 6 px down its column
     for excess, face in ((0.98, True), (1.02, False)):
-        za = np.array([400.0 - excess * COT15 * lateral])
-        assert test(bi, bj, np.array([400.0]), ai, aj, za)[0] == face, excess
+        assert _call(test, (40, 40), (46, 40), 400.0, 400.0 - excess * COT15 * lateral) == face, excess
+    # diagonally, the lateral extent is the pixels' distance (6 sqrt 2)
+    assert _call(test, (40, 40), (46, 46), 400.0, 400.0 - 1.4 * COT15 * lateral)
     # what the threshold adds (quanta, noise) is allowed once over the gap
     test = gap_fold_test(_Scan(), fp, COT15, extra=1.0)
-    za = np.array([400.0 - COT15 * lateral - 0.9])
-    assert test(bi, bj, np.array([400.0]), ai, aj, za)[0]
+    assert _call(test, (40, 40), (46, 40), 400.0, 400.0 - COT15 * lateral - 0.9)
+    assert not _call(test, (40, 40), (46, 40), 400.0, 400.0 - COT15 * lateral - 1.1)
 
 
-def test_a_gap_whose_ends_lie_on_one_ray_of_the_light_is_a_shadow():
+@pytest.mark.parametrize("status", [Status.SHADOW, Status.MISS, Status.OUT_OF_RANGE, Status.VALID])
+def test_a_gap_that_is_not_all_dropout_is_no_face(status):
     fp = np.full((96, 128), 400.0 / F)
-    test = gap_fold_test(_Scan(), fp, COT15)
-    light = np.array([100.0, 0.0, 0.0])
-    a = np.array([-10.0, -5.0, 390.0])             # the near end (the would-be caster)
-    ray = (a - light) / np.linalg.norm(a - light)
-
-    def fold(b):
-        (ai, aj), (bi, bj) = _pixel(*a), _pixel(*b)
-        # the pixels' centres lie within half a pixel of the points: the test works on those
-        return test(np.rint(bi).astype(int), np.rint(bj).astype(int), np.array([b[2]]),
-                    np.rint(ai).astype(int), np.rint(aj).astype(int), np.array([a[2]])).item()
-
-    b_on = a + 8.0 * ray                           # the shadow's end, 8 mm on along the ray
-    assert not fold(b_on)
-    # moved off the ray by more than SHADOW_LINE_PX footprints and the pixels' rounding
-    # (across it, in y), it is a face
-    assert fold(b_on + np.array([0.0, (SHADOW_LINE_PX + 2.0) * fp[0, 0], 0.0]))
+    scan = _Scan()
+    assert _call(gap_fold_test(scan, fp, COT15), (40, 40), (47, 44), 400.0, 396.0)
+    # one pixel on the search's path of another kind (a fractional direction: row 40 +
+    # rint(7/4 k)); one beside it, off the path, does not count
+    scan.status[42, 41] = status
+    assert not _call(gap_fold_test(scan, fp, COT15), (40, 40), (47, 44), 400.0, 396.0)
+    scan.status[42, 41], scan.status[42, 42] = STATUS_DROPOUT, status
+    assert _call(gap_fold_test(scan, fp, COT15), (40, 40), (47, 44), 400.0, 396.0)
 
 
-def test_no_light_or_camera_no_test():
-    fp = np.ones((4, 4))
-    assert gap_fold_test(_Scan({"mode": "stage"}), fp, COT15) is None
-    blind = _Scan()
-    blind.meta = {"sensor": SENSOR}
-    assert gap_fold_test(blind, fp, COT15) is None
+def test_no_status_no_test():
+    bare = _Scan((4, 4))
+    bare.status = None
+    assert gap_fold_test(bare, np.ones((4, 4)), COT15) is None
 
 
 # -- a block's front wall dropped out ------------------------------------------------------------

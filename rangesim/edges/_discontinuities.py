@@ -26,7 +26,7 @@ from rangesim.edges._noise import depth_quantum, predicted_noise
 from rangesim.edges._pair_kernels import pair_tests, search_gaps
 from rangesim.edges._scan_access import PixelGeometry, pixel_geometry
 from rangesim.edges._self_shadow import CasterTest, shadow_gaps
-from rangesim.edges._thinning import thin_staircases
+from rangesim.edges._thinning import drop_specks, thin_staircases
 
 __all__ = [
     "JUMP_THRESHOLD", "QUANTUM_STEPS", "SIGMA_STEPS", "Discontinuities", "discontinuities", "empty_pixels",
@@ -170,9 +170,12 @@ def discontinuities(
     # occluded side, thinned the same way) a concave one
     far = disc.occluded & disc.gap_fold & ~disc.occluding & ~disc.rim
     far &= thin_staircases(far, keep_corners=True)
+    # an end of a pixel or two is a speck of dropout (noise over the threshold), not a wall's
+    far = drop_specks(far, far)
     creases = np.zeros(z.shape, np.uint8)
     creases[far] = EdgeLabel.CONCAVE
-    creases[disc.occluding & disc.gap_fold] = EdgeLabel.CONVEX
+    near = disc.occluding & disc.gap_fold
+    creases[drop_specks(near, near)] = EdgeLabel.CONVEX
     disc.gap_creases = creases
     return disc, geo
 
@@ -514,7 +517,7 @@ def find_discontinuities(
             steps = found_s[f].astype(np.float32)
             ai = si[f] + np.rint(sy[f] * steps).astype(np.intp)
             aj = sj[f] + np.rint(sx[f] * steps).astype(np.intp)
-            f = f[fold_test(si[f], sj[f], z0[f], ai, aj, found_z[f])]
+            f = f[fold_test(si[f], sj[f], z0[f], ai, aj, found_z[f], sy[f], sx[f], found_s[f])]
             gap_fold[si[f], sj[f]] = True
         # either side of a jump across a gap: the contour lies towards the gap
         across.append((si[jump], sj[jump], sx[jump], sy[jump]))

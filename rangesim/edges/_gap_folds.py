@@ -1,32 +1,35 @@
 """Gaps that a steep face the scanner did not measure explains: creases at both ends, not a jump.
 
-A gap of unmeasured pixels between a near surface (A) and a far one (B) is either an
-occlusion or a face. Across an occlusion the camera looks past A's edge onto B; the pixels
-between are missing because the light did not reach them (a shadow, whose end on B lies on
-the light's ray grazing A) or because the matcher lost them beside the step. Across a face,
-the camera looks at a wall joining A to B that the scanner did not measure (a wall seen at
-60-75 degrees, which a block matcher's window cannot resolve and a stripe dims on): the
-truth there is two creases, convex at A (the top of the wall) and concave at B (its foot),
-and no jump at all (:func:`rangesim.evaluate.ground_truth_edges` marks occluding contours
-only where the surface turns away from the camera).
+A gap of unmeasured pixels between a near surface and a far one is either an occlusion or a
+face. Across an occlusion the camera looks past the near surface's edge onto the far one;
+the pixels between are missing because the light did not reach them (a shadow) or because a
+block matcher lost them beside the step. Across a face, the camera looks at a wall joining
+the two that the scanner did not measure (a wall seen at 45-75 degrees that a block matcher's
+window cannot resolve, or whose return dropped out): the truth there is two creases, convex at
+the near end (the top of the wall) and concave at the far end (its foot), and no jump at all
+(:func:`rangesim.evaluate.ground_truth_edges` marks occluding contours only where the surface
+turns away from the camera).
 
-Which it is follows from the two measured points alone. The face the gap would be joins
-A's point to B's: over the gap's lateral extent (the pixels between them times their
-footprint) its depth changes by ``|z_A - z_B|``. A face steeper than the jump rule (seen at
-more than 75 degrees slant, :data:`~._discontinuities.JUMP_THRESHOLD` footprints a pixel)
-is what the truth calls an occluding contour, and stays a jump; so does a gap whose two
-ends lie on one ray of the light (a shadow: the ray grazing A lands on B, within
-:data:`SHADOW_LINE_PX` footprints), and one that holds pixels the scan's status calls shadow
-(a shadow's far end is where the light comes back, beyond a face turned from the light
-too, not the face's foot; a block matcher widens a projector shadow by the pixels it loses
-beside it, which moves its ends off the ray). What is left is a face: its near end is a convex
-crease and its far end a concave one (the near surface continued passes in front of B,
-the far one behind A; :func:`~._discontinuities.find_discontinuities` calls them occluding
-and occluded).
+The test (:func:`gap_fold_test`) takes the gap for a face when all of these hold:
 
-The rule needs the camera (``meta["K"]``) and the light (``meta["sensor"]``,
-:func:`rangesim.core.light.light_sources`): without them a shadow's gap cannot be told
-from a face's, and the test is not made.
+* the face joining the two measured points is no steeper than the jump rule: over the gap's
+  lateral extent (the pixels between them times their footprint) its depth changes by at
+  most cot 15 deg footprints a footprint (:data:`~._discontinuities.JUMP_THRESHOLD`; plus,
+  once, what the jump threshold adds for quanta and noise). A steeper one is what the truth
+  calls an occluding contour;
+* every pixel of the gap, as the search crossed it, is one the scan's status calls a dropout
+  (a surface the camera saw and the scanner did not measure): a shadow's gap is not a face
+  (its far end is where the light comes back, beyond a face turned from the light too, not
+  the face's foot), nor is a gap that saw no surface.
+
+So it needs a scan that says why its pixels are missing: a synthetic one. A recording's
+status says only that a return is missing (MISS), and there the two ends of a shadow's gap
+look like a face's: the light's path from the gap beside the far end grazes the near
+surface's edge (that is where the shadow ends), so neither the ray through the two ends nor
+a march towards the light tells them apart within a pixel's tolerance (tried: on a laser scan
+with its shadows unmarked, most shadow gaps passed as faces). It cannot tell a face from
+pixels a block matcher lost beside a true occluding step where no shadow falls (the far
+surface on the projector's side of the step) either: the two measured ends look alike.
 """
 from __future__ import annotations
 
@@ -35,31 +38,27 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.core.light import light_sources
+#: RangeScan.status of a pixel whose surface the camera saw and the scanner did not measure
+#: (:class:`rangesim.core.constants.Status` DROPOUT; the value, so that this analysis module
+#: needs nothing from the sensor layer)
+STATUS_DROPOUT = 3
 
-#: a gap's two ends lie on one ray of the light (a shadow) when B's point lies within this
-#: many footprints of the ray from the light through A's point: each end's pixel centre is
-#: up to half a pixel from the edge it stands for, and a block matcher moves the near end by
-#: a pixel or two more
-SHADOW_LINE_PX = 2.0
-
-#: FoldTest(bi, bj, zb, ai, aj, za) -> (N,) bool: True where the gap between the measured
-#: pixels B (rows bi, cols bj, depth zb, mm) and A (ai, aj, za) is a face the scanner did
-#: not measure
-#: RangeScan.status of a pixel in the light's shadow (:class:`rangesim.core.constants.Status`)
-STATUS_SHADOW = 2
-
-FoldTest = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+#: FoldTest(bi, bj, zb, ai, aj, za, sy, sx, steps) -> (N,) bool: True where the gap between
+#: the measured pixel (bi, bj) at depth zb (mm), which searched, and the measured pixel
+#: (ai, aj) at za it found ``steps`` steps of (sy, sx) away (the search of
+#: :func:`~._discontinuities.find_discontinuities`: pixel ``rint((sy, sx) * k)``, float32
+#: products) is a face the scanner did not measure
+FoldTest = Callable[..., np.ndarray]
 
 
 def gap_fold_test(scan: Any, footprint: np.ndarray, slope_limit: float, extra: np.ndarray | float = 0.0
                   ) -> FoldTest | None:
-    """The test of :mod:`._gap_folds` for one scan; None where the scan lacks its camera or light.
+    """The test of :mod:`._gap_folds` for one scan; None where the scan has no status.
 
     Parameters
     ----------
     scan : RangeScan
-        Needs ``meta["K"]`` (depth is camera z) and ``meta["sensor"]`` (where the light is).
+        Needs ``status``: gaps of DROPOUT pixels only can be faces (a recording's are MISS).
     footprint : (H, W) float
         Pixel footprint, mm.
     slope_limit : float
@@ -73,45 +72,27 @@ def gap_fold_test(scan: Any, footprint: np.ndarray, slope_limit: float, extra: n
     -------
     FoldTest or None
     """
-    meta = getattr(scan, "meta", None) or {}
-    K, sensor = meta.get("K"), meta.get("sensor")
-    if K is None or not isinstance(sensor, dict) or light_sources(np.zeros((1, 3)), sensor) is None:
-        return None
-    K = np.asarray(K, np.float64)
-    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     fp = np.asarray(footprint, np.float64)
     status = getattr(scan, "status", None)
-    shadow = (np.asarray(status) == STATUS_SHADOW) if status is not None and np.shape(status) == fp.shape else None
+    if status is None or np.shape(status) != fp.shape:
+        return None
+    dropout = np.asarray(status) == STATUS_DROPOUT
     extra_img = np.broadcast_to(np.asarray(extra, np.float64), fp.shape)
 
-    def points(rows: np.ndarray, cols: np.ndarray, depth: np.ndarray) -> np.ndarray:
-        return np.column_stack([(cols + 0.5 - cx) / fx * depth, (rows + 0.5 - cy) / fy * depth, depth])
-
-    def test(bi, bj, zb, ai, aj, za):
+    def test(bi, bj, zb, ai, aj, za, sy, sx, steps):
         zb, za = np.asarray(zb, np.float64), np.asarray(za, np.float64)
+        sy, sx = np.asarray(sy, np.float32), np.asarray(sx, np.float32)
+        steps = np.asarray(steps).astype(np.intp)
         lateral = np.hypot(ai - bi, aj - bj) * 0.5 * (fp[bi, bj] + fp[ai, aj])
         allowed = slope_limit * lateral + np.maximum(extra_img[bi, bj], extra_img[ai, aj])
         face = np.abs(za - zb) <= allowed
-        if shadow is not None:
-            # a gap with shadow in it is a shadow's: its far end is where the light comes
-            # back (beyond a face turned from the light, too), not the face's foot. The gap's
-            # pixels as the search stepped over them (one pixel along its larger axis a step)
-            steps = np.maximum(np.abs(ai - bi), np.abs(aj - bj))
-            di, dj = (ai - bi) / steps, (aj - bj) / steps
-            for k in range(1, int(steps.max(initial=0))):
-                on = face & (k < steps)
-                gi = bi[on] + np.rint(k * di[on]).astype(np.intp)
-                gj = bj[on] + np.rint(k * dj[on]).astype(np.intp)
-                face[on] = ~shadow[gi, gj]
-        if face.any():
-            b, a = points(bi, bj, zb), points(ai, aj, za)
-            # the light's ray through A (the edge that would cast the shadow) and B's
-            # distance from it
-            light = light_sources(a, sensor)
-            ray = a - light
-            ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-            off = np.linalg.norm(np.cross(b - light, ray), axis=1)
-            face &= off > SHADOW_LINE_PX * np.maximum(fp[bi, bj], fp[ai, aj])
+        # the gap's pixels as the search crossed them: rint((sy, sx) * k), float32 products
+        for k in range(1, int(steps.max(initial=0))):
+            on = np.flatnonzero(face & (k < steps))
+            kk = np.float32(k)
+            gi = bi[on] + np.rint(sy[on] * kk).astype(np.intp)
+            gj = bj[on] + np.rint(sx[on] * kk).astype(np.intp)
+            face[on] = dropout[gi, gj]
         return face
 
     return test

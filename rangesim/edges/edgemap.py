@@ -75,7 +75,9 @@ class EdgeMap:
         (:func:`~rangesim.edges._discontinuities.contour_offsets`). ``gradient`` and ``normal``
         also set it at their crease pixels, to the peak of the crease response across the
         line (:func:`~rangesim.edges._thinning.ridge_offsets`, within +-0.5 px); the other
-        detectors leave creases at 0. The feature finders fit their circles, ellipses and
+        detectors leave creases at 0, but for the far end of a wall the scanner did not
+        measure (:mod:`~rangesim.edges._gap_folds`), which every detector but pcl_organized
+        places as a jump's contour, towards the gap. The feature finders fit their circles, ellipses and
         lines to the edge pixels moved by it. None: the pixel centres.
     """
 
