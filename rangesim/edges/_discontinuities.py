@@ -168,15 +168,16 @@ def discontinuities(
     disc.rim &= kept
     # a face the scanner did not measure: its near end a convex crease, its far end (the
     # occluded side, thinned the same way) a concave one
-    far = disc.occluded & disc.gap_fold & ~disc.occluding & ~disc.rim
-    far &= thin_staircases(far, keep_corners=True)
-    # an end of a pixel or two is a speck of dropout (noise over the threshold), not a wall's
-    far = drop_specks(far, far)
-    creases = np.zeros(z.shape, np.uint8)
-    creases[far] = EdgeLabel.CONCAVE
-    near = disc.occluding & disc.gap_fold
-    creases[drop_specks(near, near)] = EdgeLabel.CONVEX
-    disc.gap_creases = creases
+    if disc.gap_fold.any():
+        far = disc.occluded & disc.gap_fold & ~disc.occluding & ~disc.rim
+        far &= thin_staircases(far, keep_corners=True)
+        # an end of a pixel or two is a speck of dropout (noise over the threshold), not a wall's
+        far = drop_specks(far, far)
+        creases = np.zeros(z.shape, np.uint8)
+        creases[far] = EdgeLabel.CONCAVE
+        near = disc.occluding & disc.gap_fold
+        creases[drop_specks(near, near)] = EdgeLabel.CONVEX
+        disc.gap_creases = creases
     return disc, geo
 
 

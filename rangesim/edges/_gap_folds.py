@@ -89,6 +89,8 @@ def gap_fold_test(scan: Any, footprint: np.ndarray, slope_limit: float, extra: n
         # the gap's pixels as the search crossed them: rint((sy, sx) * k), float32 products
         for k in range(1, int(steps.max(initial=0))):
             on = np.flatnonzero(face & (k < steps))
+            if on.size == 0:
+                break
             kk = np.float32(k)
             gi = bi[on] + np.rint(sy[on] * kk).astype(np.intp)
             gj = bj[on] + np.rint(sx[on] * kk).astype(np.intp)
