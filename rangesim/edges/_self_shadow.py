@@ -94,7 +94,6 @@ def shadow_gaps(scan: Any, z: np.ndarray, footprint: np.ndarray, sigma: np.ndarr
     unlit = ~valid & (np.asarray(status) == Status.SHADOW)
     if not unlit.any():
         return None
-    K = np.asarray(K, np.float64).reshape(3, 3)  # a scan may hold K flat (9 values)
     tolerance = footprint if sigma is None else footprint + np.float32(2.0 * np.sqrt(2.0)) * sigma
     if quantum is not None:
         tolerance = tolerance + quantum
@@ -134,7 +133,7 @@ def uncast(z: np.ndarray, thr: np.ndarray, K: np.ndarray, sensor: dict, rows: np
         True where no measured pixel stands in front of the path to the source.
     """
     depth = np.asarray(depth, np.float64)
-    K = np.asarray(K, np.float64).reshape(3, 3)
+    K = np.asarray(K, np.float64).reshape(3, 3)  # a scan may hold K flat (9 values)
     fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     points = np.column_stack([(cols + 0.5 - cx) / fx * depth, (rows + 0.5 - cy) / fy * depth, depth])
     sources = light_sources(points, sensor)
