@@ -260,29 +260,31 @@ def test_outer_outline_holds_every_side_of_a_rim():
 
 
 def test_compiled_helpers_match_the_numpy_they_replace():
-    # the moments (float32 and float64, as np.add.reduceat sums them: first row plus NumPy's
-    # pairwise sum), the order of the pieces by (curve, count, sum) (np.lexsort), the curves
-    # (scipy's connected components of the links) and the outlines (ndimage's dilation and labels)
+    # the moments (float64 sums point by point: within round-off of exact sums, and closer
+    # to them than the float32 rows NumPy's batched form summed), the order of the pieces by
+    # (curve, count, sum) (np.lexsort), the curves (scipy's connected components of the
+    # links) and the outlines (ndimage's dilation and labels)
+    import math
+
     from scipy import ndimage
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     from rangesim.core.conics import conic_monomials
-    from rangesim.features._conic_kernels import _reduce_rows
     from rangesim.features._ellipse_kernels import _by_curve_count_sum, _piece_moments, curve_labels, outline_points
 
     rng = np.random.default_rng(3)
     xy = rng.integers(0, 400, (3000, 2)).astype(float) + rng.uniform(-0.5, 0.5, (3000, 2))
-    buf, got = np.empty((3000, 15), np.float32), np.empty(15, np.float32)
+    got = np.empty(15)
     for n in (1, 5, 8, 127, 129, 300, 2999):
         pts, frame = rng.integers(0, 3000, n), np.array([rng.uniform(0, 400), rng.uniform(0, 400), 64.0])
-        _piece_moments(xy, pts, 0, n, frame, buf, got)
-        q = ((xy[pts] - frame[:2]) / frame[2]).astype(np.float32)
-        assert np.array_equal(got, np.add.reduceat(conic_monomials(q), [0], axis=0)[0])
-        w = rng.normal(size=(n, 15)) * 1e3
-        out = np.empty(15)
-        _reduce_rows(w, 0, n, out)
-        assert np.array_equal(out, np.add.reduceat(w, [0], axis=0)[0])
+        _piece_moments(xy, pts, 0, n, frame, got)
+        rows = conic_monomials((xy[pts] - frame[:2]) / frame[2])
+        exact = np.array([math.fsum(c) for c in rows.T])
+        scale = np.abs(rows).sum(0)
+        assert np.all(np.abs(got - exact) <= 1e-13 * scale)
+        float32 = np.add.reduceat(conic_monomials(((xy[pts] - frame[:2]) / frame[2]).astype(np.float32)), [0])[0]
+        assert np.abs(got - exact).max() <= np.abs(float32 - exact).max()
 
     curve, cnt, psum = rng.integers(0, 30, 2000), rng.integers(5, 9, 2000), rng.integers(0, 4, 2000)
     curve[:300] = 7  # a curve of many pieces (merge sorts)
@@ -384,8 +386,8 @@ def test_inner_outlines_match_ndimage_regions():
 
 
 def test_grouped_frames_and_sampson_pairs_match_numpy():
-    # fit_conics_grouped's centroids, scales and moments (float64 reduceat sums with the zero
-    # row after the last group; empty groups too) and the Sampson distances, to the bits
+    # fit_conics_grouped's centroids, scales and moments (empty groups too; the moments to
+    # round-off, as they are summed point by point) and the Sampson distances, to the bits
     from rangesim.core import conics as C
     from rangesim.features._conic_kernels import grouped_frames, sampson_pairs
 
@@ -402,9 +404,13 @@ def test_grouped_frames_and_sampson_pairs_match_numpy():
         s = np.maximum(np.maximum.reduceat(np.abs(q).max(1), np.minimum(np.searchsorted(g2, np.arange(G)), len(g2) - 1)),
                        1e-9)
         s[n == 0] = 1.0
-        mom = C._group_sums(C.conic_monomials(q / s[g2, None]), g2, G)
+        rows = C.conic_monomials(q / s[g2, None])
+        mom = C._group_sums(rows, g2, G)
         m2, s2, mom2 = grouped_frames(xy, pt, keep, group, G)
-        assert np.array_equal(m2, m) and np.array_equal(s2, s) and np.array_equal(mom2, mom)
+        np.testing.assert_allclose(m2, m, rtol=1e-13)
+        np.testing.assert_allclose(s2, s, rtol=1e-12)
+        assert np.all(np.abs(mom2 - mom) <= 1e-12 * C._group_sums(np.abs(rows), g2, G) + 1e-300)
+        assert np.array_equal(mom2[n == 0], np.zeros(((n == 0).sum(), 15)))
         conics = rng.normal(size=(G, 6))
         assert np.array_equal(sampson_pairs(conics, group, xy, pt), C.sampson_distance_rows(conics[group], xy[pt]))
 

@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from rangesim.core._conic_kernels import direct_fit, ellipse_row
+from rangesim.features._conic_kernels import _add_moments
 from rangesim.features._ellipse_kernels import _find, _sampson, _union, fit_groups, pixel_index
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
@@ -228,28 +229,6 @@ def _simplify(px, py, lo, hi, tol, keep, stack):  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT)
-def _add_moments(mom, x, y):  # pragma: no cover - compiled
-    """Add the monomials of (x, y) to the moments ``mom`` (15,) (:func:`frame_moments`' order)."""
-    x2, y2 = x * x, y * y
-    x3, y3 = x2 * x, y2 * y
-    mom[0] += 1.0
-    mom[1] += y
-    mom[2] += y2
-    mom[3] += y3
-    mom[4] += y3 * y
-    mom[5] += x
-    mom[6] += x * y
-    mom[7] += x * y2
-    mom[8] += x * y3
-    mom[9] += x2
-    mom[10] += x2 * y
-    mom[11] += x2 * y2
-    mom[12] += x3
-    mom[13] += x3 * y
-    mom[14] += x3 * x
-
-
-@numba.njit(**_JIT)
 def _off_fit(conic, px, py, verts, j0, j, hi, cut_dist):  # pragma: no cover - compiled
     """Whether a vertex ``verts[j0 .. j]`` or a segment's middle point lies over ``cut_dist``
     px (Sampson distance) off ``conic``."""
@@ -401,7 +380,7 @@ def cut_chains(xy, order, cstart, tol, max_turn, min_inflection, max_ratio, min_
 @numba.njit(**_JIT)
 def frame_moments(xy, pts, lo, n, frame, mom):  # pragma: no cover - compiled
     """The frame (centroid, largest coordinate offset, at least 1 px) and float64 moments
-    (:func:`~._conic_kernels._monomials`' order) of the points ``pts[lo:lo + n]``."""
+    (:func:`~._conic_kernels._add_moments`) of the points ``pts[lo:lo + n]``."""
     sx, sy = 0.0, 0.0
     for r in range(lo, lo + n):
         sx += xy[pts[r], 0]

@@ -5,11 +5,9 @@ coverage and the claims (:mod:`._arc_ellipses`).
 Each stage is one compiled call whose loops follow the edge points and the hypotheses: the
 batched NumPy form it replaces cost a few hundred array calls per map (sorts, uniques,
 bincounts, fancy indexing), most of the finder's time on maps of a few thousand points. The
-arithmetic is the NumPy form's, in its order (the same float32 and float64 sums, the same
-pairwise summation, the same stable orders of pieces and hypotheses), so the ellipses are the
-same; the only difference is ``atan2`` (libm here; NumPy's SIMD form may differ in the last
-bit), which could move a point across a bin edge of the arc or coverage counts only at an
-exact tie.
+orders are the NumPy form's (the same stable orders of pieces and hypotheses); the moments of
+the fits are summed point by point in float64 (:func:`~._conic_kernels._add_moments`), not as
+the NumPy form's float32 rows and pairwise sums, which moves a fit by round-off only.
 """
 from __future__ import annotations
 
@@ -17,7 +15,7 @@ import numba
 import numpy as np
 
 from rangesim.core._conic_kernels import direct_fit, ellipse_row
-from rangesim.features._conic_kernels import _monomials, _reduce_rows, band_moments, grouped_frames
+from rangesim.features._conic_kernels import _add_moments, band_moments, grouped_frames
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 TWO_PI = 2 * np.pi
@@ -251,14 +249,14 @@ def fit_groups(xy, pts, sa, na, sb, nb, mom, frame, max_rms, min_inliers, ax_lo,
 
 
 @numba.njit(**_JIT)
-def _piece_moments(xy, pts, start, cnt, frame, buf, out):  # pragma: no cover - compiled
-    """Float32 moments of the points ``pts[start:start + cnt]`` in ``frame`` (x, y, scale)
-    into ``out`` (15,): :func:`~._conic_kernels.piece_moments` of one piece, to the bits
-    (``buf`` (>= cnt, 15) float32 scratch)."""
+def _piece_moments(xy, pts, start, cnt, frame, out):  # pragma: no cover - compiled
+    """Float64 moments of the points ``pts[start:start + cnt]`` in ``frame`` (x, y, scale)
+    into ``out`` (15,)."""
+    out[:] = 0.0
+    f0, f1, f2 = frame[0], frame[1], frame[2]
     for r in range(cnt):
         p = pts[start + r]
-        _monomials(buf, r, np.float32((xy[p, 0] - frame[0]) / frame[2]), np.float32((xy[p, 1] - frame[1]) / frame[2]))
-    _reduce_rows(buf, 0, cnt, out)
+        _add_moments(out, (xy[p, 0] - f0) / f2, (xy[p, 1] - f1) / f2)
 
 
 @numba.njit(**_JIT)
@@ -303,13 +301,11 @@ def _by_curve_count_sum(curve, cnt, psum, P, n_curves):  # pragma: no cover - co
 
 
 @numba.njit(**_JIT)
-def _moments_of(xy, pts, p, start, cnt, frame, buf, out32, mom, have):  # pragma: no cover - compiled
-    """The float32 moments of piece ``p`` into ``mom[p]`` (float64), once (``have``)."""
+def _moments_of(xy, pts, p, start, cnt, frame, mom, have):  # pragma: no cover - compiled
+    """The moments of piece ``p`` into ``mom[p]``, once (``have``)."""
     if have[p]:
         return
-    _piece_moments(xy, pts, start[p], cnt[p], frame[p], buf, out32)
-    for k in range(15):
-        mom[p, k] = out32[k]
+    _piece_moments(xy, pts, start[p], cnt[p], frame[p], mom[p])
     have[p] = True
 
 
@@ -382,15 +378,9 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
             prev_b = b
         at += N
     small = max(5, min_points // 3)
-    # moments (float32, as the batched form sums them), of the pieces fitted only: the first
-    # copies, then the pieces of pairs
+    # moments of the pieces fitted only: the first copies, then the pieces of pairs
     mom = np.zeros((P, 15))
     have = np.zeros(P, np.bool_)
-    big = 0
-    for p in range(P):
-        big = max(big, p_cnt[p])
-    buf = np.empty((big, 15), np.float32)
-    out32 = np.empty(15, np.float32)
     # first copies: pieces of the same curve, count and sum of point indices, by those keys
     o3 = _by_curve_count_sum(p_curve, p_cnt, p_sum, P, n_curves)
     same_as = np.empty(P, np.int64)
@@ -410,7 +400,7 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
             S += 1
     single = single[:S]
     for p in single:
-        _moments_of(xy, pts, p, p_start, p_cnt, p_frame, buf, out32, mom, have)
+        _moments_of(xy, pts, p, p_start, p_cnt, p_frame, mom, have)
     zero = np.zeros(S, np.int64)
     conics1, curved1, good1 = fit_groups(xy, pts, p_start[single], p_cnt[single], zero, zero, mom[single],
                                          p_frame[single], max_rms, min_inliers, ax_lo, ax_hi, min_ratio,
@@ -477,8 +467,8 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
     qa, qb = qa[:M], qb[:M]
     mom2 = np.empty((M, 15))
     for q in range(M):
-        _moments_of(xy, pts, qa[q], p_start, p_cnt, p_frame, buf, out32, mom, have)
-        _moments_of(xy, pts, qb[q], p_start, p_cnt, p_frame, buf, out32, mom, have)
+        _moments_of(xy, pts, qa[q], p_start, p_cnt, p_frame, mom, have)
+        _moments_of(xy, pts, qb[q], p_start, p_cnt, p_frame, mom, have)
         for k in range(15):
             mom2[q, k] = mom[qa[q], k] + mom[qb[q], k]
     conics2, _, good2 = fit_groups(xy, pts, p_start[qa], p_cnt[qa], p_start[qb], p_cnt[qb], mom2, p_frame[qa],
@@ -739,14 +729,13 @@ def outline_points(pix, g, inner=False):  # pragma: no cover - compiled
 def outline_fits(xy, idx, n, min_points, max_rms, min_inliers, ax_lo, ax_hi, min_ratio,
                  min_arc_deg):  # pragma: no cover - compiled
     """Fits of the outlines (points ``idx`` by group, ``n`` per group): frames (centroid,
-    largest offset, at least 1 px), float32 moments, :func:`fit_groups` of those with
+    largest offset, at least 1 px), moments, :func:`fit_groups` of those with
     ``min_points``. Returns the good conics and their points."""
     G = len(n)
     start = np.zeros(G, np.int64)
     for k in range(1, G):
         start[k] = start[k - 1] + n[k - 1]
     frame = np.empty((G, 3))
-    big = 0
     for k in range(G):
         sx, sy = 0.0, 0.0
         for r in range(start[k], start[k] + n[k]):
@@ -757,17 +746,12 @@ def outline_fits(xy, idx, n, min_points, max_rms, min_inliers, ax_lo, ax_hi, min
         for r in range(start[k], start[k] + n[k]):
             s = max(s, max(abs(xy[idx[r], 0] - cx), abs(xy[idx[r], 1] - cy)))
         frame[k, 0], frame[k, 1], frame[k, 2] = cx, cy, max(s, 1.0)
-        big = max(big, n[k])
-    buf = np.empty((big, 15), np.float32)
-    out32 = np.empty(15, np.float32)
     sel = np.nonzero(n >= min_points)[0]
     B = len(sel)
     mom = np.empty((B, 15))
     for j in range(B):
         k = sel[j]
-        _piece_moments(xy, idx, start[k], n[k], frame[k], buf, out32)
-        for c in range(15):
-            mom[j, c] = out32[c]
+        _piece_moments(xy, idx, start[k], n[k], frame[k], mom[j])
     zero = np.zeros(B, np.int64)
     conics, _, good = fit_groups(xy, idx, start[sel], n[sel], zero, zero, mom, frame[sel], max_rms, min_inliers,
                                  ax_lo, ax_hi, min_ratio, min_arc_deg, 3.0)
