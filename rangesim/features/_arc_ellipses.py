@@ -37,16 +37,16 @@ from rangesim.features._ellipse_kernels import (
 #: the hypothesis generator of :func:`free_ellipses` (and so of ``rs.features.ellipses``
 #: without a model): "tilings" (:func:`arc_hypotheses` and :func:`outline_hypotheses`) or
 #: "chains" (:func:`~._ellipse_chains.chain_hypotheses` and :func:`outline_hypotheses`). The
-#: chains are 1.4-1.6x faster on the tilted Green Piece (CPU time 2.8-3.5x cv2.fitEllipse's,
-#: the tilings 4.2-4.9x) and find far more large partial ellipses (55 of 80 against 25 on
+#: chains are 1.3-1.5x faster on the tilted Green Piece (CPU time 2.7-3.3x cv2.fitEllipse's,
+#: the tilings 3.9-4.4x) and find far more large partial ellipses (55 of 80 against 25 on
 #: held-out synthetic maps), but lost a rim and gained a false one on the machined parts' check
 #: seeds, and find ghost ellipses in dense random clutter (half the pixels of a mask set) where
 #: the tilings find none, so they are not the default (``rs.features.ellipses(...,
 #: hypotheses="chains")`` asks for them). "outlines": only :func:`outline_hypotheses`, the
 #: outlines of the groups of edge pixels and of the regions they enclose (``cv2.findContours``
 #: with ``RETR_LIST`` and ``cv2.fitEllipse`` on each contour; :data:`OUTLINE_PASSES`): on the
-#: tilted Green Piece the tilings' recall (0.92 / 1.00) at 1.4-1.55x cv2.fitEllipse's CPU time
-#: (the tilings 4.3-4.8x), precision 0.92 / 1.00 (fitEllipse 0.33 / 0.44); on the machined
+#: tilted Green Piece the tilings' recall (0.92 / 1.00) at 1.4-1.5x cv2.fitEllipse's CPU time
+#: (the tilings 3.9-4.4x), precision 0.92 / 1.00 (fitEllipse 0.33 / 0.44); on the machined
 #: parts' report seeds the same hole rims as the tilings on the laser-stripe presets but fewer
 #: boss and cylinder tops (all round features 0.80-1.00 against 0.95-1.00), and far fewer
 #: rims on the block-matched ones. It needs outlines: a rim broken by gaps over 2 px (a

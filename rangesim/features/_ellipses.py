@@ -261,7 +261,7 @@ def ellipses(
     default "tilings", :data:`~._arc_ellipses.HYPOTHESES`): with "chains" the
     hypotheses come instead from the edge pixels traced into chains and cut into arc pieces at
     corners, inflections and curvature jumps, pieces linked end to end across gaps
-    (:mod:`~._ellipse_chains`): 1.4-1.6x faster on the tilted Green Piece and far better on
+    (:mod:`~._ellipse_chains`): 1.3-1.5x faster on the tilted Green Piece and far better on
     large partial ellipses (55 of 80 found against 25 on held-out synthetic maps, precision 0.98
     against 0.56), not the default: on the machined parts' check seeds it lost one rim of 54 on
     white_scanner and added a false one on cyberware_3030 (``benchmarks/bench_hough.py``), and
@@ -271,7 +271,7 @@ def ellipses(
     grown and claimed like the rest): each group's outer outline and the outlines of the
     regions it encloses, with the pixels dilated by 1 px (bridging a broken rim), and the
     outer outlines undilated (keeping apart a rim and a line a pixel or two beside it),
-    :data:`~._arc_ellipses.OUTLINE_PASSES`. 3x faster than the tilings (1.4-1.55x
+    :data:`~._arc_ellipses.OUTLINE_PASSES`. 3x faster than the tilings (1.4-1.5x
     fitEllipse's CPU time on the tilted Green Piece) with their recall there. It needs
     outlines: it misses an ellipse broken by gaps over 2 px (dashed: 9 of 99 found, the tilings
     93) or whose inside an edge splits in two (neither region is the ellipse), and two crossing
