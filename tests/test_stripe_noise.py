@@ -23,6 +23,28 @@ def test_correlated_field_has_unit_variance_and_gaussian_correlation(corr):
         assert rho == pytest.approx(math.exp(-lag**2 / (4 * corr**2)), abs=0.04)
 
 
+def test_correlated_field_longer_than_the_grid_keeps_its_law():
+    # a kernel longer than the grid along the rows (8 sigma + 1 > 64) is filtered in Fourier
+    # space: the same unit variance and Gaussian correlation along the columns, over 60 draws
+    fields = [sn.correlated_field(np.random.default_rng(k), (64, 400), (9.0, 1.5)) for k in range(60)]
+    assert np.mean([np.mean(f**2) for f in fields]) == pytest.approx(1.0, abs=0.05)
+    for lag in (1, 3):
+        rho = np.mean([np.mean(f[:, :-lag] * f[:, lag:]) for f in fields])
+        assert rho == pytest.approx(math.exp(-lag**2 / (4 * 1.5**2)), abs=0.04)
+        rho_rows = np.mean([np.mean(f[:-lag] * f[lag:]) for f in fields])
+        assert rho_rows == pytest.approx(math.exp(-lag**2 / (4 * 9.0**2)), abs=0.04)
+
+
+def test_correlated_field_of_a_correlation_beyond_the_grid_is_one_value_per_line():
+    # a twin's fitted grid of a perspective scan gave 1.3 million cells of correlation on 64
+    # rows: the spatial filter ran for minutes; the field is then constant down each column
+    f = sn.correlated_field(np.random.default_rng(0), (64, 64), (1.3e6, 0.25))
+    assert np.ptp(f, axis=0).max() < 1e-9 and np.ptp(f[0]) > 1.0
+    values = [sn.correlated_field(np.random.default_rng(k), (8, 8), (np.inf, np.inf)) for k in range(400)]
+    assert all(np.ptp(v) < 1e-12 for v in values)
+    assert np.std([v[0, 0] for v in values]) == pytest.approx(1.0, abs=0.1)
+
+
 def test_detection_probability_is_the_gamma_speckle_law():
     s = np.array([2.0, 0.5, 0.1, 0.02])
     # fully developed speckle: exponential intensity, P(S X >= m) = exp(-m / S)

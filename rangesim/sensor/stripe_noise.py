@@ -331,10 +331,12 @@ def correlated_field(rng: np.random.Generator, shape: tuple[int, int], corr_px: 
     >>> bool(abs(f.std() - 1) < 0.1), bool(np.corrcoef(f[:, :-1].ravel(), f[:, 1:].ravel())[0, 1] > 0.85)
     (True, True)
     """
-    sr, sc = (max(float(s), 0.0) for s in corr_px)
+    sr, sc = (float(s) if s > 0 else 0.0 for s in corr_px)  # NaN: white, inf: one value per line
     if sr < 0.05 and sc < 0.05:
         return rng.standard_normal(shape, dtype=np.float32)
     white = rng.standard_normal(shape)
+    if 8 * sr + 1 > shape[0] or 8 * sc + 1 > shape[1]:
+        return _periodic_field(white, (sr, sc))
     field = ndimage.gaussian_filter(white, (sr, sc), mode="wrap", truncate=4.0)
     # the filter's L2 norm: its response to a unit impulse
     size = (min(shape[0], int(8 * sr) + 3) | 1, min(shape[1], int(8 * sc) + 3) | 1)
@@ -342,6 +344,24 @@ def correlated_field(rng: np.random.Generator, shape: tuple[int, int], corr_px: 
     impulse[size[0] // 2, size[1] // 2] = 1.0
     norm = float(np.sqrt(np.sum(np.square(ndimage.gaussian_filter(impulse, (sr, sc), mode="constant", truncate=4.0)))))
     return field / norm
+
+
+def _periodic_field(white: np.ndarray, sigma: tuple[float, float]) -> np.ndarray:
+    """:func:`correlated_field` of ``white`` for a kernel longer than the grid along an axis.
+
+    The filter is applied in Fourier space: the periodic Gaussian that ``mode="wrap"`` makes
+    of a kernel, untruncated, in one FFT whatever its length (the spatial filter's work grows
+    with the kernel: a correlation of a million cells took minutes). A correlation of many grid
+    lengths leaves one value along that axis (the std is capped at 64 lengths, where the
+    periodic kernel is flat to round-off).
+    """
+    h, w = white.shape
+    sr, sc = min(sigma[0], 64.0 * h), min(sigma[1], 64.0 * w)
+    gain_r = np.exp(-2.0 * (np.pi * sr * np.fft.fftfreq(h)) ** 2)
+    gain_c = np.exp(-2.0 * (np.pi * sc * np.fft.fftfreq(w)) ** 2)
+    field = np.fft.irfft2(np.fft.rfft2(white) * np.outer(gain_r, gain_c[: w // 2 + 1]), s=(h, w))
+    # a cell's variance: the mean squared gain over the whole spectrum (separable)
+    return field / np.sqrt(np.mean(gain_r ** 2) * np.mean(gain_c ** 2))
 
 
 class NumPyDraws:
