@@ -262,3 +262,23 @@ def test_empty_scan_warnings_say_why():
         rs.scan([tiny], sensor)
     with pytest.warns(EmptyScanWarning, match="outside tiny's working range 100-1000 mm"):
         rs.scan([box], sensor, pose=look_at((0, 0, 1500), (0, 0, 0), up=(0, 1, 0)))
+
+
+@pytest.mark.parametrize(("variant", "words"), [("scalar_rgb", "traces one ray at a time"),
+                                                ("llvm_rgbx", "unknown Mitsuba variant")])
+def test_a_variant_rangesim_cannot_run_is_refused_in_one_line(tmp_path, variant, words):
+    """A scalar variant (listed by Mitsuba, chosen in a fresh process) failed inside the first
+    cast with an internal TypeError; it is refused before any work, naming the variable."""
+    import os
+    import subprocess
+    import sys
+
+    trimesh.creation.box((50, 50, 50)).export(tmp_path / "box.stl")
+    out = tmp_path / "s.npz"
+    run = subprocess.run([sys.executable, "-m", "rangesim", "scan", str(tmp_path / "box.stl"), "--out", str(out)],
+                         env={**os.environ, "RANGESIM_VARIANT": variant}, capture_output=True, text=True,
+                         timeout=120)
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1 and "Traceback" not in run.stderr
+    assert "RANGESIM_VARIANT" in lines[0] and words in lines[0] and "llvm_ad_rgb" in lines[0]
+    assert not out.exists()

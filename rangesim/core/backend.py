@@ -92,17 +92,25 @@ def llvm_problem() -> str | None:
             "or run sh system-deps.sh) or point DRJIT_LIBLLVM_PATH at one")
 
 
+#: the Mitsuba variants rangesim can run on (Dr.Jit's vectorised CPU and GPU backends)
+JIT_PREFIXES = ("llvm_", "cuda_")
+
+
 def mitsuba() -> ModuleType:
     """The ``mitsuba`` module with a variant set (choosing one on first use)."""
     import mitsuba as mi
 
     if mi.variant() is None:
         variant = choose_variant()
+        # every scan casts its rays in one vectorised call: the JIT variants only
+        usable = [v for v in mi.variants() if v.startswith(JIT_PREFIXES)]
         if variant not in mi.variants():
-            raise RangesimError(
-                f"unknown Mitsuba variant {variant!r}; available: {', '.join(mi.variants())}",
-                source="RANGESIM_VARIANT",
-            )
+            raise RangesimError(f"unknown Mitsuba variant {variant!r}; available: {', '.join(usable)}",
+                                source="RANGESIM_VARIANT")
+        if not variant.startswith(JIT_PREFIXES):
+            raise RangesimError(f"Mitsuba variant {variant!r} traces one ray at a time; rangesim casts all rays in "
+                                f"one vectorised call and needs one of {', '.join(usable)}",
+                                source="RANGESIM_VARIANT")
         try:
             mi.set_variant(variant)
         except Exception as exc:  # e.g. cuda requested without a GPU
