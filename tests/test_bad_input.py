@@ -282,3 +282,24 @@ def test_a_variant_rangesim_cannot_run_is_refused_in_one_line(tmp_path, variant,
     assert run.returncode == 2 and len(lines) == 1 and "Traceback" not in run.stderr
     assert "RANGESIM_VARIANT" in lines[0] and words in lines[0] and "llvm_ad_rgb" in lines[0]
     assert not out.exists()
+
+
+def test_scan_arrays_that_contradict_themselves_are_refused_naming_the_file(good_scan, tmp_path, capsys):
+    """Valid pixels with an infinite depth: ``features`` said so without the file's name (``detect``
+    named it); status codes past the documented 0-4: ``info`` printed "valid 0" and ``detect``
+    scored the stored mask. An independent probe's cases."""
+    from rangesim.io import load_scan
+
+    load_scan(good_scan).save(tmp_path / "good.npz")
+    arrays = dict(np.load(tmp_path / "good.npz"))
+    infinite = {**arrays, "depth": np.where(arrays["valid"], np.inf, arrays["depth"]).astype(np.float32)}
+    np.savez(tmp_path / "infinite.npz", **infinite)
+    np.savez(tmp_path / "status.npz", **{**arrays, "status": (arrays["status"] + 7).astype(np.uint8)})
+    for argv, words in ((["features", str(tmp_path / "infinite.npz"), "--out", str(tmp_path / "f")],
+                         ["infinite.npz", "infinite depth"]),
+                        (["info", str(tmp_path / "status.npz")], ["status.npz", "status holds code", "0-4"]),
+                        (["detect", str(tmp_path / "status.npz"), "--out", str(tmp_path / "d")], ["status.npz"])):
+        assert main(argv) == 2
+        lines = capsys.readouterr().err.splitlines()
+        assert len(lines) == 1 and all(w in lines[0] for w in words), lines
+    assert not (tmp_path / "f").exists() and not (tmp_path / "d").exists()

@@ -64,7 +64,10 @@ def cmd_features(args: argparse.Namespace) -> int:
         check_out_files(out, names, scene_files(given_model))
     # rims are fitted whole: keep the creases a jump would otherwise clear around it
     options = {"jump_clearance": 0} if args.edges == "gradient" else {}
-    edge_map = DETECTORS[args.edges](scan, **options)
+    try:
+        edge_map = DETECTORS[args.edges](scan, **options)
+    except RangesimError as exc:  # a detector's refusal names the scan's field: name the file too
+        raise RangesimError(str(exc), source=args.scan) from None
     radii = (args.rmin, args.rmax)
     segs = F.lines(edge_map, scan)
     circ = F.circles(edge_map, radii)

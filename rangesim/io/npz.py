@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import OPTIONAL_PIXEL_FIELDS, PIXEL_FIELDS, RangeScan, checked_scan
 from rangesim.io.exr import decode_meta, encode_meta
@@ -132,6 +133,11 @@ def _scan_from_arrays(arrays: dict[str, np.ndarray], path: Path) -> RangeScan:
         fields[field] = arrays.get(field)
     for field, dtype, _ in PIXEL_FIELDS + OPTIONAL_PIXEL_FIELDS:
         _check_kind(field, fields[field], np.dtype(dtype), path)
+    status = np.asarray(fields["status"])
+    unknown = status > max(Status) if status.dtype.kind == "u" else (status < 0) | (status > max(Status))
+    if np.any(unknown):
+        raise RangesimError(f"array status holds code {int(status[unknown].flat[0])} at {int(np.count_nonzero(unknown)):,} "
+                            f"pixels; the codes are 0-{int(max(Status))} (rangesim.core.constants.Status)", path)
     try:
         meta = decode_meta(str(arrays["meta"])) if "meta" in arrays else {}
         pose = arrays["pose"] if "pose" in arrays else np.eye(4)
