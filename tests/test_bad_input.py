@@ -262,6 +262,11 @@ def test_empty_scan_warnings_say_why():
         rs.scan([tiny], sensor)
     with pytest.warns(EmptyScanWarning, match="outside tiny's working range 100-1000 mm"):
         rs.scan([box], sensor, pose=look_at((0, 0, 1500), (0, 0, 0), up=(0, 1, 0)))
+    # surfaces in range, measured depths not (a huge peak error): the message said the hits at
+    # 460-530 mm lay outside 100-1000 mm
+    loud = sensor.with_params({"noise.sigma_px": 1e6})
+    with pytest.warns(EmptyScanWarning, match="inside tiny's working range 100-1000 mm, but the depth noise"):
+        rs.scan([box], loud, pose=look_at((0, 0, 500), (0, 0, 0), up=(0, 1, 0)))
 
 
 @pytest.mark.parametrize(("variant", "words"), [("scalar_rgb", "traces one ray at a time"),

@@ -14,7 +14,8 @@ class Status(IntEnum):
     SHADOW = 2
     #: the return signal is below the sensor's ``min_signal``
     DROPOUT = 3
-    #: the surface lies outside the sensor's working range [near, far]
+    #: the surface lies outside the sensor's working range [near, far], or its measured depth does
+    #: (a noisy peak carried past near or far: no measurement)
     OUT_OF_RANGE = 4
 
 

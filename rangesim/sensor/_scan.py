@@ -153,6 +153,11 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
         z = z[np.isfinite(z)]
         if z.size:
             share = f"all {n_hits:,}" if counts[worst] == n_hits else f"{counts[worst]:,} of the {n_hits:,}"
+            inside = (z >= near) & (z <= far)
+            if np.mean(inside) > 0.5:  # the surfaces are in range: their measured depths were not
+                return (f"{head}: {share} hits lie at {z.min():.0f}-{z.max():.0f} mm, inside {sensor.name}'s "
+                        f"working range {near:g}-{far:g} mm, but the depth noise put {np.count_nonzero(inside):,} of "
+                        f"their measured depths outside it (check the [noise] settings)")
             return (f"{head}: {share} hits lie at {z.min():.0f}-{z.max():.0f} mm, outside "
                     f"{sensor.name}'s working range {near:g}-{far:g} mm")
     if worst == Status.OUT_OF_RANGE:
