@@ -332,6 +332,25 @@ def test_info_names_valid_pixels_without_a_depth(scanned, tmp_path, capsys):
     assert "note: 5 pixels marked valid have no depth (NaN)" in capsys.readouterr().out
 
 
+def test_info_says_when_the_valid_mask_and_the_status_disagree(scanned, tmp_path, capsys):
+    """An edited mask (fields may be reassigned, ``valid`` rules): ``info``'s counts are the
+    status codes', and it said nothing of the mask the detectors use (an independent probe)."""
+    import dataclasses
+
+    scan = rs.load_scan(scanned[0])
+    valid = scan.valid.copy()
+    valid.ravel()[np.flatnonzero(valid)[:7]] = False
+    depth = np.where(scan.valid, np.inf, scan.depth).astype(np.float32)
+    dataclasses.replace(scan, valid=valid).save(tmp_path / "masked.npz")
+    dataclasses.replace(scan, depth=depth).save(tmp_path / "infinite.npz")
+    assert main(["info", str(tmp_path / "masked.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "valid and status disagree at 7 pixels" in out and f"use the {int(valid.sum()):,} valid" in out
+    assert main(["info", str(tmp_path / "infinite.npz")]) == 0
+    out = capsys.readouterr().out
+    assert f"{int(scan.valid.sum()):,} pixels marked valid have an infinite depth" in out and "disagree" not in out
+
+
 @pytest.mark.parametrize(("args", "mode"), [
     (["info", "x.exr"], "log"), (["info", "x.exr", "--quiet"], "off"), (["--quiet", "info", "x.exr"], "off"),
     (["compare", "x.pcd", "--out", "o", "--quiet"], "off"), (["detect", "x.exr", "--out", "o", "--quiet"], "off"),

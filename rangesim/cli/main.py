@@ -286,6 +286,15 @@ def cmd_info(args: argparse.Namespace) -> int:
     if holes:
         # the detectors take them as holes (an edited scan may punch NaN without updating valid)
         lines.append(f"note: {holes:,} pixels marked valid have no depth (NaN); the detectors treat them as invalid")
+    infinite = int(np.count_nonzero(result.valid & np.isinf(result.depth)))
+    if infinite:
+        lines.append(f"note: {infinite:,} pixels marked valid have an infinite depth; the detectors refuse the scan")
+    edited = int(np.count_nonzero(result.valid != (result.status == Status.VALID)))
+    if edited:
+        # the counts above are the status codes'; the detectors and scores use the valid mask
+        lines.append(f"note: valid and status disagree at {edited:,} pixels (an edited mask?); the counts above "
+                     f"are the status codes', the detectors use the {int(np.count_nonzero(result.valid)):,} valid "
+                     "pixels")
     if result.sigma is not None:
         sig = result.sigma[result.valid & np.isfinite(result.sigma)]
         if sig.size:
