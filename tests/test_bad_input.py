@@ -308,3 +308,23 @@ def test_scan_arrays_that_contradict_themselves_are_refused_naming_the_file(good
         lines = capsys.readouterr().err.splitlines()
         assert len(lines) == 1 and all(w in lines[0] for w in words), lines
     assert not (tmp_path / "f").exists() and not (tmp_path / "d").exists()
+
+
+def test_compare_refuses_a_camera_image_as_a_range_grid(tmp_path, capsys):
+    """A perspective scan's points do not lie on a sweep's sample lines: its fitted grid had a
+    row step near 0, the twin's noise correlation came out at 1.3 million cells and ``compare``
+    ran for over 10 minutes (an independent probe). The Stanford bunny's grids stray 0.00 and
+    0.15 steps; this one about 2."""
+    import rangesim as rs
+    from rangesim.twin.stage import GRID_MAX_RESIDUAL
+
+    box = trimesh.creation.box((50, 50, 50))
+    box.export(tmp_path / "box.stl")
+    sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 64, "camera.height": 64})
+    rs.scan([box], sensor).save(tmp_path / "small.npz")
+    out = tmp_path / "c"
+    assert main(["compare", str(tmp_path / "small.npz"), "--mesh", str(tmp_path / "box.stl"), "--out", str(out)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "small.npz" in lines[0] and "range grid" in lines[0], lines
+    stray = float(lines[0].split("stray ")[1].split(" ")[0])
+    assert stray > 2 * GRID_MAX_RESIDUAL and not out.exists()

@@ -230,6 +230,11 @@ def _sensor_name(sensor: Any) -> str | None:
     return sensor if isinstance(sensor, str) else getattr(sensor, "name", str(sensor))
 
 
+#: the largest RMS distance (in grid steps, x and y) of a recording's points from their cells'
+#: fitted sample lines (:func:`fit_grid`): the Stanford bunny's range grids stray 0.00 and 0.15
+GRID_MAX_RESIDUAL = 0.5
+
+
 @dataclass
 class GridModel:
     """The sample line of every cell (see the module docstring); coefficients a, b."""
@@ -274,7 +279,21 @@ def fit_grid(scan: RangeScan) -> GridModel:
     b = np.array([by[0] - by[2] * z_ref, by[1] - by[3] * z_ref, by[2], by[3]])
     if abs(a[1]) < 1e-9 or abs(b[1]) < 1e-9:
         raise RangesimError("the recorded grid does not step in x along rows and in y down columns")
-    return GridModel(a, b, z_ref)
+    grid = GridModel(a, b, z_ref)
+    # the points must lie on their cells' sample lines: a perspective image (x and y growing
+    # with z) fits them with a step near 0 and residuals of many steps, and its twin's
+    # correlation lengths in cells come out in the millions
+    origin, direction = grid.line(i, j)
+    near = origin + direction * (p[:, 2] - z_ref)[:, None]
+    rms = np.sqrt(np.mean(np.square(near[:, :2] - p[:, :2]), axis=0))
+    off = rms / np.abs([a[1], b[1]])
+    if np.max(off) > GRID_MAX_RESIDUAL:
+        axis = "x along the rows" if off[0] >= off[1] else "y down the columns"
+        raise RangesimError(f"the recorded points do not lie on a range grid's sample lines: {axis} they stray "
+                            f"{np.max(off):.3g} grid steps (RMS) from the best fit; a twin needs a sweep's range "
+                            f"grid (a Cyberware scan), not a camera image (for a perspective scan use "
+                            f"rangesim diff, or --sensor kinect_v1 for a Kinect frame)")
+    return grid
 
 
 def _mi_vec(mi, arr: np.ndarray, kind: str = "Vector3f"):
