@@ -149,3 +149,34 @@ def test_feature_finders_refuse_bad_parameters(plate, finder, kwargs, name):
     _, _, edges, _ = plate
     with pytest.raises(RangesimError, match=name):
         finder(edges, **kwargs)
+
+
+@pytest.mark.parametrize(("which", "labels"), [("pred_labels", -1), ("gt_labels", 300), ("pred_labels", 1.5),
+                                               ("gt_labels", np.nan)])
+def test_edge_scores_refuses_labels_that_are_no_edge_type(which, labels):
+    # a -1 or a 300 fell in no type and vanished from every per-label count (an API probe)
+    a = np.zeros((32, 40), bool)
+    a[10] = True
+    b = np.zeros((32, 40), bool)
+    b[11] = True
+    given = {which: np.where(a if which == "pred_labels" else b, labels, 0)}
+    with pytest.raises(RangesimError, match=f"{which} must hold whole numbers 0-4"):
+        edge_scores(a, b, **given)
+    rim = edge_scores(a, b, pred_labels=a * 4.0, gt_labels=b.astype(np.uint8))  # a rim scores as a jump
+    assert rim["per_label"]["jump"]["f1"] == 1.0
+
+
+@pytest.mark.parametrize(("name", "value"), [("spacing_px", 0), ("spacing_px", 1e-9), ("spacing_px", -1.0),
+                                             ("spacing_px", np.nan), ("depth_tol_px", np.nan),
+                                             ("depth_tol_px", -1.0)])
+def test_ground_truth_features_refuses_spacings_and_tolerances_out_of_range(plate, name, value):
+    # spacing 1e-9 px asked for 111 GiB, 0 raised OverflowError; NaN / negative tolerances passed
+    scan, scene, _, _ = plate
+    with pytest.raises(RangesimError, match=name):
+        rs.evaluate.ground_truth_features(scan, scene, **{name: value})
+
+
+@pytest.mark.parametrize("given", [{"z": np.ones((8, 8))}, {"fp": np.ones((8, 8))}, {}])
+def test_estimate_depth_noise_without_a_scan_needs_z_and_fp(given):
+    with pytest.raises(RangesimError, match="needs a scan, or both z and fp"):
+        rs.edges.estimate_depth_noise(**given)

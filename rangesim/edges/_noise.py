@@ -228,6 +228,10 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     >>> bool(rs.edges.estimate_depth_noise(quiet) < rs.edges.estimate_depth_noise(scan))
     True
     """
+    if scan is None and (z is None or fp is None):
+        given = " (got only z)" if z is not None else " (got only fp)" if fp is not None else ""
+        raise RangesimError("estimate_depth_noise needs a scan, or both z and fp (the depth and its pixel "
+                            f"footprints, mm){given}")
     if z is None:
         z, _ = scan_depth(scan)
     if fp is None:

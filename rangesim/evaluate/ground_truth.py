@@ -29,6 +29,8 @@ from rangesim.core.rangescan import RangeScan
 
 #: default jump rule: the 3D step between two neighbours within this angle of the viewing ray
 JUMP_ANGLE_DEG = 15.0
+#: the least ``spacing_px`` of :func:`ground_truth_features`, pixels
+MIN_FEATURE_SPACING_PX = 0.01
 #: image-space spacing of the samples along projected crease edges, pixels
 SAMPLE_SPACING_PX = 0.25
 #: crease samples closer to the camera than this are clipped, mm
@@ -829,6 +831,11 @@ def ground_truth_features(
         A synthetic scan of ``scene``.
     scene : Scene or anything :func:`rangesim.load_scene` accepts
         Objects' ``features`` (AnalyticFeatures, world mm, may be None) are used.
+    depth_tol_px : float
+        How far (pixel footprints, z / fx mm) a hit may lie from a sample's depth and still
+        see it, >= 0.
+    spacing_px : float
+        Spacing of the samples along each curve's image, pixels, >= 0.01.
 
     Returns
     -------
@@ -840,6 +847,9 @@ def ground_truth_features(
     """
     from rangesim.scene.scene import load_scene
 
+    P.number(depth_tol_px, "depth_tol_px", 0, unit="pixel footprints")
+    # finer than a hundredth of a pixel changes no visibility and costs memory (1e-9: 111 GiB)
+    P.number(spacing_px, "spacing_px", MIN_FEATURE_SPACING_PX, unit="pixels")
     scene = load_scene(scene)
     R, t, K = _camera(scan)
     shift = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]])
