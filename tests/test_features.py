@@ -211,6 +211,8 @@ def test_feature_finders_refuse_bad_parameters_in_one_line():
         lambda: F.circle_hypotheses(m, max_hypotheses=2.5),
         lambda: F.circle_hypotheses(m, radius_step=0),
         lambda: F.circle_hypotheses(m, cell_px=-1),
+        lambda: F.circle_hypotheses(m, (5, 80), cell_px=1e9),   # asked for terabytes of radius bins
+        lambda: F.circle_hypotheses(m, (5, 80), rel_cell=1e9),
         lambda: F.circles(m, split_tangent="no"),
     ]
     for call in bad:

@@ -96,9 +96,11 @@ def circle_hypotheses(
     P.number(threshold, "threshold", 0, lo_open=True)
     P.number(band_px, "band_px", 0, lo_open=True, unit="pixels")
     max_hypotheses = P.whole(max_hypotheses, "max_hypotheses", 1)
-    P.number(cell_px, "cell_px", 0, lo_open=True, unit="pixels")
+    # a centre cell wider than the largest radius sought (or than its band's smallest radius)
+    # resolves no circle, and its radius bins ran into terabytes
+    P.number(cell_px, "cell_px", 0, float(radii[1]), lo_open=True, unit="pixels")
     P.number(radius_step, "radius_step", 0, lo_open=True, unit="pixels")
-    P.number(rel_cell, "rel_cell", 0, lo_open=True, none=True)
+    P.number(rel_cell, "rel_cell", 0, 1, lo_open=True, none=True)
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)
     mask = np.asarray(getattr(edge_map, "mask", edge_map), bool)
     h = _hypotheses(xy, theta, pixels, mask.shape, radii, angle_tol_deg, threshold, band_px,
