@@ -79,6 +79,19 @@ def test_region_boundaries_and_jump_edges_check_shapes():
         rs.evaluate.jump_edges(xyz, hit, max_angle_deg=float("nan"))  # every pixel 'no jump' before
 
 
+def test_region_boundaries_take_nan_as_no_segment():
+    # NaN != NaN made every pixel of an all-NaN float label image a boundary (an API probe)
+    assert not rs.evaluate.region_boundaries(np.full((5, 5), np.nan)).any()
+    labels = np.ones((4, 6))
+    labels[:, 3:] = 2.0
+    labels[0, 0] = np.nan
+    expected = np.zeros((4, 6), bool)
+    expected[:, 2:4] = True
+    np.testing.assert_array_equal(rs.evaluate.region_boundaries(labels), expected)
+    with pytest.raises(rs.RangesimError, match="numeric segment ids"):
+        rs.evaluate.region_boundaries(np.full((3, 3), "a"))
+
+
 def test_score_edges_flag_is_a_bool(plate):
     scan, scene = plate
     with pytest.raises(rs.RangesimError, match="ignore_data_boundary must be True or False"):

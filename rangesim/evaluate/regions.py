@@ -26,7 +26,11 @@ def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, backg
     labels = np.asarray(labels)
     if labels.ndim != 2:
         raise RangesimError(f"labels must be an (H, W) array, got shape {labels.shape}")
+    if labels.dtype.kind not in "biuf":
+        raise RangesimError(f"labels must be numeric segment ids, got {labels.dtype}")
     ok = labels != background
+    if labels.dtype.kind == "f":
+        ok &= np.isfinite(labels)  # NaN is no segment (NaN != NaN made every pixel a boundary)
     if valid is not None:
         valid = np.asarray(valid, dtype=bool)
         if valid.shape != labels.shape:
