@@ -29,7 +29,7 @@ import rangesim.edges._discontinuities as D
 from rangesim.core.constants import EdgeLabel, Status
 from rangesim.core.geometry import look_at
 from rangesim.edges import curvature, gradient, line_fit, normal
-from rangesim.edges._gap_folds import STATUS_DROPOUT, gap_fold_test
+from rangesim.edges._gap_folds import gap_fold_test
 from tests.conftest import world_heights
 
 F = 500.0
@@ -42,7 +42,7 @@ class _Scan:
 
     def __init__(self, shape=(96, 128)):
         self.meta = {"K": K}
-        self.status = np.full(shape, STATUS_DROPOUT, np.uint8)
+        self.status = np.full(shape, Status.DROPOUT, np.uint8)
 
 
 def _call(test, b, a, zb, za):
@@ -77,7 +77,7 @@ def test_a_gap_that_is_not_all_dropout_is_no_face(status):
     # rint(7/4 k)); one beside it, off the path, does not count
     scan.status[42, 41] = status
     assert not _call(gap_fold_test(scan, fp, COT15), (40, 40), (47, 44), 400.0, 396.0)
-    scan.status[42, 41], scan.status[42, 42] = STATUS_DROPOUT, status
+    scan.status[42, 41], scan.status[42, 42] = Status.DROPOUT, status
     assert _call(gap_fold_test(scan, fp, COT15), (40, 40), (47, 44), 400.0, 396.0)
 
 

@@ -195,7 +195,8 @@ def _check_layout(p: dict) -> None:
     rims = {key: _rim_height(surface) for key, surface in (("right", _head_surface(p, 1)),
                                                             ("left", _head_surface(p, -1)),
                                                             ("bump", _bump_surface(p)))}
-    for what, rim in (("right head", rims["right"]), ("left head", rims["left"]), ("bump", rims["bump"])):
+    for key, what in (("right", "right head"), ("left", "left head"), ("bump", "bump")):
+        rim = rims[key]
         if rim <= T:
             raise RangesimError(f"{m}: the {what}'s rim falls to {rim:g} mm, not above the plate's top "
                                 f"(plate_thickness {T:g} mm); raise head_height / bump_height or thin the plate")

@@ -103,9 +103,9 @@ def machined_design(seed: int) -> dict[str, Any]:
         ``width``, ``thickness``, ``outline`` ("plain", "chamfer" or "fillet") and
         ``outline_size``, ``step`` (width, depth) or None, ``slot`` (x, y, length, width,
         depth, along) or None, ``holes`` [(x, y, radius, depth or None for through); three
-        values (x, y, radius) are a through hole too], ``bosses`` and ``cylinders`` [(x, y, radius, height)], ``wedge`` (x, y, length,
-        width, height) or None (rising towards +x), ``lying`` [(x, y, radius, length,
-        along)].
+        values (x, y, radius) are a through hole too], ``bosses`` and ``cylinders`` [(x, y,
+        radius, height)], ``wedge`` (x, y, length, width, height) or None (rising towards
+        +x), ``lying`` [(x, y, radius, length, along)].
 
     Examples
     --------

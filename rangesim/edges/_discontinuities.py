@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from rangesim.core.constants import EdgeLabel
+from rangesim.core.constants import EdgeLabel, Status
 from rangesim.core.errors import RangesimError
 from rangesim.edges._gap_folds import FoldTest, gap_fold_test
 from rangesim.edges._grid import AXES, NEIGHBOURS, nonzero2, pad_last2, padded_view
@@ -76,11 +76,6 @@ SPECK_PX = 6
 #: creases (:mod:`~._gap_folds`)
 GAP_FOLDS = True
 
-#: RangeScan.status code of a pixel whose camera ray hit no surface
-#: (:class:`rangesim.core.constants.Status` ``MISS``; the value, so that this analysis
-#: module needs nothing from the sensor layer)
-_STATUS_MISS = 1
-
 
 def empty_pixels(scan: Any, valid: np.ndarray) -> tuple[np.ndarray, bool]:
     """Invalid pixels that saw no surface at all: where a rim of the measured surface can be.
@@ -110,7 +105,7 @@ def empty_pixels(scan: Any, valid: np.ndarray) -> tuple[np.ndarray, bool]:
     if status is None or np.shape(status) != valid.shape:
         return ~valid, False
     recorded = "source" in (getattr(scan, "meta", None) or {})
-    return ~valid & (np.asarray(status) == _STATUS_MISS), not recorded
+    return ~valid & (np.asarray(status) == Status.MISS), not recorded
 
 
 def discontinuities(

@@ -38,10 +38,7 @@ from typing import Any
 
 import numpy as np
 
-#: RangeScan.status of a pixel whose surface the camera saw and the scanner did not measure
-#: (:class:`rangesim.core.constants.Status` DROPOUT; the value, so that this analysis module
-#: needs nothing from the sensor layer)
-STATUS_DROPOUT = 3
+from rangesim.core.constants import Status
 
 #: FoldTest(bi, bj, zb, ai, aj, za, sy, sx, steps) -> (N,) bool: True where the gap between
 #: the measured pixel (bi, bj) at depth zb (mm), which searched, and the measured pixel
@@ -76,7 +73,7 @@ def gap_fold_test(scan: Any, footprint: np.ndarray, slope_limit: float, extra: n
     status = getattr(scan, "status", None)
     if status is None or np.shape(status) != fp.shape:
         return None
-    dropout = np.asarray(status) == STATUS_DROPOUT
+    dropout = np.asarray(status) == Status.DROPOUT
     extra_img = np.broadcast_to(np.asarray(extra, np.float64), fp.shape)
 
     def test(bi, bj, zb, ai, aj, za, sy, sx, steps):

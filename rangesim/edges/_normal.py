@@ -249,7 +249,8 @@ def normal(
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=with_gap_creases(crease | jump | rim, labels, disc, offset) & valid, labels=labels, strength=strength,
+    mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
+    return EdgeMap(mask=mask, labels=labels, strength=strength,
                    method="normal", params=params, offset=offset)
 
 
@@ -306,7 +307,8 @@ def _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_thresho
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise), "noise_gain": [float(g) for g in bends.gains],
     }
-    return EdgeMap(mask=with_gap_creases(crease | jump | rim, labels, disc, offset) & valid, labels=labels, strength=bends.strength,
+    mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
+    return EdgeMap(mask=mask, labels=labels, strength=bends.strength,
                    method="normal", params=params, offset=offset)
 
 
@@ -337,5 +339,6 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
         "jump_threshold": float(jump_threshold), "nms": bool(nms), "max_search": int(max_search),
         "noise": None if noise is None else float(noise),
     }
-    return EdgeMap(mask=with_gap_creases(crease | jump | rim, labels, disc, offset) & valid, labels=labels, strength=res["strength"],
+    mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
+    return EdgeMap(mask=mask, labels=labels, strength=res["strength"],
                    method="normal", params=params, offset=offset)

@@ -136,8 +136,9 @@ def _scan_from_arrays(arrays: dict[str, np.ndarray], path: Path) -> RangeScan:
     status = np.asarray(fields["status"])
     unknown = status > max(Status) if status.dtype.kind == "u" else (status < 0) | (status > max(Status))
     if np.any(unknown):
-        raise RangesimError(f"array status holds code {int(status[unknown].flat[0])} at {int(np.count_nonzero(unknown)):,} "
-                            f"pixels; the codes are 0-{int(max(Status))} (rangesim.core.constants.Status)", path)
+        code, count = int(status[unknown].flat[0]), int(np.count_nonzero(unknown))
+        raise RangesimError(f"array status holds code {code} at {count:,} pixels; the codes are "
+                            f"0-{int(max(Status))} (rangesim.core.constants.Status)", path)
     try:
         meta = decode_meta(str(arrays["meta"])) if "meta" in arrays else {}
         pose = arrays["pose"] if "pose" in arrays else np.eye(4)
