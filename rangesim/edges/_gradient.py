@@ -13,7 +13,13 @@ from rangesim.edges._differences import central_difference
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities, with_gap_creases
 from rangesim.edges._gradient_steps import step_smooth, tap5_sum
 from rangesim.edges._grid import shift
-from rangesim.edges._matching_scale import matching_window, ridge_sigma, rounding_gain, strided_responses
+from rangesim.edges._matching_scale import (
+    matching_window,
+    ridge_sigma,
+    rounding_gain,
+    strided_responses,
+    window_directions,
+)
 from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_GRADIENT,
@@ -1068,7 +1074,11 @@ def gradient(
         ``method="gradient"``; ``strength`` is the bend estimate in degrees (NaN where no
         operator has a response: invalid pixels, stencils cut by gaps or jumps);
         ``direction`` is the angle in [0, pi) of the (x, y) vector across the edge, for
-        every pixel with a response (and across the discontinuity at jump pixels);
+        every pixel with a response (and across the discontinuity at jump pixels); on a
+        block-matched scan, at the edge pixels, the mean of the edge pixels' directions
+        over the matcher's window (:func:`~rangesim.edges._matching_scale.window_directions`:
+        its contours are ragged by a pixel or two, and the circle and ellipse finders vote
+        and grow along these directions);
         ``labels`` CONVEX/CONCAVE on creases, JUMP on the near side of jumps.
 
     Examples
@@ -1258,5 +1268,8 @@ def gradient(
         "noise": None if noise is None else float(noise),
     }
     mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
+    if window is not None:
+        # a block matcher resolves a contour's direction only at its window's scale
+        direction = window_directions(direction, mask, window)
     return EdgeMap(mask=mask, labels=labels, strength=bend, direction=direction, offset=offset,
                    method="gradient", params=params)
