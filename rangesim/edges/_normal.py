@@ -11,7 +11,7 @@ from rangesim.core.errors import RangesimError
 from rangesim.edges._differences import dot3, measured_normals
 from rangesim.edges._discontinuities import JUMP_THRESHOLD, discontinuities, with_gap_creases
 from rangesim.edges._grid import AXES, pad_last2, padded_view
-from rangesim.edges._matching_scale import matching_window
+from rangesim.edges._matching_scale import matching_window, window_directions
 from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_NORMAL,
@@ -152,7 +152,11 @@ def normal(
     -------
     EdgeMap
         ``method="normal"``; ``strength`` is the bend angle in degrees (NaN where no pair of
-        opposite neighbours has normals); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None.
+        opposite neighbours has normals); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None,
+        but on a block-matched scan the angle in [0, pi) across each edge (the chords' bend at
+        creases, the discontinuity at jumps and rims) averaged over the matcher's window
+        (:func:`~rangesim.edges._matching_scale.window_directions`), for the circle and
+        ellipse finders.
 
     Examples
     --------
@@ -332,6 +336,14 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
     labels = np.where(res["concave"], EdgeLabel.CONCAVE, EdgeLabel.CONVEX).astype(np.uint8)
     labels[rim] = RIM
     labels[jump] = EdgeLabel.JUMP
+    # directions as gradient's on these scans: across the crease (the chords' bend), across the
+    # discontinuity at jumps and rims, averaged over the matcher's window (its contours are
+    # ragged by a pixel or two: the circle and ellipse finders vote and grow along them)
+    direction = np.where(crease, np.mod(res["theta"], np.pi), np.nan).astype(np.float32)
+    np.copyto(direction, disc.direction, where=(jump | rim) & np.isfinite(disc.direction))
+    # a rim has no jump direction: its offset points across it, to the unmeasured side
+    across = (jump | rim) & np.isnan(direction) & np.any(offset != 0, axis=-1)
+    direction[across] = np.mod(np.arctan2(offset[..., 1][across], offset[..., 0][across]), np.pi)
     params = {
         "threshold_deg": res["threshold_deg"], "threshold_scale_max": res["threshold_scale_max"],
         "window": None, "matching_window": int(matcher),
@@ -341,4 +353,5 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
     }
     mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
     return EdgeMap(mask=mask, labels=labels, strength=res["strength"],
-                   method="normal", params=params, offset=offset)
+                   direction=window_directions(direction, mask, matcher), method="normal", params=params,
+                   offset=offset)

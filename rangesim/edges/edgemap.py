@@ -62,7 +62,8 @@ class EdgeMap:
         is not required: it is the raw response everywhere, NaN where undefined.
     direction : (H, W) float32 or None
         Edge normal direction in the image, radians, angle of the (x = column, y = row)
-        vector across the edge (gradient detector; None for others).
+        vector across the edge (gradient detector, and normal on block-matched scans; None
+        for others).
     method : str
         The detector's name.
     params : dict
