@@ -59,9 +59,15 @@ def test_window_directions_are_axes_and_leave_other_pixels_alone():
     # one axis, the contour's normal (angle 0 as an axis), in [0, pi) as gradient's
     assert np.all((out[mask] >= 0) & (out[mask] < np.pi))
     assert np.all(np.abs(np.sin(out[mask])) < np.sin(np.deg2rad(10.0)))
-    # a window of 1 px (no matcher's box) or no edge pixels: unchanged
-    assert np.array_equal(window_directions(direction, mask, 1), direction, equal_nan=True)
-    assert np.array_equal(window_directions(direction, np.zeros_like(mask), 9), direction, equal_nan=True)
+    # a window of 1 px (no matcher's box) or no edge pixels: unchanged, and always a copy
+    for out in (window_directions(direction, mask, 1), window_directions(direction, np.zeros_like(mask), 9)):
+        assert np.array_equal(out, direction, equal_nan=True) and out is not direction
+    # an edge pixel without a direction keeps none, and the caller's array is left alone
+    holed = direction.copy()
+    holed[20, col] = np.nan
+    out = window_directions(holed, mask, 9)
+    assert np.isnan(out[20, col]) and np.isfinite(out[mask & np.isfinite(holed)]).all()
+    assert np.array_equal(holed[mask & np.isfinite(holed)], direction[mask & np.isfinite(holed)])
 
 
 def test_window_directions_keep_a_corner_apart_beyond_the_window():
@@ -148,3 +154,4 @@ def test_normal_maps_of_block_matched_scans_carry_window_directions():
     assert max(_hole_offsets(em, scan)) <= 3.0
     # laser-stripe scans: no matcher, no directions (as before)
     assert normal(rs.datasets.plate_scan()).direction is None
+

@@ -139,13 +139,13 @@ def window_directions(direction: np.ndarray, mask: np.ndarray, window: int) -> n
     mask : (H, W) bool
         Edge pixels: only they are averaged, and only theirs change.
     window : int
-        Matcher window, pixels (odd, > 1).
+        Matcher window, pixels (odd; 1 or less: no matcher's box, nothing averaged).
 
     Returns
     -------
     (H, W) float32
-        ``direction`` with the averaged axis, in [0, pi) as the gradient detector's, at every
-        edge pixel that had one.
+        A copy of ``direction`` with the averaged axis, in [0, pi) as the gradient
+        detector's, at every edge pixel that had one.
 
     Examples
     --------
@@ -155,7 +155,7 @@ def window_directions(direction: np.ndarray, mask: np.ndarray, window: int) -> n
     >>> bool(np.abs(np.sin(out[4, 2:7])).max() < np.sin(0.4))   # nearer the contour's normal, 0
     True
     """
-    direction = np.asarray(direction, np.float32)
+    direction = np.array(direction, np.float32)  # a copy: the caller's array is left as it is
     have = np.asarray(mask, bool) & np.isfinite(direction)
     h = int(window) // 2
     if h < 1 or not have.any():
@@ -170,10 +170,9 @@ def window_directions(direction: np.ndarray, mask: np.ndarray, window: int) -> n
             part = ndimage.correlate1d(part, taps, axis=axis, mode="constant")
         axes.append(part[have])
     mean = np.mod(0.5 * np.arctan2(axes[1], axes[0]), np.pi)
-    out = direction.copy()
-    out[have] = mean
-    out[have & (out >= np.float32(np.pi))] = 0.0  # pi - tiny rounds up to pi in float32
-    return out
+    direction[have] = mean
+    direction[have & (direction >= np.float32(np.pi))] = 0.0  # pi - tiny rounds up to pi in float32
+    return direction
 
 
 def strided_pairs(pairs: np.ndarray | None, valid: np.ndarray, stride: int) -> np.ndarray:

@@ -153,8 +153,10 @@ def normal(
     EdgeMap
         ``method="normal"``; ``strength`` is the bend angle in degrees (NaN where no pair of
         opposite neighbours has normals); ``labels`` CONVEX/CONCAVE/JUMP; ``direction`` None,
-        but on a block-matched scan the angle in [0, pi) across each edge (the chords' bend at
-        creases, the discontinuity at jumps and rims) averaged over the matcher's window
+        but on a block-matched scan with the default ``window`` and ``blocks`` (the matcher's
+        scale) the angle in [0, pi) across each edge (the chords' bend at creases, the
+        discontinuity at jumps and rims; none at a gap fold's far end) averaged over the
+        matcher's window
         (:func:`~rangesim.edges._matching_scale.window_directions`), for the circle and
         ellipse finders.
 
@@ -341,6 +343,9 @@ def _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshol
     # ragged by a pixel or two: the circle and ellipse finders vote and grow along them)
     direction = np.where(crease, np.mod(res["theta"], np.pi), np.nan).astype(np.float32)
     np.copyto(direction, disc.direction, where=(jump | rim) & np.isfinite(disc.direction))
+    # (a gap fold's far end, a crease with_gap_creases adds below, keeps none: the finders take
+    # the layout of its pixels there; its jump's direction was neutral on the tuning and check
+    # seeds and cost 1-2 rims per cell on the report sets)
     # a rim has no jump direction: its offset points across it, to the unmeasured side
     across = (jump | rim) & np.isnan(direction) & np.any(offset != 0, axis=-1)
     direction[across] = np.mod(np.arctan2(offset[..., 1][across], offset[..., 0][across]), np.pi)

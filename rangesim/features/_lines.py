@@ -83,7 +83,8 @@ def lines(
     and become segments; their pixels are used up. A pixel is aligned when its edge direction
     or the direction of the local line of edge pixels around it
     (:func:`~rangesim.features._edge_points.mask_normals`, 5 x 5) is within ``angle_tol_deg``
-    of the line's normal: a detector's direction is that of a 3 x 3 neighbourhood, which on
+    of the line's normal: a detector's direction is that of a 3 x 3 neighbourhood (on
+    block-matched scans averaged over the matcher's window), which on
     a digital line at 30 degrees swings by 15-30 degrees at each step of the staircase (the
     line would break every 4-5 px), while the local line follows it within a few degrees;
     where the 5 x 5 window holds a corner or a crossing, the detector's direction still can.
