@@ -125,7 +125,7 @@ def window_directions(direction: np.ndarray, mask: np.ndarray, window: int) -> n
     A block matcher's depth is the surface seen through a ``window`` x ``window`` box, and
     where it crosses a contour the box's pixels straddle both sides: the measured contour
     comes out ragged by a pixel or two along its length, and a 3 x 3 direction taken on it
-    swings with each step of the rag (on the machined parts' kinect_v1 scans 40 % of a rim's
+    swings with each step of the rag (on the machined parts' kinect_v1 scans 25-43 % of a rim's
     edge pixels lie more than 25 degrees off its true normal). The contour's direction is
     only resolved at the window's scale. Each edge pixel's direction becomes the mean of the
     edge pixels' directions around it, as axes (angles doubled, so a normal and its
