@@ -161,15 +161,16 @@ def window_directions(direction: np.ndarray, mask: np.ndarray, window: int) -> n
     if h < 1 or not have.any():
         return direction
     sigma = float(window) / 4.0
-    taps = np.exp(-0.5 * (np.arange(-h, h + 1) / sigma) ** 2)
-    angle = np.where(have, direction, 0.0).astype(np.float64)
+    taps = np.exp(-0.5 * (np.arange(-h, h + 1) / sigma) ** 2).astype(np.float32)
+    doubled = 2.0 * direction[have].astype(np.float64)   # trigonometry at the edge pixels only
     axes = []
-    for part in (np.cos(2 * angle), np.sin(2 * angle)):
-        part = np.where(have, part, 0.0)
+    for values in (np.cos(doubled), np.sin(doubled)):
+        part = np.zeros(direction.shape, np.float32)
+        part[have] = values
         for axis in (0, 1):
             part = ndimage.correlate1d(part, taps, axis=axis, mode="constant")
         axes.append(part[have])
-    mean = np.mod(0.5 * np.arctan2(axes[1], axes[0]), np.pi)
+    mean = np.mod(0.5 * np.arctan2(axes[1], axes[0], dtype=np.float64), np.pi)
     direction[have] = mean
     direction[have & (direction >= np.float32(np.pi))] = 0.0  # pi - tiny rounds up to pi in float32
     return direction
