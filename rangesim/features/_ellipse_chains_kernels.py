@@ -14,7 +14,7 @@ import numpy as np
 
 from rangesim.core._conic_kernels import direct_fit, ellipse_row
 from rangesim.features._conic_kernels import _add_moments
-from rangesim.features._ellipse_kernels import _find, _sampson, _union, fit_groups, pixel_index
+from rangesim.features._ellipse_kernels import _find, _sampson, _union, fit_groups, frame_moments, pixel_index
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 #: fits whose residual estimate from the moments exceeds this (px) are not checked further (the
@@ -376,25 +376,6 @@ def cut_chains(xy, order, cstart, tol, max_turn, min_inflection, max_ratio, min_
 
 
 # -- fits -----------------------------------------------------------------------------------------
-
-@numba.njit(**_JIT)
-def frame_moments(xy, pts, lo, n, frame, mom):  # pragma: no cover - compiled
-    """The frame (centroid, largest coordinate offset, at least 1 px) and float64 moments
-    (:func:`~._conic_kernels._add_moments`) of the points ``pts[lo:lo + n]``."""
-    sx, sy = 0.0, 0.0
-    for r in range(lo, lo + n):
-        sx += xy[pts[r], 0]
-        sy += xy[pts[r], 1]
-    cx, cy = sx / n, sy / n
-    s = 0.0
-    for r in range(lo, lo + n):
-        s = max(s, max(abs(xy[pts[r], 0] - cx), abs(xy[pts[r], 1] - cy)))
-    s = max(s, 1.0)
-    frame[0], frame[1], frame[2] = cx, cy, s
-    mom[:] = 0.0
-    for r in range(lo, lo + n):
-        _add_moments(mom, (xy[pts[r], 0] - cx) / s, (xy[pts[r], 1] - cy) / s)
-
 
 @numba.njit(**_JIT)
 def fit_ranges(xy, pts, lo, n, max_rms, min_inliers, ax_lo, ax_hi, min_ratio, min_arc_deg):  # pragma: no cover

@@ -260,6 +260,25 @@ def _piece_moments(xy, pts, start, cnt, frame, out):  # pragma: no cover - compi
 
 
 @numba.njit(**_JIT)
+def frame_moments(xy, pts, lo, n, frame, mom):  # pragma: no cover - compiled
+    """The frame (centroid, largest coordinate offset, at least 1 px) and float64 moments
+    (:func:`~._conic_kernels._add_moments`) of the points ``pts[lo:lo + n]``."""
+    sx, sy = 0.0, 0.0
+    for r in range(lo, lo + n):
+        sx += xy[pts[r], 0]
+        sy += xy[pts[r], 1]
+    cx, cy = sx / n, sy / n
+    s = 0.0
+    for r in range(lo, lo + n):
+        s = max(s, max(abs(xy[pts[r], 0] - cx), abs(xy[pts[r], 1] - cy)))
+    s = max(s, 1.0)
+    frame[0], frame[1], frame[2] = cx, cy, s
+    mom[:] = 0.0
+    for r in range(lo, lo + n):
+        _add_moments(mom, (xy[pts[r], 0] - cx) / s, (xy[pts[r], 1] - cy) / s)
+
+
+@numba.njit(**_JIT)
 def _counting_sort(key, n, n_keys):  # pragma: no cover - compiled
     """The indices ``0 .. n - 1`` ordered by ``key`` (stable counting sort; keys in
     ``0 .. n_keys - 1``) and each key's start in that order, (n_keys + 1,)."""
@@ -735,25 +754,14 @@ def outline_fits(xy, idx, n, min_points, max_rms, min_inliers, ax_lo, ax_hi, min
     start = np.zeros(G, np.int64)
     for k in range(1, G):
         start[k] = start[k - 1] + n[k - 1]
-    frame = np.empty((G, 3))
-    for k in range(G):
-        sx, sy = 0.0, 0.0
-        for r in range(start[k], start[k] + n[k]):
-            sx += xy[idx[r], 0]
-            sy += xy[idx[r], 1]
-        cx, cy = sx / n[k], sy / n[k]
-        s = 0.0
-        for r in range(start[k], start[k] + n[k]):
-            s = max(s, max(abs(xy[idx[r], 0] - cx), abs(xy[idx[r], 1] - cy)))
-        frame[k, 0], frame[k, 1], frame[k, 2] = cx, cy, max(s, 1.0)
     sel = np.nonzero(n >= min_points)[0]
     B = len(sel)
+    frame = np.empty((B, 3))
     mom = np.empty((B, 15))
     for j in range(B):
-        k = sel[j]
-        _piece_moments(xy, idx, start[k], n[k], frame[k], mom[j])
+        frame_moments(xy, idx, start[sel[j]], n[sel[j]], frame[j], mom[j])
     zero = np.zeros(B, np.int64)
-    conics, _, good = fit_groups(xy, idx, start[sel], n[sel], zero, zero, mom, frame[sel], max_rms, min_inliers,
+    conics, _, good = fit_groups(xy, idx, start[sel], n[sel], zero, zero, mom, frame, max_rms, min_inliers,
                                  ax_lo, ax_hi, min_ratio, min_arc_deg, 3.0)
     keep = np.nonzero(good)[0]
     return conics[keep], n[sel][keep]
