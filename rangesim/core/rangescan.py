@@ -133,7 +133,21 @@ class RangeScan:
             raise RangesimError(f"RangeScan.pose must be a 4x4 matrix of numbers ({exc})") from exc
         if pose.size != 16:
             raise RangesimError(f"RangeScan.pose must be a 4x4 matrix, got shape {pose.shape}")
-        self.pose = pose.reshape(4, 4)
+        pose = pose.reshape(4, 4)
+        # the ground truth and the world-frame points invert it (not check_pose's rigid test:
+        # recorded poses carry rounded quaternions)
+        if not np.all(np.isfinite(pose)):
+            raise RangesimError("RangeScan.pose holds NaN or infinity")
+        det = float(np.linalg.det(pose[:3, :3]))
+        if not abs(det) > 1e-6:
+            raise RangesimError(f"RangeScan.pose has a singular rotation block (determinant {det:.3g}): it maps "
+                                "the scan onto a plane or a point")
+        self.pose = pose
+        negative = None if self.sigma is None else self.sigma[self.sigma < 0]  # (NaN compares False)
+        if negative is not None and negative.size:
+            raise RangesimError("RangeScan.sigma is a standard deviation: it must be >= 0 (NaN where not "
+                                f"predicted), found {float(negative.min())!r}")
+        _intrinsics(self.meta.get("K"))
 
     # -- shape and geometry ------------------------------------------------------------
     @property
@@ -143,9 +157,32 @@ class RangeScan:
 
     @property
     def K(self) -> np.ndarray | None:
-        """3x3 pinhole intrinsics (float64), or None for scans without a pinhole model."""
-        k = self.meta.get("K")
-        return None if k is None else np.asarray(k, dtype=np.float64)
+        """3x3 pinhole intrinsics (float64), or None for scans without a pinhole model.
+
+        Raises RangesimError where ``meta["K"]`` (reassigned since construction) is not one:
+        see :func:`_intrinsics`.
+        """
+        return _intrinsics(self.meta.get("K"))
+
+    def __eq__(self, other: object) -> bool:
+        """Field by field: arrays equal element by element (NaN equal to NaN, as a scan
+        writes and reads them back), ``meta`` equal as nested values (lists and arrays alike).
+        Two runs of one seed give equal scans."""
+        if not isinstance(other, RangeScan):
+            return NotImplemented
+        for f in dataclasses.fields(self):
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if f.name == "meta":
+                if not _same_value(a, b):
+                    return False
+            elif a is None or b is None:
+                if a is not b:
+                    return False
+            elif np.shape(a) != np.shape(b) or not np.array_equal(a, b, equal_nan=True):
+                return False
+        return True
+
+    __hash__ = None  # type: ignore[assignment]  (mutable, like the dataclass it replaces)
 
     def points(self, frame: str = "camera") -> np.ndarray:
         """Valid measured points as an (N, 3) float64 array, row-major pixel order.
@@ -222,6 +259,42 @@ def checked_scan(scan: Any, source: str | Path | None = None) -> RangeScan:
         return dataclasses.replace(scan)
     except RangesimError as exc:
         raise RangesimError(f"cannot write the scan: {exc}", source) from exc
+
+
+def _intrinsics(k: Any) -> np.ndarray | None:
+    """``meta["K"]`` as a float64 (3, 3) pinhole matrix, None where absent; a one-line
+    RangesimError where it is not one (finite, with focal lengths fx = K[0, 0] and
+    fy = K[1, 1] > 0): pixel rays, footprints and the ground truth all divide by them."""
+    if k is None:
+        return None
+    try:
+        K = np.asarray(k, dtype=np.float64)
+    except (TypeError, ValueError):
+        K = np.empty(0)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise RangesimError(f"RangeScan.meta['K'] must be a finite 3x3 pinhole matrix with positive focal "
+                            f"lengths K[0][0], K[1][1], got {k!r:.80}")
+    return K
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """``a == b`` for nested meta values: dicts by keys, lists, tuples and arrays element by
+    element (NaN equal to NaN)."""
+    if isinstance(a, dict) or isinstance(b, dict):
+        return (isinstance(a, dict) and isinstance(b, dict) and a.keys() == b.keys()
+                and all(_same_value(a[k], b[k]) for k in a))
+    if isinstance(a, (list, tuple, np.ndarray)) or isinstance(b, (list, tuple, np.ndarray)):
+        try:
+            x, y = np.asarray(a), np.asarray(b)
+        except (TypeError, ValueError):  # ragged: element by element
+            return (isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)) and len(a) == len(b)
+                    and all(_same_value(u, v) for u, v in zip(a, b)))
+        if x.dtype == object or y.dtype == object:
+            return len(a) == len(b) and all(_same_value(u, v) for u, v in zip(a, b))
+        return x.shape == y.shape and np.array_equal(x, y, equal_nan=x.dtype.kind == "f" and y.dtype.kind == "f")
+    if isinstance(a, float) and isinstance(b, float) and a != a and b != b:
+        return True
+    return bool(a == b)
 
 
 def _as_array(name: str, value: Any) -> np.ndarray:

@@ -96,11 +96,11 @@ register_reader(".npz", read_npz)
 def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
     """Refuse a scan file whose contents every reader of it would trip over later, in one line.
 
-    The pose must be finite with a non-singular rotation block (a NaN pose was printed and
-    used, a zero one made every world point the origin), ``meta["units"]`` (when present) ``"mm"``
-    (``meta["sensor"]`` a table: the RangeScan constructor refuses another), ``meta["K"]``
-    (when present) a finite 3x3 matrix with positive focal lengths, and every valid pixel's
-    ``xyz`` finite (a NaN point counted as measured).
+    ``meta["units"]`` (when present) must be ``"mm"``, and every valid pixel's ``xyz`` finite (a
+    NaN point counted as measured). The RangeScan constructor, which every reader goes
+    through, has refused the rest already: a pose that is not finite or has a singular rotation
+    block (a NaN pose was printed and used, a zero one made every world point the origin), a
+    ``meta["K"]`` that is no pinhole matrix, a ``meta["sensor"]`` that is no table.
 
     Returns
     -------
@@ -109,24 +109,9 @@ def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
     """
     import numpy as np
 
-    pose = scan.pose
-    if not np.all(np.isfinite(pose)):
-        raise RangesimError("the scan's pose holds NaN or infinity", path)
-    det = float(np.linalg.det(pose[:3, :3]))
-    if not abs(det) > 1e-6:
-        raise RangesimError(f"the scan's pose has a singular rotation block (determinant {det:.3g}): "
-                            "it maps the scan onto a plane or a point", path)
     units = scan.meta.get("units", "mm")
     if units != "mm":  # every reader of a scan takes its coordinates as millimetres
         raise RangesimError(f"the scan's meta.units is {units!r:.40}: rangesim scans are in millimetres (\"mm\")", path)
-    if scan.meta.get("K") is not None:
-        try:
-            K = np.asarray(scan.meta["K"], dtype=np.float64)
-        except (TypeError, ValueError):
-            K = np.empty(0)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or not (K[0, 0] > 0 and K[1, 1] > 0):
-            raise RangesimError("the scan's meta.K must be a finite 3x3 pinhole matrix with positive focal "
-                                f"lengths, got {scan.meta['K']!r:.80}", path)
     bad = int(np.count_nonzero(~np.isfinite(scan.xyz[scan.valid]).all(axis=-1)))
     if bad:
         raise RangesimError(f"{bad:,} valid pixels have NaN or infinite coordinates (xyz)", path)
