@@ -15,6 +15,7 @@ from rangesim.edges._grid import pad_last2, padded_view
 from rangesim.edges._matching_scale import matching_window
 from rangesim.edges._noise import (
     NOISE_FLOOR,
+    carries_sigma,
     estimate_depth_noise,
     local_noise_scale,
     noise_threshold,
@@ -216,7 +217,7 @@ def curvature(
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     noise = estimate_depth_noise(scan, z=z, fp=geo.footprint, quantum=disc.quantum) if not sensor_scale else None
-    if window is None and matcher is None and getattr(scan, "sigma", None) is not None:
+    if window is None and matcher is None and carries_sigma(scan):
         # (scans with a noise model; a recording's noise measured from its depth alone is left
         # at 5 px: the mOSD Kinect frames measure 0.46-0.54 footprints, across the step)
         window = NOISY_BLOCK_WINDOW if noise >= NOISY_BLOCK_NOISE else DEFAULT_WINDOW

@@ -1052,7 +1052,7 @@ def gradient(
         No crease is kept within this many pixels (an integer >= 0) of a jump (the crest beside an occluding
         edge is the jump itself); 0 keeps them, e.g. for fitting circles to whole rims.
     stride : int, optional
-        Half-width of the operators, pixels (an integer >= 1): 1 is the paper's 3 x 3; ``s`` dilates them (a
+        Half-width of the operators, pixels (an integer from 1 to 255): 1 is the paper's 3 x 3; ``s`` dilates them (a
         trous: second differences between pixels ``s`` apart, parts across a jump or a gap
         dropped, :func:`~rangesim.edges._matching_scale.strided_responses`), so they compare
         the slopes of chords ``s`` pixels long. Default (None): 1, or the block matcher's
@@ -1102,7 +1102,7 @@ def gradient(
     # the kernel reaches 3 sigma: no wider than the largest window a detector takes
     sigma = P.number(sigma, "sigma", 0, P.MAX_WINDOW_PX / 6, unit="pixels", none=True)
     jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels")
-    stride = P.whole(stride, "stride", 1, unit="pixels", none=True)
+    stride = P.whole(stride, "stride", 1, P.MAX_WINDOW_PX, unit="pixels", none=True)
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     window = matching_window(scan)

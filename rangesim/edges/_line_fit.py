@@ -41,6 +41,9 @@ LINE_FIT_CLEARANCE = 1
 
 #: centres per batch: bounds the (chunk, k, k) temporaries (~4 MB each at k = 8)
 _CHUNK = 1 << 16
+#: most neighbours of the line test: past a few dozen the neighbourhood is no longer local
+#: (the paper's is 8), and a k-d query holds _CHUNK x k indices (a k of 10^6 asked for 500 TB)
+MAX_K = 64
 
 
 def line_fit_points(
@@ -92,7 +95,7 @@ def line_fit_points(
 
 def _line_test_params(k: Any, line_sep_deg: Any, workers: Any) -> tuple[int, Any, int]:
     """The line test's parameters checked (scans and point lists alike)."""
-    k = P.whole(k, "k", 2)
+    k = P.whole(k, "k", 2, MAX_K)
     line_sep_deg = P.number(line_sep_deg, "line_sep_deg", 0, 90, lo_open=True, what="angle", unit="degrees")
     workers = P.whole(workers, "workers", 1, also=(-1,), unit="threads; -1: all cores")
     return k, line_sep_deg, workers
@@ -295,7 +298,8 @@ def line_fit(
     points_or_scan : (N, 3) array or RangeScan
         Points (mm; non-finite rows ignored), or a scan (``xyz``, ``depth``, ``valid``).
     k : int
-        Neighbours per point, an integer >= 2 (8-12; the paper's 8-neighbourhood).
+        Neighbours per point, an integer from 2 to :data:`MAX_K` (64; 8-12 suit: the paper's
+        8-neighbourhood).
     angle_tol_deg : float, optional
         Two neighbours are opposite if the angle between their directions is within this
         many degrees of 180, in (0, 90); hence the least crease bend detected. Default (None): 15;
@@ -327,7 +331,7 @@ def line_fit(
         (above); False leaves them 0, "type unknown".
     max_stride : int
         Scans only, noisy ones with the default tolerance: the longest stride of the line
-        test, pixels, >= 1 (above; 1 tests only the nearest neighbours).
+        test, pixels, 1 to 255 (above; 1 tests only the nearest neighbours).
     jump_clearance : int, optional
         Scans only: no crease is kept within this many pixels (chessboard; an integer >= 0) of a jump's far
         side (the step's foot, rounded by the stripe's width), beyond the pixels that touch
@@ -365,7 +369,7 @@ def line_fit(
     thin = P.flag(thin, "thin")
     min_crease_px = P.whole(min_crease_px, "min_crease_px", 1, unit="pixels")
     label_creases = P.flag(label_creases, "label_creases")
-    max_stride = P.whole(max_stride, "max_stride", 1, unit="pixels")
+    max_stride = P.whole(max_stride, "max_stride", 1, P.MAX_WINDOW_PX, unit="pixels")
     jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels", none=True)
     scan = points_or_scan
     xyz, z, valid = scan_arrays(scan)

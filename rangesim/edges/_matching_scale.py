@@ -19,6 +19,8 @@ from typing import Any, Callable
 import numpy as np
 from scipy import ndimage
 
+from rangesim.core.errors import RangesimError
+from rangesim.core.params import MAX_WINDOW_PX
 from rangesim.core.quantisation import DEFAULT_MATCHER_WINDOW, disparity_lattice
 from rangesim.edges._discontinuities import segment_broken
 from rangesim.edges._grid import AXES
@@ -67,6 +69,9 @@ def matching_window(scan: Any, *, detect: bool = False) -> int | None:
         window = int(window)
     except (TypeError, ValueError):
         return None
+    if window > MAX_WINDOW_PX:  # (a sensor loaded through load_sensor never holds one: meta edited by hand)
+        raise RangesimError(f"the scan's meta['sensor'] has structured_light.window = {window} px: the detectors "
+                            f"take it as their scale, at most {MAX_WINDOW_PX} px")
     return window if window > 1 else None
 
 

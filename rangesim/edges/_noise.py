@@ -36,7 +36,7 @@ from rangesim.edges._scan_access import pixel_geometry, scan_depth
 
 __all__ = [
     "depth_quantum", "quantised_sigma", "estimate_depth_noise", "noise_threshold", "local_noise_scale", "noise_in_footprints",
-    "predicted_noise", "scan_sigma", "raised_threshold", "stride_gain",
+    "predicted_noise", "scan_sigma", "carries_sigma", "raised_threshold", "stride_gain",
     "NOISE_FLOOR", "NOISE_MEASURABLE",
     "NOISE_K_GRADIENT", "NOISE_K_NORMAL", "NOISE_K_NORMAL_LOCAL", "NOISE_K_PCL",
 ]
@@ -244,7 +244,7 @@ def estimate_depth_noise(scan: Any = None, z: np.ndarray | None = None,
     if quantum is not None and np.shape(quantum) != z.shape:
         raise RangesimError(f"quantum must be None or an (H, W) array like z {z.shape} (mm per pixel), "
                             f"got {quantum!r:.40}")
-    predicted = getattr(scan, "sigma", None) if scan is not None else None
+    predicted = scan.sigma if scan is not None and carries_sigma(scan) else None
     if predicted is not None:
         sub = (slice(None, None, 4), slice(None, None, 4))
         if quantum is not None:     # with the rounding's share of the noise (quantised_sigma)
@@ -382,15 +382,28 @@ def noise_threshold(strength: np.ndarray, valid: np.ndarray, default: float, k: 
 NOISE_WINDOW = 5
 
 
+def carries_sigma(scan: Any) -> bool:
+    """Whether the scan carries its noise model's prediction: a ``sigma`` with a finite value at
+    some valid pixel. One with none predicts nothing (every detector then measures the noise;
+    read as 0 it would set the thresholds to their floors, as if the scan were noise-free)."""
+    sigma = getattr(scan, "sigma", None)
+    if sigma is None:
+        return False
+    sigma = np.asarray(sigma)
+    valid = getattr(scan, "valid", None)
+    return bool(np.isfinite(sigma if valid is None else sigma[np.asarray(valid, dtype=bool)]).any())
+
+
 def scan_sigma(scan: Any, z: np.ndarray | None = None, quantum: Any = UNKNOWN) -> np.ndarray | None:
     """The noise model's depth std at each pixel, mm (``scan.sigma``), with the rounding's
     variance ``q^2 / 12`` added on quantised depth where the data show it
     (:func:`_rounded_sigma`); None when the scan carries no sigma. ``z`` (the scan's
     :func:`~rangesim.edges._scan_access.scan_depth`) and ``quantum`` (its
-    :func:`depth_quantum`, None for continuous depth) when the caller has them already."""
-    sigma = getattr(scan, "sigma", None)
-    if sigma is None:
+    :func:`depth_quantum`, None for continuous depth) when the caller has them already.
+    None too where the sigma predicts nothing (:func:`carries_sigma`)."""
+    if not carries_sigma(scan):
         return None
+    sigma = scan.sigma
     if quantum is UNKNOWN:
         quantum = _scan_quantum(scan)
     if quantum is not None:

@@ -16,6 +16,7 @@ from rangesim.edges._noise import (
     NOISE_FLOOR,
     NOISE_K_NORMAL,
     NOISE_K_NORMAL_LOCAL,
+    carries_sigma,
     estimate_depth_noise,
     local_noise_scale,
     noise_threshold,
@@ -196,7 +197,7 @@ def normal(
         scale = local_noise_scale(scan, valid, geo.footprint, disc.noise) if threshold_deg is None else None
         return _normal_sl(z, valid, xyz, disc, noise, matcher, threshold_deg, jump_threshold, nms, max_search, scale)
     if blocks is None:
-        blocks = window is None and noisy and getattr(scan, "sigma", None) is not None
+        blocks = window is None and noisy and carries_sigma(scan)
     if blocks:
         return _normal_blocks(scan, z, valid, xyz, disc, noise, threshold_deg, jump_threshold, nms, max_search)
     window = stencil_window(window, "window", noise)

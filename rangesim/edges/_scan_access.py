@@ -82,7 +82,9 @@ def check_scan(scan: Any) -> tuple[int, int]:
     :class:`~rangesim.core.errors.RangesimError` naming the field and both shapes, and no
     compiled kernel ever indexes an array by another's shape. ``sigma`` and ``status``
     may be None (recorded data); ``xyz`` is checked here when present and again where it is
-    read (:func:`scan_points`).
+    read (:func:`scan_points`). An unorganized point list (``meta["organized"]`` False: a
+    1 x N "image" of a PLY or PCD point cloud) is refused: its neighbours in the list are
+    not neighbours on the surface (:func:`~rangesim.edges.line_fit` takes its points).
     """
     if not (hasattr(scan, "depth") and hasattr(scan, "valid")):
         raise RangesimError(f"the edge detectors take a RangeScan (depth, valid, xyz, meta), got {type(scan).__name__}")
@@ -90,6 +92,11 @@ def check_scan(scan: Any) -> tuple[int, int]:
     if depth.ndim != 2 or 0 in depth.shape:
         raise RangesimError(f"must be a non-empty (H, W) image, got shape {depth.shape}", "scan.depth")
     h, w = depth.shape
+    meta = getattr(scan, "meta", None)
+    if isinstance(meta, dict) and meta.get("organized") is False:
+        # a point list's 1 x N "image" has no neighbours: its edges would be between list entries
+        raise RangesimError(f"is an unorganized point list ({h} x {w}, no image grid): the edge detectors need an "
+                            "organized scan; line_fit takes its points, line_fit(scan.points())", "scan")
     for name, (trailing, kinds, required) in PIXEL_FIELDS.items():
         value = getattr(scan, name, None)
         if value is None and not required:

@@ -108,6 +108,10 @@ class EdgeMap:
             check_offsets(self.offset[self.mask])  # read at edge pixels only
         # labels only on edge pixels (NONE = 0); a product is ~20x cheaper than np.where
         self.labels = self.labels * self.mask
+        if self.labels.max(initial=0) > RIM:  # (a -1 cast to uint8 is 255) no edge type: every scorer refuses it
+            bad = int(self.labels.max())
+            raise RangesimError(f"EdgeMap.labels must be 0-{RIM} ({', '.join(LABEL_NAMES.values())}) at edge pixels, "
+                                f"got {bad}")
 
     def label_mask(self, label: EdgeLabel | int) -> np.ndarray:
         """Edge pixels of one type."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from rangesim.core.errors import RangesimError
 from rangesim.core.light import sheet_tilt_rad
+from rangesim.core.params import MAX_WINDOW_PX
 from rangesim.core.tomlfile import check_keys, read_toml
 
 #: the repository's preset folder (the package is installed in editable mode from the repo)
@@ -359,8 +360,10 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
         raise RangesimError(f"structured_light.ambient must lie in [0, {MAX_AMBIENT:g}] (relative to a dot's peak), "
                             f"got {sl['ambient']:g}", source=source)
     _number(params, "structured_light", "window", source, positive=True, integer=True)
-    if sl["window"] < 3 or sl["window"] % 2 == 0:
-        raise RangesimError(f"structured_light.window must be an odd integer >= 3, got {sl['window']}", source=source)
+    # (the detectors take the window as their scale: at most MAX_WINDOW_PX, as any window they take)
+    if sl["window"] < 3 or sl["window"] % 2 == 0 or sl["window"] > MAX_WINDOW_PX:
+        raise RangesimError(f"structured_light.window must be an odd integer from 3 to {MAX_WINDOW_PX}, "
+                            f"got {sl['window']}", source=source)
     _number(params, "structured_light", "subpixel_steps", source, positive=True, integer=True)
     _number(params, "structured_light", "min_score", source, upper=1)
     if sl["min_score"] < -1:  # a ZNCC is never below -1: a lower threshold would silently switch the test off
