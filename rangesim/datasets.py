@@ -12,6 +12,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rangesim.core.errors import RangesimError
+
 __all__ = ["plate_scene", "plate_scan", "PLATE_VIEW"]
 
 #: the camera of :func:`plate_scan`: above and in front of the plate (camera position, target)
@@ -51,6 +53,8 @@ def plate_scan(changes: Mapping[str, Any] | None = None, *, sensor: str = "white
     from rangesim.core.geometry import look_at
     from rangesim.sensor import load_sensor, scan
 
+    if changes is not None and not isinstance(changes, Mapping):
+        raise RangesimError(f"changes must be a mapping of dotted sensor keys to values, got {type(changes).__name__}")
     s = load_sensor(sensor).with_params({"camera.width": width, "camera.height": height, **dict(changes or {})})
     eye, target = PLATE_VIEW
     return scan(plate_scene(), s, pose=look_at(np.array(eye), np.array(target)), seed=seed)

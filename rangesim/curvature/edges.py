@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 __all__ = ["curvature_edges"]
@@ -44,8 +45,12 @@ def curvature_edges(k1: ArrayLike, k2: ArrayLike, threshold: float) -> np.ndarra
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
-    k1 = np.asarray(k1, dtype=np.float64)
-    k2 = np.asarray(k2, dtype=np.float64)
+    threshold = P.number(threshold, "threshold", 0, unit="1/mm")
+    try:
+        k1 = np.asarray(k1, dtype=np.float64)
+        k2 = np.asarray(k2, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise RangesimError(f"k1 and k2 must be arrays of curvatures (1/mm): {exc}") from None
     if k1.shape != k2.shape:
         raise RangesimError(f"k1 and k2 shapes differ: {k1.shape} vs {k2.shape}")
     with np.errstate(invalid="ignore"):

@@ -6,6 +6,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import ArrayLike
 
+from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 
 __all__ = ["SurfaceType", "hk_sign_map", "surface_type_name", "SURFACE_TYPE_NAMES"]
@@ -86,6 +87,9 @@ def hk_sign_map(
     .. [2] P. J. Besl, R. C. Jain, "Segmentation through variable-order surface fitting", IEEE
        TPAMI 10(2), 167-192 (1988), doi:10.1109/34.3881.
     """
+    # (a negative eps would make every value non-zero: no flat, ridge or saddle ridge at all)
+    eps_K = P.number(eps_K, "eps_K", 0, unit="1/mm^2")
+    eps_H = P.number(eps_H, "eps_H", 0, unit="1/mm")
     K = np.asarray(K, dtype=np.float64)
     H = np.asarray(H, dtype=np.float64)
     if K.shape != H.shape:

@@ -40,7 +40,10 @@ def ring_neighbourhoods(mesh: trimesh.Trimesh, rings: int = 2) -> sp.csr_matrix:
     step = sp.csr_matrix((np.ones(len(ii), np.int8), (ii, jj)), shape=(nv, nv)).astype(bool)
     reach = step
     for _ in range(rings - 1):
-        reach = (reach @ step).astype(bool)
+        grown = (reach @ step).astype(bool)
+        if grown.nnz == reach.nnz:  # every component covered: more hops add nothing
+            break
+        reach = grown
     return reach.tocsr()
 
 
@@ -133,6 +136,8 @@ def curvature_mesh(
     .. [1] "CAD Based 3-D Models for Computer Vision", the founding paper of this package
        (``../shared/reference/cad-based-3d-models-for-computer-vision.txt``), section 4.
     """
+    if not all(hasattr(mesh, a) for a in ("vertices", "vertex_normals", "faces")):
+        raise RangesimError(f"curvature_mesh takes a trimesh.Trimesh, got {type(mesh).__name__}")
     rings = P.whole(rings, "rings", 1)
     radius = P.number(radius, "radius", 0, lo_open=True, what="distance", unit="mm", none=True)
     min_points = P.whole(min_points, "min_points", 6)

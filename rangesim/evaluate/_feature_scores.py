@@ -139,6 +139,13 @@ def feature_scores(
     min_visible = P.number(min_visible, "min_visible", 0, 1, what="share")
     if scan is not None and not (hasattr(scan, "K") and hasattr(scan, "depth") and hasattr(scan, "shape")):
         raise RangesimError(f"scan must be a RangeScan (for errors in mm) or None, got {type(scan).__name__}")
+    for key, attrs in (("circles", ("center", "axes", "visible", "name")), ("segments", ("xyxy", "visible", "name"))):
+        items = truth.get(key, [])
+        bad = next((t for t in items if not all(hasattr(t, a) for a in attrs)), None) \
+            if isinstance(items, (list, tuple)) else items
+        if bad is not None:  # found features passed as truth (arguments swapped, or two runs compared)
+            raise RangesimError(f"truth[{key!r}] must hold ground_truth_features' items (with {', '.join(attrs)}), "
+                                f"got {type(bad).__name__}: pass ground_truth_features(scan, scene) as truth")
     out: dict[str, Any] = {}
     # -- round features vs truth ellipses --
     tr = [t for t in truth.get("circles", []) if t.visible >= min_visible]

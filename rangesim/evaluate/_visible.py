@@ -15,10 +15,14 @@ from scipy import ndimage
 from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.evaluate._edge_scores import _as_mask_labels, check_tolerance, edge_scores
+from rangesim.evaluate._edge_scores import RIM, _as_mask_labels, check_tolerance, edge_scores
 from rangesim.evaluate.ground_truth import ground_truth_edges
 
 __all__ = ["visible_truth", "data_boundary", "score_edges"]
+
+
+#: the keyword options visible_truth passes on to ground_truth_edges
+TRUTH_OPTIONS = ("jump_angle_deg", "depth_tol_px", "jump_rule")
 
 
 def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: Any) -> np.ndarray:
@@ -59,6 +63,10 @@ def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: An
     >>> bool(truth[~scan.valid].any()), bool((truth == 1).any())
     (False, True)
     """
+    unknown = sorted(set(options) - set(TRUTH_OPTIONS))
+    if unknown:  # (else a TypeError naming ground_truth_edges, which the caller never called)
+        raise RangesimError(f"visible_truth got unknown option(s) {', '.join(unknown)}: it takes crease_deg and "
+                            f"{', '.join(TRUTH_OPTIONS)}")
     labels = ground_truth_edges(scan, scene, crease_deg, **options)
     # measured = valid with a depth, as the detectors read it (a pixel marked valid without a
     # depth is a hole to them; truth kept there was unfindable)
@@ -101,17 +109,18 @@ def data_boundary(valid: np.ndarray) -> np.ndarray:
 
 
 def _truth_labels(truth: Any) -> np.ndarray:
-    """``truth`` as a (H, W) uint8 label map (:class:`EdgeLabel` values; NaN in a float map is
-    no edge), refused with a one-line message when it is not one."""
+    """``truth`` as a (H, W) uint8 label map (:class:`EdgeLabel` values, or a detector's
+    :data:`~rangesim.evaluate._edge_scores.RIM`, scored as a jump as :func:`edge_scores` does;
+    NaN in a float map is no edge), refused with a one-line message when it is not one."""
     a = np.asarray(truth)
     if a.dtype.kind not in "biuf" or a.ndim != 2:
         raise RangesimError(f"truth must be an (H, W) label map, got {a.dtype} of shape {a.shape}")
     if a.dtype.kind == "f":
         a = np.nan_to_num(a, nan=0.0)
     labels = np.asarray(a, np.int64)
-    if np.any(labels != a) or labels.min(initial=0) < 0 or labels.max(initial=0) > max(EdgeLabel):
-        raise RangesimError(f"truth labels must be whole numbers 0-{int(max(EdgeLabel))} "
-                            f"({', '.join(k.name.lower() for k in EdgeLabel)})")
+    if np.any(labels != a) or labels.min(initial=0) < 0 or labels.max(initial=0) > RIM:
+        raise RangesimError(f"truth labels must be whole numbers 0-{RIM} "
+                            f"({', '.join(k.name.lower() for k in EdgeLabel)}, rim)")
     return labels.astype(np.uint8)
 
 
@@ -166,6 +175,8 @@ def score_edges(
     (['concave', 'convex', 'jump'], True)
     """
     ignore_data_boundary = P.flag(ignore_data_boundary, "ignore_data_boundary")
+    if not hasattr(scan, "valid"):
+        raise RangesimError(f"score_edges takes the RangeScan the edges were found on, got {type(scan).__name__}")
     if truth is None:
         if scene is None:
             raise RangesimError("score_edges needs the scene behind the scan, or truth=")

@@ -135,6 +135,8 @@ def jump_edges(
 # ---------------------------------------------------------------------------------------
 def _camera(scan: RangeScan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(world-to-camera rotation R (3, 3), translation t (3,), K (3, 3)) of a synthetic scan."""
+    if not isinstance(scan, RangeScan):
+        raise RangesimError(f"ground truth takes a RangeScan (the synthetic scan), got {type(scan).__name__}")
     if scan.xyz_true is None:
         raise RangesimError("ground truth needs a synthetic scan (scan.xyz_true is None)")
     K = scan.K

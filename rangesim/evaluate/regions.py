@@ -24,6 +24,8 @@ def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, backg
     boundary is two pixels wide; score it with a tolerance of at least 1 pixel.
     """
     labels = np.asarray(labels)
+    if isinstance(background, (bool, np.bool_)) or not isinstance(background, (int, float, np.integer, np.floating)):
+        raise RangesimError(f"background must be a segment id (a number), got {background!r:.40}")
     if labels.ndim != 2:
         raise RangesimError(f"labels must be an (H, W) array, got shape {labels.shape}")
     if labels.dtype.kind not in "biuf":

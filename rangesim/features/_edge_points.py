@@ -46,6 +46,8 @@ def check_scan_shape(scan: Any, mask: np.ndarray) -> None:
 def check_range(values: Any, name: str, what: str = "pixels") -> tuple[float, float]:
     """``(min, max)`` of a range parameter (radii, axes) as two finite floats, 0 <= min <= max."""
     try:
+        if isinstance(values, (str, bytes)) or any(isinstance(v, (bool, np.bool_)) for v in values):
+            raise TypeError("not numbers")  # (True would pass as 1.0)
         lo, hi = (float(v) for v in values)
     except (TypeError, ValueError) as exc:
         raise RangesimError(f"must be two numbers (min, max), {what}; got {values!r}", name) from exc

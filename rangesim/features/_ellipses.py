@@ -135,6 +135,8 @@ def predict_ellipses(scan: Any, circles3d: list, world: bool = True) -> list[tup
     if getattr(scan, "K", None) is None:
         raise RangesimError("has no camera intrinsics (meta['K']): ellipses predicted from a model need a "
                             "pinhole scan; without a scene, ellipses() finds them from the edges alone", "scan")
+    if isinstance(circles3d, (str, bytes)) or not hasattr(circles3d, "__iter__"):
+        raise RangesimError(f"circles3d must be a list of Circle3D (a scene's circles), got {type(circles3d).__name__}")
     inv = np.linalg.inv(np.asarray(scan.pose, float)) if world else np.eye(4)
     R, t = inv[:3, :3], inv[:3, 3]
     out = []

@@ -10,6 +10,7 @@ from skimage.transform import hough_line
 
 from rangesim.core import params as P
 from rangesim.features._edge_points import check_scan_shape, edge_mask, edge_points, mask_normals
+from rangesim.features._feature_lists import feature_list
 from rangesim.features._line_kernels import suppress_near, window_maxima
 
 #: along a line, neighbouring pixels lie up to sqrt(2) px apart: a smaller ``max_gap`` still
@@ -216,6 +217,7 @@ def segment_pairs(segments: list[Segment]) -> tuple[np.ndarray, np.ndarray]:
     angle : (N, N) float, degrees in [0, 90]
         Angle between the lines.
     """
+    segments = feature_list(segments, "segments", ("start", "end"), "segment_pairs")
     if not segments:
         return np.zeros((0, 0)), np.zeros((0, 0))
     A = np.array([s.start for s in segments], float)

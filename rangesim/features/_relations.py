@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from rangesim.core.errors import RangesimError
+from rangesim.features._feature_lists import feature_list
 from rangesim.features._lines import segment_pairs
 
 FIELDS = ("relation", "a", "b", "value", "unit")
@@ -90,19 +91,8 @@ def relations(segments: list = (), circles: list = (), ellipses: list = (), arcs
 
 
 def _features(items, name: str, attrs: tuple[str, ...]) -> list:
-    """``items`` as a list, each with ``attrs`` (a segment: start and end; a circle or arc:
-    center; an ellipse: center and orientation), else a clear error naming the argument."""
-    if items is None:
-        return []
-    if hasattr(items, attrs[0]) or isinstance(items, (str, bytes)) or not hasattr(items, "__iter__"):
-        raise RangesimError(f"relations: {name} must be a list of features, got one {type(items).__name__}")
-    items = list(items)
-    for k, item in enumerate(items):
-        missing = [a for a in attrs if not hasattr(item, a)]
-        if missing:
-            raise RangesimError(f"relations: {name}[{k}] is a {type(item).__name__}, not a feature with "
-                                f"{' and '.join(attrs)} (as rs.features returns)")
-    return items
+    """:func:`~._feature_lists.feature_list` for :func:`relations`."""
+    return feature_list(items, name, attrs, "relations")
 
 
 def _check_rows(rows) -> list[dict]:
