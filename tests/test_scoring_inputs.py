@@ -77,7 +77,7 @@ def test_score_edges_truth_as_float_map_and_wrong_shapes(plate):
     with pytest.raises(RangesimError, match=r"edge map \(3, 3\) and scan"):  # was numpy's broadcast error
         rs.evaluate.score_edges(np.ones((3, 3), bool), scan, truth=np.zeros((3, 3), np.uint8))
     for bad in (np.full(truth.shape, 7), np.full(truth.shape, 0.5), np.full(truth.shape, -1)):
-        with pytest.raises(RangesimError, match="truth labels must be whole numbers 0-3"):
+        with pytest.raises(RangesimError, match="truth labels must be whole numbers 0-4"):
             rs.evaluate.score_edges(edges, scan, truth=bad)
 
 
