@@ -60,7 +60,7 @@ def test_a_mesh_that_does_not_overlap_is_refused(tmp_path, capsys, command, opti
 @pytest.mark.parametrize("command", ["compare", "calibrate"])
 @pytest.mark.parametrize(("text", "words"), [
     ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "1 vertices have NaN or infinite coordinates"),
-    ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "not a triangle mesh"),   # (the words of scan's mesh reader)
 ])
 def test_twin_meshes_with_nan_vertices_or_no_triangles_are_refused_by_name(tmp_path, capsys, command, text, words):
     # compare once wrote IoU 0 and NaN statistics for the NaN mesh, with exit code 0
@@ -272,3 +272,54 @@ def test_dataset_refuses_a_target_that_keeps_the_part_out_of_view(tmp_path, caps
                       "--set", "camera.width=32", "--set", "camera.height=24", "--workers", "0", "--quiet"],
              "field of view", "target [2000, 0, 0]", "empty")
     assert not out.exists()
+
+
+# -- a review's findings (seventeenth session): a moved scan, a scan without depth or intrinsics -------------
+@pytest.fixture(scope="module")
+def moved(tmp_path_factory):
+    """A small Green Piece scan whose scene file was deleted after the scan (a folder moved)."""
+    folder = tmp_path_factory.mktemp("moved")
+    scene = folder / "green_piece.toml"
+    scene.write_text((ROOT / "scenes" / "green_piece.toml").read_text())
+    assert main(["scan", str(scene), "--set", "camera.width=64", "--set", "camera.height=60",
+                 "--out", str(folder / "r.npz"), "--quiet"]) == 0
+    scene.unlink()
+    return folder / "r.npz"
+
+
+@pytest.mark.parametrize(("command", "lost"), [("detect", "no ground truth, no scores"),
+                                               ("features", "ellipses from the edges alone")])
+def test_a_scan_whose_scene_is_gone_says_so(tmp_path, capsys, moved, command, lost):
+    out = tmp_path / "out"
+    assert main([command, str(moved), "--out", str(out)]) == 0   # the detectors still run
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rangesim: warning: "), err
+    assert "r.npz" in err[0] and "green_piece.toml" in err[0] and "is not there" in err[0] and lost in err[0]
+    assert "--scene" in err[0]
+
+
+@pytest.mark.parametrize("command", ["detect", "features"])
+def test_scans_without_depth_or_intrinsics_are_refused_by_name(tmp_path, capsys, moved, command):
+    scan = rs.load_scan(moved)
+    no_depth = tmp_path / "no_depth.npz"
+    dataclasses.replace(scan, depth=np.full(scan.shape, np.nan, np.float32)).save(no_depth)
+    _refused(capsys, [command, no_depth, "--out", tmp_path / "a"], "no_depth.npz", "no valid pixel (with a depth)")
+    assert not (tmp_path / "a").exists()
+    no_k = tmp_path / "no_k.npz"  # naming a scene that is there (--scene checks the intrinsics itself)
+    meta = {**{k: v for k, v in scan.meta.items() if k != "K"}, "scene": GREEN}
+    dataclasses.replace(scan, meta=meta).save(no_k)
+    _refused(capsys, [command, no_k, "--out", tmp_path / "b"], "no_k.npz", "meta['K']")
+    assert not (tmp_path / "b").exists()
+
+
+def test_compare_reads_its_mesh_as_scan_does(tmp_path, capsys):
+    rec = tmp_path / "rec.npz"
+    grid_recording(60, 70).save(rec)
+    whole = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(20.0, 20.0, 20.0)).export(whole)
+    cut = tmp_path / "cut.stl"
+    cut.write_bytes(whole.read_bytes()[:300])
+    _refused(capsys, ["compare", rec, "--mesh", cut, "--sensor", "cyberware_3030", "--out", tmp_path / "c"],
+             "cut.stl", "truncated binary STL")
+    _refused(capsys, ["compare", rec, "--mesh", tmp_path, "--sensor", "cyberware_3030", "--out", tmp_path / "c"],
+             "is a directory")

@@ -87,9 +87,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
     check_out_files(out, names, [path, args.conf, args.scene, args.sensor])
     scan, segment_labels = load_scan_with_labels(path, args.conf, sensor=args.sensor)
     require_grid(scan, path)
-    if not np.any(scan.valid):  # as rangesim scan refuses to write one without --keep-empty
-        raise RangesimError("no valid pixel: nothing to detect (every score would be 1 for finding nothing)",
-                            source=path)
+    if not np.any(scan.valid & ~np.isnan(scan.depth)):  # as rangesim scan refuses to write one without --keep-empty
+        raise RangesimError("no valid pixel (with a depth): nothing to detect (every score would be 1 for finding "
+                            "nothing)", source=path)
     scene = args.scene
     if scene is not None:
         from rangesim.cli.common import load_scene_arg
@@ -114,7 +114,14 @@ def cmd_detect(args: argparse.Namespace) -> int:
                 f"scan's true surface on {100 * share:.1f} % of its pixels (edited since the scan?); give --scene",
                 source=path)
         check_out_files(out, names, scene_files(scene))
-    truth = scan_truth(scan, scene, segment_labels, crease_deg=args.crease_deg)
+    else:
+        from rangesim.cli.scene_match import warn_if_named_scene_is_gone
+
+        warn_if_named_scene_is_gone(scan, path, "no ground truth, no scores")
+    try:
+        truth = scan_truth(scan, scene, segment_labels, crease_deg=args.crease_deg)
+    except RangesimError as exc:  # (a scan without intrinsics, ...): name the file
+        raise RangesimError(str(exc), source=path) from None
     try:
         results = run_detectors(scan, methods, truth, tolerance_px=args.tolerance)
     except RangesimError as exc:  # a detector's refusal names the scan's field: name the file too

@@ -44,8 +44,8 @@ def cmd_features(args: argparse.Namespace) -> int:
     from rangesim.cli.edge_commands import require_grid
 
     require_grid(scan, Path(args.scan))
-    if not np.any(scan.valid):
-        raise RangesimError("no valid pixel: no edges, no features to find", source=args.scan)
+    if not np.any(scan.valid & ~np.isnan(scan.depth)):  # (an infinite one: the detectors name it)
+        raise RangesimError("no valid pixel (with a depth): no edges, no features to find", source=args.scan)
     scene = args.scene
     given_model = None
     if scene is not None:
@@ -56,8 +56,10 @@ def cmd_features(args: argparse.Namespace) -> int:
         given_model = load_scene_arg(scene)
         require_matching_scene(scan, given_model, args.scan, scene)
     if scene is None and scan.xyz_true is not None:
+        from rangesim.cli.scene_match import warn_if_named_scene_is_gone
         from rangesim.evaluate.runs import scene_of_scan
 
+        warn_if_named_scene_is_gone(scan, args.scan, "no model: ellipses from the edges alone, no scores")
         given_model = scene_of_scan(scan)  # (a bare mesh in its own units, as it was scanned)
         scene = given_model.source if given_model is not None else None
     if given_model is not None:
@@ -74,7 +76,10 @@ def cmd_features(args: argparse.Namespace) -> int:
     arc = F.arcs(edge_map, radii)
     # the analysis layer takes a loaded scene (it does not read scene files itself)
     model = given_model if given_model is not None else (load_scene(scene) if scene else None)
-    ell = F.ellipses(edge_map, scan if scene else None, model, explained=(*segs, *circ, *arc))
+    try:
+        ell = F.ellipses(edge_map, scan if scene else None, model, explained=(*segs, *circ, *arc))
+    except RangesimError as exc:  # (a scan without intrinsics for the model's ellipses): name the file
+        raise RangesimError(str(exc), source=args.scan) from None
     feats = {"segments": segs, "circles": circ, "arcs": arc, "ellipses": ell}
     rows = F.relations(segs, circ, ell)
     make_out_dir(out)

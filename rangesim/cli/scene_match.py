@@ -74,6 +74,18 @@ def require_matching_scene(scan, scene, scan_path: Path | str, scene_path: Path 
             "the scene the scan was made from", source=scan_path)
 
 
+def warn_if_named_scene_is_gone(scan, scan_path: Path | str, lost: str) -> None:
+    """A synthetic scan whose named scene file (``meta["scene"]``) is gone (the folder moved or
+    copied) loses what the scene gives (``lost``: "no ground truth, no scores"): say so in one
+    line rather than leave it out unasked."""
+    named = scan.meta.get("scene") if scan.xyz_true is not None else None
+    if named and not Path(str(named)).is_file():
+        import warnings
+
+        warnings.warn(f"{scan_path}: the scene it was scanned from ({named}) is not there (moved or renamed?): "
+                      f"{lost}; give --scene", stacklevel=2)
+
+
 def require_synthetic(scan, scan_path: Path | str, scene_path: Path | str | None) -> None:
     """``--scene`` gives the ground truth of a synthetic scan; a recording has none to draw from it."""
     if scene_path is not None and scan.xyz_true is None:

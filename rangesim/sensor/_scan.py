@@ -138,7 +138,8 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
     footprint = max(distance, 1e-9) / sensor.focal_px
     if size < 2 * footprint:
         return (f"{head}: the scene is only {size:.3g} mm across, under {max(size / footprint, 0):.2g} pixel at "
-                f"{distance:.0f} mm (a bare mesh in metres or inches? give its units, e.g. --units m)")
+                f"{distance:.0f} mm (a bare mesh in metres or inches? give its units: a scene .toml's `units`, or "
+                f"`rangesim scan --units m` for a mesh file)")
     lo, hi = scene.bounds
     nearest = float(np.linalg.norm(eye - np.clip(eye, lo, hi)))
     if n_hits == 0 and nearest > far:

@@ -69,19 +69,14 @@ def load_mesh_mm(mesh: Any, scale: float | str = "auto", reference: np.ndarray |
     ``scale="auto"``: a mesh whose bounding box is under 5 units across while the
     ``reference`` points span more than 5 mm is taken to be in metres (x 1000).
     """
-    import trimesh
+    from rangesim.cad.meshes import check_mesh_arrays, load_mesh
 
     source = None
     if isinstance(mesh, (str, Path)):
-        path = source = Path(mesh)
-        if not path.is_file():
-            raise RangesimError("mesh file not found", source=path)
-        try:
-            loaded = trimesh.load(path, force="mesh", process=False)
-        except Exception as exc:  # trimesh raises many kinds
-            raise RangesimError(f"cannot read mesh ({exc})", source=path) from exc
-        mesh = loaded
-    from rangesim.cad.meshes import check_mesh_arrays
+        # the scanner's own reader: a truncated STL, a directory or an OBJ index out of range
+        # named as such (trimesh alone called them all an empty mesh or an index error)
+        source = Path(mesh)
+        mesh = load_mesh(source)
 
     check_mesh_arrays(mesh, source)
     mesh = mesh.copy()
