@@ -323,3 +323,22 @@ def test_compare_reads_its_mesh_as_scan_does(tmp_path, capsys):
              "cut.stl", "truncated binary STL")
     _refused(capsys, ["compare", rec, "--mesh", tmp_path, "--sensor", "cyberware_3030", "--out", tmp_path / "c"],
              "is a directory")
+
+
+def test_a_failed_write_leaves_no_empty_output_folder(tmp_path, capsys, monkeypatch, plate):
+    import rangesim.viz.edge_overlay as overlay
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(overlay, "save_edge_overlay", full_disk)
+    out = tmp_path / "new" / "deeper" / "out"
+    assert main(["detect", str(plate), "--method", "gradient", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()                 # (a note that it made the folders)
+    assert err[-1].startswith("rangesim: error: ") and "No space left" in err[-1], err
+    assert not (tmp_path / "new").exists()                              # made by the run, left empty: removed
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "notes.txt").write_text("mine")
+    _refused(capsys, ["detect", plate, "--method", "gradient", "--out", kept / "out"], "No space left")
+    assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"]       # a folder that was there stays

@@ -94,6 +94,29 @@ def _printable(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+def _new_folders(args: argparse.Namespace) -> list[Path]:
+    """The ``--out`` path and the folders above it that do not exist yet (deepest first): a run
+    that fails removes those of them it left empty (:func:`_remove_empty`)."""
+    out = getattr(args, "out", None)
+    if not isinstance(out, (str, Path)) or not str(out):
+        return []
+    path = Path(out)
+    return [p for p in (path, *path.parents) if not p.exists() and not p.is_symlink()]
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the empty folders a failed run made under ``folders`` (which did not exist before
+    it), deepest first; a file in one keeps it and the folders above it."""
+    for top in folders:
+        if not top.is_dir() or top.is_symlink():
+            continue
+        for root, _, _ in os.walk(top, topdown=False):  # (children first: a parent empties as they go)
+            try:
+                Path(root).rmdir()
+            except OSError:  # not empty
+                pass
+
+
 def _error(message: str) -> None:
     print(f"{PROG}: error: {_printable(_one_line(message))}", file=sys.stderr)
 
@@ -401,9 +424,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     # a warning is one line like an error (with RANGESIM_DEBUG, Python's own form: file and line)
     if not _debug():
         warnings.showwarning = _show_warning
+    new_folders = _new_folders(args)
+    code = EXIT_INTERNAL
     try:
         with signal_handler(signal.SIGTERM, _terminate):
-            return args.func(args)
+            code = args.func(args)
+            return code
     except Terminated:
         _error("terminated")
         return EXIT_TERMINATED
@@ -427,6 +453,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         progress.set_progress(before)
         warnings.showwarning = shown
+        if code != EXIT_OK:  # a failed run leaves no empty output folder it made (a write failed, ...)
+            _remove_empty(new_folders)
 
 
 if __name__ == "__main__":

@@ -78,8 +78,12 @@ def warn_if_named_scene_is_gone(scan, scan_path: Path | str, lost: str) -> None:
     """A synthetic scan whose named scene file (``meta["scene"]``) is gone (the folder moved or
     copied) loses what the scene gives (``lost``: "no ground truth, no scores"): say so in one
     line rather than leave it out unasked."""
+    from rangesim.scene.scene import MESH_SUFFIXES
+
     named = scan.meta.get("scene") if scan.xyz_true is not None else None
-    if named and not Path(str(named)).is_file():
+    # (a scene built in memory is named "memory": no file to miss)
+    is_file_name = bool(named) and Path(str(named)).suffix.lower() in {".toml", *MESH_SUFFIXES}
+    if is_file_name and not Path(str(named)).is_file():
         import warnings
 
         warnings.warn(f"{scan_path}: the scene it was scanned from ({named}) is not there (moved or renamed?): "
