@@ -342,3 +342,19 @@ def test_a_failed_write_leaves_no_empty_output_folder(tmp_path, capsys, monkeypa
     (kept / "notes.txt").write_text("mine")
     _refused(capsys, ["detect", plate, "--method", "gradient", "--out", kept / "out"], "No space left")
     assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"]       # a folder that was there stays
+
+
+def test_pose_files_that_are_no_pose_file_say_what_they_are(tmp_path, capsys):
+    folder = tmp_path / "poses"
+    folder.mkdir()
+    text = tmp_path / "pose.npy"
+    text.write_text("[[1, 0, 0, 0]]")  # a text file named .npy (numpy's words: pickle advice)
+    for pose, words in ((folder, "is a directory"), (text, "not a .npy file")):
+        _refused(capsys, ["scan", GREEN, "--pose", pose, "--out", tmp_path / "s.exr"], pose.name, words)
+    assert not (tmp_path / "s.exr").exists()
+
+
+def test_unknown_units_list_the_inch_sign_quoted(tmp_path, capsys):
+    line = _refused(capsys, ["points", "green_piece", "--resolution", "3 furlong", "--out", tmp_path / "p.ply"],
+                    "furlong")
+    assert line.endswith("""the inch sign '"')"""), line

@@ -66,6 +66,8 @@ def load_scene_arg(source: str, units: str | None = None, option: str = "--units
     path = Path(source)
     is_mesh = path.suffix.lower() in MESH_SUFFIXES
     if units is not None and not is_mesh:
+        if path.suffix.lower() != ".toml":
+            load_scene(path)  # (no such file, or an unknown type: its own words, not the --units rule's)
         raise RangesimError(f"{option} applies to a bare mesh file; a scene .toml sets its own units "
                             "(units = ...)", source=path)
     if not is_mesh:

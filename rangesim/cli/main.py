@@ -155,11 +155,17 @@ def _parse_setting(text: str) -> tuple[str, Any]:
 
 def _load_pose(path: Path) -> np.ndarray:
     """A 4x4 camera-to-world matrix from ``.npy`` or ``.json`` (nested list, or {"pose": ...})."""
+    if path.is_dir():
+        raise RangesimError("is a directory, not a pose file (.json or .npy)", source=path)
     if not path.is_file():
         raise RangesimError("no such pose file", source=path)
     suffix = path.suffix.lower()
     data: Any
     if suffix == ".npy":
+        with open(path, "rb") as fh:  # (numpy's own complaint about such a file is pickle advice)
+            if fh.read(6) != b"\x93NUMPY":
+                raise RangesimError("not a .npy file (no NumPy header): save the pose with np.save, or as .json",
+                                    source=path)
         try:
             data = np.load(path, allow_pickle=False)
         except (ValueError, EOFError, SyntaxError, TypeError, OSError) as exc:  # a broken header: SyntaxError

@@ -18,6 +18,9 @@ UNITS_MM: dict[str, float] = {
     '"': 25.4,
 }
 
+#: the units as a message lists them (the inch sign quoted: last in a list it read as a stray quote)
+UNIT_NAMES = "mm, cm, m, in (or inch, inches, the inch sign '\"')"
+
 # a float literal (sign, digits, optional fraction and exponent), then an optional unit;
 # the exponent needs digits, so "1e-3m" is 1e-3 metres and "2em" is rejected
 _LENGTH = re.compile(
@@ -65,7 +68,7 @@ def parse_length(
     """
     default = default_unit.strip().lower()
     if default not in UNITS_MM:
-        raise RangesimError(f"unknown length unit {default_unit!r}; use one of {_unit_list()}")
+        raise RangesimError(f"unknown length unit {default_unit!r}; use one of {UNIT_NAMES}")
     if isinstance(value, bool):  # bool is an int; True mm is surely a mistake
         raise RangesimError(f"{what} must be a length such as 5mm or 0.2in, got {value!r}")
     if isinstance(value, Real):
@@ -74,13 +77,13 @@ def parse_length(
         match = _LENGTH.match(value)
         if match is None:
             raise RangesimError(
-                f"{what} must be a number with an optional unit ({_unit_list()}), "
+                f"{what} must be a number with an optional unit ({UNIT_NAMES}), "
                 f"e.g. 5mm or 0.2in; got {value!r}"
             )
         number = float(match["number"])
         unit = match["unit"].lower() or default
         if unit not in UNITS_MM:
-            raise RangesimError(f"{what}: unknown unit {match['unit']!r} in {value!r}; use one of {_unit_list()}")
+            raise RangesimError(f"{what}: unknown unit {match['unit']!r} in {value!r}; use one of {UNIT_NAMES}")
     else:
         raise RangesimError(f"{what} must be a number or a string, got {type(value).__name__}")
     mm = number * UNITS_MM[unit]
@@ -90,6 +93,3 @@ def parse_length(
         raise RangesimError(f"{what} must be positive, got {value!r}")
     return mm
 
-
-def _unit_list() -> str:
-    return ", ".join(UNITS_MM)

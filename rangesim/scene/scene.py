@@ -16,7 +16,7 @@ from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import look_at, object_transform
 from rangesim.core.tomlfile import check_keys, read_toml
-from rangesim.core.units import UNITS_MM
+from rangesim.core.units import UNIT_NAMES, UNITS_MM
 from rangesim.scene.materials import check_material
 from rangesim.scene.meshes import MESH_SUFFIXES, load_mesh, validate_mesh
 from rangesim.scene.primitives import GEOMETRY_KEYS, PRIMITIVE_KEYS, make_primitive
@@ -207,7 +207,7 @@ def load_mesh_scene(path: str | Path, units: str | None = None) -> Scene:
     if units is None or UNITS_MM.get(units) == 1.0:
         return load_scene(path)
     if units not in UNITS_MM:
-        raise RangesimError(f"unknown units {units!r}; use one of {', '.join(UNITS_MM)}", source=path)
+        raise RangesimError(f"unknown units {units!r}; use one of {UNIT_NAMES}", source=path)
     mesh = load_mesh(path)
     mesh.apply_scale(UNITS_MM[units])
     return Scene([SceneObject(path.stem, mesh, source=str(path))], source=str(path.resolve()), source_units=units)
@@ -277,7 +277,7 @@ def expand_data_path(text: str) -> str:
 def _unit_scale(value: str, where: str, source) -> float:
     if not isinstance(value, str) or value not in UNITS_MM:
         raise RangesimError(
-            f"unknown units {value!r} in {where}; use one of {', '.join(UNITS_MM)}", source=source
+            f"unknown units {value!r} in {where}; use one of {UNIT_NAMES}", source=source
         )
     return UNITS_MM[value]
 
