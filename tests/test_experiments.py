@@ -777,3 +777,29 @@ def test_part_seen_from_cap_takes_the_range_in_depth():
     assert np.hypot(100.0, d) > 450.0 and _part_seen_from_cap(cap, vertices, sensor)
     cap["distance"] = [455.0, 455.0]  # now its depth is past far too
     assert not _part_seen_from_cap(cap, vertices, sensor)
+
+
+def test_sweep_range_check_runs_once_per_scene_and_optics(sweep_dir, monkeypatch):
+    """The pre-flight range check reads the scene, the pose table and the sensor's camera and working
+    range: a noise parameter swept does not repeat it (a 10^4-task noise grid sat silent for minutes)."""
+    import rangesim.experiments.poses as poses
+    import rangesim.experiments.scenes as scenes
+    from rangesim.experiments.sweep import _check_parts_in_range
+
+    calls = {"scene": 0, "check": 0}
+    load, check = scenes.load_task_scene, poses.check_distance_in_range
+
+    def counted_load(*args, **kwargs):
+        calls["scene"] += 1
+        return load(*args, **kwargs)
+
+    def counted_check(*args, **kwargs):
+        calls["check"] += 1
+        return check(*args, **kwargs)
+
+    monkeypatch.setattr(scenes, "load_task_scene", counted_load)
+    monkeypatch.setattr(poses, "check_distance_in_range", counted_check)
+    tasks = plan_sweep(load_sweep(sweep_dir / "sweep.toml"))  # noise.sigma_px x object.box.albedo, 2 x 2
+    assert len({json.dumps(t.payload["sensor"], sort_keys=True) for t in tasks}) == 2
+    _check_parts_in_range(tasks, None)
+    assert calls == {"scene": 2, "check": 2}   # one per albedo (the scene's objects), not per noise level
