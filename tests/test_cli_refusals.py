@@ -358,3 +358,18 @@ def test_unknown_units_list_the_inch_sign_quoted(tmp_path, capsys):
     line = _refused(capsys, ["points", "green_piece", "--resolution", "3 furlong", "--out", tmp_path / "p.ply"],
                     "furlong")
     assert line.endswith("""the inch sign '"')"""), line
+
+
+def test_points_takes_the_units_of_a_mesh_file_and_warns_of_a_tiny_one(tmp_path, capsys):
+    mesh = tmp_path / "box_m.stl"
+    trimesh.creation.box(extents=(0.05, 0.04, 0.03)).export(mesh)   # a 50 mm box in metres
+    assert main(["points", str(mesh), "--resolution", "2mm", "--out", str(tmp_path / "a.ply")]) == 0
+    err = capsys.readouterr().err
+    assert "only 0.05 mm across" in err and "--units" in err
+    assert main(["points", str(mesh), "--units", "m", "--resolution", "2mm", "--out", str(tmp_path / "b.ply")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    a = trimesh.load(tmp_path / "a.ply")
+    b = trimesh.load(tmp_path / "b.ply")
+    assert len(a.vertices) < 50 < 500 < len(b.vertices)             # a few points per face, against its surface
+    _refused(capsys, ["points", "green_piece", "--units", "m", "--resolution", "2mm", "--out", tmp_path / "c.ply"],
+             "--units applies to a mesh file")

@@ -11,18 +11,21 @@ from __future__ import annotations
 
 import argparse
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from rangesim.cad.sampling import ENDS, surface_points
-from rangesim.cli.common import check_outputs, check_suffix, write_together
+from rangesim.cli.common import MESH_UNITS, check_outputs, check_suffix, write_together
 from rangesim.core.errors import RangesimError
-from rangesim.core.units import parse_length
+from rangesim.core.units import UNITS_MM, parse_length
 
 #: extensions the command writes, checked before any work
 POINTS_SUFFIXES = (".ply", ".npz")
 PREVIEW_SUFFIXES = (".png",)
+#: a model fewer resolution steps across than this draws a warning (a mesh in other units)
+MIN_STEPS_ACROSS = 5
 
 
 def parse_viewpoint(text: str) -> np.ndarray:
@@ -35,7 +38,7 @@ def parse_viewpoint(text: str) -> np.ndarray:
 
 def cmd_points(args: argparse.Namespace) -> int:
     """Sample the model's surface, write the points (and a preview), print a summary."""
-    from rangesim.cad.models import load_model
+    from rangesim.cad.models import MODELS, load_model
     from rangesim.scene.visibility import visible_surface_points
 
     out = Path(args.out)
@@ -51,6 +54,15 @@ def cmd_points(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     mesh = load_model(args.model)
+    if args.units is not None:
+        if str(args.model) in MODELS:
+            raise RangesimError("--units applies to a mesh file; a built-in model is in mm", source=args.model)
+        mesh = mesh.copy()
+        mesh.apply_scale(UNITS_MM[args.units])
+    size = float(np.max(mesh.extents))
+    if size < MIN_STEPS_ACROSS * h:  # (a mesh in metres sampled at 2 mm: its vertices and nothing else)
+        warnings.warn(f"{args.model}: the model is only {size:.3g} mm across, under {MIN_STEPS_ACROSS} steps of "
+                      f"{h:g} mm (a mesh in metres or inches? give --units)", stacklevel=1)
     if view is None:
         samples = surface_points(mesh, h, smooth=not args.flat, ends=args.ends)
     else:
@@ -77,6 +89,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Sample a model's surface with points and normals at a resolution "
         "(grid spacing; neighbouring points at most spacing*sqrt(3) apart).")
     p.add_argument("model", metavar="MODEL", help="built-in model name or mesh file (.stl, .obj, .ply, ...)")
+    p.add_argument("--units", choices=MESH_UNITS, help="length unit of a mesh file (default: mm)")
     p.add_argument("--resolution", required=True, metavar="LENGTH",
                    help="grid spacing, e.g. 2mm, 0.2in, 0.5cm (a bare number is mm)")
     p.add_argument("--out", required=True, metavar="OUT",
