@@ -200,6 +200,10 @@ def test_cli_calibrate_geometry_only(data_dir, tmp_path):
                  "--geometry-only", "--name", "my_cyberware"]) == 0
     sensor = rs.load_sensor(out)
     assert sensor.name == "my_cyberware" and sensor.params["twin"]["theta_deg"] is not None
+    header = [line for line in out.read_text().splitlines() if line.startswith("#")]
+    # no range-error fit: no "cost nan", no empty list of noise keys ("...; ." before)
+    assert "range error not fitted (geometry only)" in header[1] and "nan" not in " ".join(header)
+    assert header[2].endswith("noise.min_signal, noise.signal_contrast."), header[2]
     assert main(["calibrate", str(root / "bun045.ply"), "--mesh", str(tmp_path / "missing.ply"),
                  "--sensor", "cyberware_3030", "--out", str(tmp_path / "x.toml")]) == 2
     assert not (tmp_path / "x.toml").exists()

@@ -77,7 +77,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if n:
         print("range error: " + ", ".join(f"{k} {v:.4g}" for k, v in n.items() if k not in ("cost", "evaluations"))
               + f"  (cost {n['cost']:.4f}, {n['evaluations']} evaluations)")
-    print(f"wrote {out}")
+    print(f"wrote {out}" + (f" and {report}" if report is not None else ""))
     return 0
 
 

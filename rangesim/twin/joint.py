@@ -290,14 +290,17 @@ def sensor_toml(sensor: Any, report: dict[str, Any] | None = None) -> str:
     """TOML text of a sensor (every table and key with a value), with a header on its calibration."""
     lines = []
     if report is not None:
+        noise = [k for k in NOISE_PARAMS if k in report["noise"]]
+        # (geometry only: no range-error fit, no cost, no noise keys fitted)
+        cost = (f"; range-error fit cost {report['noise']['cost']:.4f}" if "cost" in report["noise"]
+                else "; range error not fitted (geometry only)")
         lines += [
             f"# Calibrated by `rangesim calibrate` jointly on {len(report['views'])} recording(s): "
             + ", ".join(str(v) for v in report["views"]) + ".",
             f"# Joint noise-free valid-mask IoU {report['iou']:.4f}; dropout fit on "
-            f"{report['dropout']['cells']:,} measurable cells; range-error fit cost "
-            f"{report['noise'].get('cost', float('nan')):.4f}.",
-            "# Fitted: [twin] theta_deg, alpha_deg, min_cos; noise.min_signal, noise.signal_contrast; "
-            + ", ".join(k for k in NOISE_PARAMS if k in report["noise"]) + ".",
+            f"{report['dropout']['cells']:,} measurable cells{cost}.",
+            "# Fitted: [twin] theta_deg, alpha_deg, min_cos; noise.min_signal, noise.signal_contrast"
+            + ("; " + ", ".join(noise) if noise else "") + ".",
         ]
     d = sensor.to_dict()
     for key in ("name", "description", "mode"):
