@@ -162,3 +162,17 @@ def test_ring_neighbourhoods_stop_once_they_cover_the_mesh():
     few = rs.curvature.curvature_mesh(mesh, rings=30)
     for key in ("H", "K"):
         np.testing.assert_array_equal(many[key], few[key])
+
+
+def test_an_independent_reviews_cases(plate):
+    """The review of this file's fixes: each of these went wrong in their first version."""
+    scan, _, em = plate
+    from rangesim.features._circles import circle_hypotheses
+
+    _refused(lambda: circle_hypotheses(em, radii=(3, 30), cell_px=None), "cell_px")   # was a TypeError
+    assert len(rs.features.circles(em, radii=(r for r in (3, 30)))) == len(rs.features.circles(em, radii=(3, 30)))
+    _refused(lambda: EdgeMap(mask=np.ones((3, 3), bool), labels=np.full((3, 3), -1), strength=np.zeros((3, 3))),
+             "got -1")                                                  # (not the 255 of a uint8 cast)
+    with_nan = dataclasses.replace(scan, meta={**scan.meta, "x": np.float32("nan"), "o": np.array(None, object)})
+    assert with_nan == dataclasses.replace(with_nan)
+    assert rs.evaluate.region_boundaries(np.arange(9).reshape(3, 3), background=None).all()

@@ -342,6 +342,25 @@ def test_a_failed_write_leaves_no_empty_output_folder(tmp_path, capsys, monkeypa
     (kept / "notes.txt").write_text("mine")
     _refused(capsys, ["detect", plate, "--method", "gradient", "--out", kept / "out"], "No space left")
     assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"]       # a folder that was there stays
+    # empty folders that were there stay, whatever the path's spelling (a review's case: `..`)
+    (tmp_path / "existing" / "empty").mkdir(parents=True)
+    assert main(["detect", str(plate), "--method", "gradient",
+                 "--out", str(tmp_path / "new2" / ".." / "existing" / "out")]) == 2
+    assert (tmp_path / "existing" / "empty").is_dir() and not (tmp_path / "existing" / "out").exists()
+    capsys.readouterr()
+
+    # a folder another process makes meanwhile in a new parent stays
+    def other_process_then_full(*args, **kwargs):
+        (tmp_path / "shared" / "run_b").mkdir()
+        full_disk()
+
+    monkeypatch.setattr(overlay, "save_edge_overlay", other_process_then_full)
+    assert main(["detect", str(plate), "--method", "gradient", "--out", str(tmp_path / "shared" / "run_a")]) == 2
+    assert (tmp_path / "shared" / "run_b").is_dir() and not (tmp_path / "shared" / "run_a").exists()
+    capsys.readouterr()
+    # a name too long to look at: the one-line error, not a traceback
+    _refused(capsys, ["detect", plate, "--method", "gradient", "--out", tmp_path / ("a" * 300) / "out"],
+             "File name too long")
 
 
 def test_pose_files_that_are_no_pose_file_say_what_they_are(tmp_path, capsys):

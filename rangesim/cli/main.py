@@ -95,26 +95,36 @@ def _printable(text: str) -> str:
 
 
 def _new_folders(args: argparse.Namespace) -> list[Path]:
-    """The ``--out`` path and the folders above it that do not exist yet (deepest first): a run
-    that fails removes those of them it left empty (:func:`_remove_empty`)."""
+    """The ``--out`` path (absolute, ``..`` resolved) and the folders above it that do not exist
+    yet, deepest first: a run that fails removes those it left empty (:func:`_remove_empty`).
+    None where the path cannot even be looked at (too long a name: the run says so itself)."""
     out = getattr(args, "out", None)
     if not isinstance(out, (str, Path)) or not str(out):
         return []
-    path = Path(out)
-    return [p for p in (path, *path.parents) if not p.exists() and not p.is_symlink()]
+    try:
+        path = Path(os.path.abspath(out))
+        return [p for p in (path, *path.parents) if not p.exists() and not p.is_symlink()]
+    except (OSError, ValueError):
+        return []
 
 
 def _remove_empty(folders: list[Path]) -> None:
-    """Remove the empty folders a failed run made under ``folders`` (which did not exist before
-    it), deepest first; a file in one keeps it and the folders above it."""
-    for top in folders:
-        if not top.is_dir() or top.is_symlink():
-            continue
-        for root, _, _ in os.walk(top, topdown=False):  # (children first: a parent empties as they go)
-            try:
-                Path(root).rmdir()
-            except OSError:  # not empty
-                pass
+    """Remove the empty folders a failed run made: ``folders`` did not exist before it (the
+    output first, then the new folders above it). Inside the output folder, which is the run's
+    own, every empty folder goes (dataset's views/); above it only the new folders themselves,
+    each if empty (not what another process made in them meanwhile)."""
+    for k, top in enumerate(folders):
+        try:
+            if not top.is_dir() or top.is_symlink():
+                continue
+            below = os.walk(top, topdown=False) if k == 0 else [(str(top), [], [])]
+            for root, _, _ in below:  # (children first: a parent empties as they go)
+                try:
+                    Path(root).rmdir()
+                except OSError:  # not empty
+                    pass
+        except OSError:
+            pass
 
 
 def _error(message: str) -> None:

@@ -83,6 +83,15 @@ class RangeScan:
         hold exactly (a status of 300, a part of 2**40 or 0.5, a NaN in ``valid``); a
         plain cast would wrap or round them silently. Values that convert exactly are
         converted (int64 labels in range, 0 / 1 for ``valid``, float64 depth to float32).
+        Also for a pose that is not finite or whose rotation block is singular, a
+        ``meta["K"]`` that is no finite 3x3 pinhole matrix with positive focal lengths, and
+        a negative ``sigma``.
+
+    Notes
+    -----
+    Scans compare by value (``==``): every field equal, arrays element by element with NaN
+    equal to NaN, ``meta`` as nested values (a list equals the array of its values); two
+    runs of one seed give equal scans. Scans are mutable and have no hash.
     """
 
     depth: np.ndarray
@@ -290,11 +299,20 @@ def _same_value(a: Any, b: Any) -> bool:
             return (isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)) and len(a) == len(b)
                     and all(_same_value(u, v) for u, v in zip(a, b)))
         if x.dtype == object or y.dtype == object:
-            return len(a) == len(b) and all(_same_value(u, v) for u, v in zip(a, b))
+            if x.ndim == 0 or y.ndim == 0:
+                return x.ndim == y.ndim and _same_value(x.item(), y.item())
+            return len(x) == len(y) and all(_same_value(u, v) for u, v in zip(x, y))
         return x.shape == y.shape and np.array_equal(x, y, equal_nan=x.dtype.kind == "f" and y.dtype.kind == "f")
-    if isinstance(a, float) and isinstance(b, float) and a != a and b != b:
+    if isinstance(a, np.generic):  # numpy scalars as Python's (NaN below)
+        a = a.item()
+    if isinstance(b, np.generic):
+        b = b.item()
+    if isinstance(a, (float, complex)) and isinstance(b, (float, complex)) and a != a and b != b:
         return True
-    return bool(a == b)
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):  # values that do not compare to one truth value
+        return False
 
 
 def _as_array(name: str, value: Any) -> np.ndarray:

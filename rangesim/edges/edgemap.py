@@ -93,6 +93,12 @@ class EdgeMap:
     def __post_init__(self) -> None:
         self.mask = np.asarray(self.mask, dtype=bool)
         shape = self.mask.shape
+        raw = np.asarray(self.labels)
+        if raw.shape == shape and raw.dtype.kind in "iuf":
+            bad = raw[self.mask & ((raw < 0) | (raw > RIM))]  # (before the uint8 cast: -1 would read 255)
+            if bad.size:
+                raise RangesimError(f"EdgeMap.labels must be 0-{RIM} ({', '.join(LABEL_NAMES.values())}) at edge "
+                                    f"pixels, got {bad.flat[0].item()!r}")
         self.labels = np.asarray(self.labels, dtype=np.uint8)
         self.strength = np.asarray(self.strength, dtype=np.float32)
         if self.labels.shape != shape or self.strength.shape != shape:
@@ -108,10 +114,6 @@ class EdgeMap:
             check_offsets(self.offset[self.mask])  # read at edge pixels only
         # labels only on edge pixels (NONE = 0); a product is ~20x cheaper than np.where
         self.labels = self.labels * self.mask
-        if self.labels.max(initial=0) > RIM:  # (a -1 cast to uint8 is 255) no edge type: every scorer refuses it
-            bad = int(self.labels.max())
-            raise RangesimError(f"EdgeMap.labels must be 0-{RIM} ({', '.join(LABEL_NAMES.values())}) at edge pixels, "
-                                f"got {bad}")
 
     def label_mask(self, label: EdgeLabel | int) -> np.ndarray:
         """Edge pixels of one type."""

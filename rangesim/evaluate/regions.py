@@ -15,8 +15,8 @@ def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, backg
         Segment id per pixel; ``background`` marks pixels with no segment (no data).
     valid : (H, W) bool, optional
         Pixels with a measurement; others never count as a boundary.
-    background : int
-        The id of "no segment".
+    background : int or None
+        The id of "no segment" (None: every id is a segment).
 
     Notes
     -----
@@ -24,8 +24,9 @@ def region_boundaries(labels: np.ndarray, valid: np.ndarray | None = None, backg
     boundary is two pixels wide; score it with a tolerance of at least 1 pixel.
     """
     labels = np.asarray(labels)
-    if isinstance(background, (bool, np.bool_)) or not isinstance(background, (int, float, np.integer, np.floating)):
-        raise RangesimError(f"background must be a segment id (a number), got {background!r:.40}")
+    if background is not None and (isinstance(background, (bool, np.bool_))
+                                   or not isinstance(background, (int, float, np.integer, np.floating))):
+        raise RangesimError(f"background must be a segment id (a number) or None, got {background!r:.40}")
     if labels.ndim != 2:
         raise RangesimError(f"labels must be an (H, W) array, got shape {labels.shape}")
     if labels.dtype.kind not in "biuf":

@@ -99,10 +99,10 @@ def circle_hypotheses(
     max_hypotheses = P.whole(max_hypotheses, "max_hypotheses", 1)
     # a centre cell wider than the largest radius sought (or than its band's smallest radius)
     # resolves no circle, and its radius bins ran into terabytes
+    cell_px = P.number(cell_px, "cell_px", 0, lo_open=True, unit="pixels")
     if radii[1] < cell_px:
         raise RangesimError(f"radii: the largest radius sought, {radii[1]:g} px, is under the centre cell "
                             f"(cell_px = {cell_px:g} px): no circle that small is resolved; got {radii!r}")
-    P.number(cell_px, "cell_px", 0, float(radii[1]), lo_open=True, unit="pixels")
     P.number(radius_step, "radius_step", 0, lo_open=True, unit="pixels")
     P.number(rel_cell, "rel_cell", 0, 1, lo_open=True, none=True)
     xy, theta, pixels = edge_points(edge_map, keep, return_pixels=True)

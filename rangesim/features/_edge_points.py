@@ -46,7 +46,10 @@ def check_scan_shape(scan: Any, mask: np.ndarray) -> None:
 def check_range(values: Any, name: str, what: str = "pixels") -> tuple[float, float]:
     """``(min, max)`` of a range parameter (radii, axes) as two finite floats, 0 <= min <= max."""
     try:
-        if isinstance(values, (str, bytes)) or any(isinstance(v, (bool, np.bool_)) for v in values):
+        if isinstance(values, (str, bytes)):
+            raise TypeError("not numbers")
+        values = tuple(values)  # (a generator is read once)
+        if any(isinstance(v, (bool, np.bool_)) for v in values):
             raise TypeError("not numbers")  # (True would pass as 1.0)
         lo, hi = (float(v) for v in values)
     except (TypeError, ValueError) as exc:
