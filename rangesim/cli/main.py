@@ -97,7 +97,7 @@ def _printable(text: str) -> str:
 def _new_folders(args: argparse.Namespace) -> list[Path]:
     """The ``--out`` path (absolute, ``..`` resolved) and the folders above it that do not exist
     yet, deepest first: a run that fails removes those it left empty (:func:`_remove_empty`).
-    None where the path cannot even be looked at (too long a name: the run says so itself)."""
+    Nothing where the path cannot even be looked at (too long a name: the run says so itself)."""
     out = getattr(args, "out", None)
     if not isinstance(out, (str, Path)) or not str(out):
         return []
