@@ -176,3 +176,24 @@ def test_an_independent_reviews_cases(plate):
     with_nan = dataclasses.replace(scan, meta={**scan.meta, "x": np.float32("nan"), "o": np.array(None, object)})
     assert with_nan == dataclasses.replace(with_nan)
     assert rs.evaluate.region_boundaries(np.arange(9).reshape(3, 3), background=None).all()
+
+
+def test_a_reader_that_sets_a_bad_pose_after_building_the_scan_is_refused_at_load(tmp_path, monkeypatch):
+    """load_scan runs the constructor's checks again on what a reader returns (a pose set after
+    construction, as a .conf sets it, or a registered reader of another package)."""
+    import copy
+
+    import rangesim.io as rio
+
+    def reader(path, **kwargs):
+        scan = copy.copy(rs.datasets.plate_scan())
+        scan.pose = np.full((4, 4), np.nan)                           # after construction: unchecked
+        return scan
+
+    monkeypatch.setitem(rio._READERS, ".weird", reader)
+    path = tmp_path / "x.weird"
+    path.write_text("x")
+    _refused(lambda: rs.load_scan(path), "x.weird", "pose holds NaN")
+    monkeypatch.setitem(rio._READERS, ".fine", lambda path, **kw: rs.datasets.plate_scan())
+    (tmp_path / "y.fine").write_text("y")
+    assert rs.load_scan(tmp_path / "y.fine") == rs.datasets.plate_scan()

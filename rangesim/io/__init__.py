@@ -97,17 +97,25 @@ def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
     """Refuse a scan file whose contents every reader of it would trip over later, in one line.
 
     ``meta["units"]`` (when present) must be ``"mm"``, and every valid pixel's ``xyz`` finite (a
-    NaN point counted as measured). The RangeScan constructor, which every reader goes
-    through, has refused the rest already: a pose that is not finite or has a singular rotation
-    block (a NaN pose was printed and used, a zero one made every world point the origin), a
-    ``meta["K"]`` that is no pinhole matrix, a ``meta["sensor"]`` that is no table.
+    NaN point counted as measured). The RangeScan constructor's checks are run again, for
+    what a reader set after building the scan (a pose from a ``.conf``; a registered reader
+    of another package): a pose that is not finite or has a singular rotation block (a NaN pose
+    was printed and used, a zero one made every world point the origin), a ``meta["K"]`` that
+    is no pinhole matrix, a ``meta["sensor"]`` that is no table, fields of the wrong shape.
 
     Returns
     -------
     RangeScan
-        ``scan`` itself.
+        The scan as the constructor checked it (the same arrays).
     """
+    import dataclasses
+
     import numpy as np
+
+    try:
+        scan = dataclasses.replace(scan)
+    except RangesimError as exc:
+        raise RangesimError(str(exc), path) from None
 
     units = scan.meta.get("units", "mm")
     if units != "mm":  # every reader of a scan takes its coordinates as millimetres
