@@ -240,19 +240,23 @@ class RangeScan:
 _REQUIRED = frozenset(name for name, _, _ in PIXEL_FIELDS)
 
 
-def checked_scan(scan: Any, source: str | Path | None = None) -> RangeScan:
-    """``scan`` as a writer may use it: a RangeScan that passes the constructor's checks.
+def checked_scan(scan: Any, source: str | Path | None = None, doing: str = "write") -> RangeScan:
+    """``scan`` as a writer (or a reader, with ``doing="read"``) may use it: a RangeScan that
+    passes the constructor's checks.
 
-    Fields can be reassigned after construction (``scan.valid = ...``); the writers call
-    this first, so every format refuses (or converts) the same values the constructor
-    does. Returns a shallow copy made through the constructor (arrays already of the right
+    Fields can be reassigned after construction (``scan.valid = ...``; a reader that sets the
+    pose from a ``.conf``); the writers call this first, so every format refuses (or converts)
+    the same values the constructor does, and ``load_scan`` calls it on what a reader
+    returns. Returns a shallow copy made through the constructor (arrays already of the right
     dtype are not copied); ``scan`` itself is left unchanged.
 
     Parameters
     ----------
     scan : RangeScan
     source : str or Path, optional
-        The file being written; prefixed to a RangesimError's message.
+        The file being written or read; prefixed to a RangesimError's message.
+    doing : {"write", "read"}
+        What the caller does with it, for the messages ("cannot write the scan: ...").
 
     Raises
     ------
@@ -263,11 +267,12 @@ def checked_scan(scan: Any, source: str | Path | None = None) -> RangeScan:
     """
     if not isinstance(scan, RangeScan):
         # no path in the message: save_scan hands writers a temporary name
-        raise TypeError(f"can only write a RangeScan, got {type(scan).__name__}")
+        raise TypeError(f"can only {doing} a RangeScan, got {type(scan).__name__}")
     try:
         return dataclasses.replace(scan)
     except RangesimError as exc:
-        raise RangesimError(f"cannot write the scan: {exc}", source) from exc
+        # (a read names the file only: the constructor's words say what is wrong in it)
+        raise RangesimError(f"cannot write the scan: {exc}" if doing == "write" else str(exc), source) from exc
 
 
 def _intrinsics(k: Any) -> np.ndarray | None:

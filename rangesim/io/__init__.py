@@ -22,7 +22,7 @@ from typing import Any
 
 from rangesim.core.atomic import atomic_path
 from rangesim.core.errors import RangesimError
-from rangesim.core.rangescan import RangeScan
+from rangesim.core.rangescan import RangeScan, checked_scan
 from rangesim.core.writers import WRITERS, Writer, register_writer, save_scan
 from rangesim.io.exr import read_exr, write_exr
 from rangesim.io.npz import read_npz, write_npz
@@ -108,15 +108,9 @@ def check_scan_contents(scan: RangeScan, path: str | Path) -> RangeScan:
     RangeScan
         The scan as the constructor checked it (the same arrays).
     """
-    import dataclasses
-
     import numpy as np
 
-    try:
-        scan = dataclasses.replace(scan)
-    except RangesimError as exc:
-        raise RangesimError(str(exc), path) from None
-
+    scan = checked_scan(scan, path, doing="read")
     units = scan.meta.get("units", "mm")
     if units != "mm":  # every reader of a scan takes its coordinates as millimetres
         raise RangesimError(f"the scan's meta.units is {units!r:.40}: rangesim scans are in millimetres (\"mm\")", path)
