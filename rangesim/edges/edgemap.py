@@ -10,7 +10,7 @@ import numpy as np
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
 
-__all__ = ["EdgeMap", "RIM", "LABEL_NAMES", "MAX_OFFSET_PX", "check_offsets"]
+__all__ = ["EdgeMap", "RIM", "LABEL_NAMES", "MAX_OFFSET_PX", "check_labels", "check_offsets"]
 
 #: ``EdgeMap.labels`` value of a *rim*: a measured pixel where the measured surface ends
 #: against pixels that saw no surface (a through-hole's rim over an absent floor, a part's
@@ -43,6 +43,22 @@ def check_offsets(values: np.ndarray, what: str = "EdgeMap.offset") -> None:
     if worst > MAX_OFFSET_PX:
         raise RangesimError(f"{what} reaches {worst:g} px at an edge pixel: at most {MAX_OFFSET_PX:g} px "
                             "(an offset places the edge within its pixel's reach)")
+
+
+def check_labels(labels: np.ndarray, name: str) -> None:
+    """Refuse labels that are no edge type: whole numbers 0 (none) .. :data:`RIM` (4) only; a
+    one-line RangesimError naming ``name``, the first bad value and how many there are."""
+    labels = np.asarray(labels)
+    if labels.dtype.kind not in "biuf":
+        raise RangesimError(f"{name} must be a numeric (H, W) array, got {labels.dtype}")
+    if labels.size == 0:
+        return
+    bad = (labels < 0) | (labels > RIM)
+    if labels.dtype.kind == "f":
+        bad |= ~np.isfinite(labels) | (labels != np.round(labels))
+    if np.any(bad):
+        raise RangesimError(f"{name} must hold whole numbers 0-{RIM} ({', '.join(LABEL_NAMES.values())}), "
+                            f"got {labels[bad].flat[0].item()!r} at {int(np.count_nonzero(bad)):,} pixels")
 
 
 @dataclass
@@ -94,11 +110,8 @@ class EdgeMap:
         self.mask = np.asarray(self.mask, dtype=bool)
         shape = self.mask.shape
         raw = np.asarray(self.labels)
-        if raw.shape == shape and raw.dtype.kind in "iuf":
-            bad = raw[self.mask & ((raw < 0) | (raw > RIM))]  # (before the uint8 cast: -1 would read 255)
-            if bad.size:
-                raise RangesimError(f"EdgeMap.labels must be 0-{RIM} ({', '.join(LABEL_NAMES.values())}) at edge "
-                                    f"pixels, got {bad.flat[0].item()!r}")
+        if raw.shape == shape:  # (before the uint8 cast: -1 would read 255)
+            check_labels(raw[self.mask], "EdgeMap.labels at edge pixels")
         self.labels = np.asarray(self.labels, dtype=np.uint8)
         self.strength = np.asarray(self.strength, dtype=np.float32)
         if self.labels.shape != shape or self.strength.shape != shape:

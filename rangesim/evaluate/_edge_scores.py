@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite
 from rangesim.core import params as P
 from rangesim.core.constants import EDGE_LABEL_NAMES, MAX_TOLERANCE_PX, EdgeLabel
 from rangesim.core.errors import RangesimError
-from rangesim.edges.edgemap import RIM
+from rangesim.edges.edgemap import RIM, check_labels
 
 #: Pratt's scaling constant
 FOM_ALPHA = 1.0 / 9.0
@@ -23,21 +23,6 @@ def _is_type(labels: np.ndarray, label: EdgeLabel) -> np.ndarray:
     where the neighbour returned nothing) is an occluding boundary, so it scores as a jump."""
     same = labels == int(label)
     return same | (labels == RIM) if label == EdgeLabel.JUMP else same
-
-
-def _check_labels(labels: np.ndarray, name: str) -> None:
-    """Refuse labels that are no edge type: whole numbers 0 (none) .. :data:`RIM` (4) only (a
-    -1 or a 300 fell in no type and vanished from every per-label count)."""
-    if labels.dtype.kind not in "biuf":
-        raise RangesimError(f"{name} must be a numeric (H, W) array, got {labels.dtype}")
-    if labels.size == 0:
-        return
-    bad = (labels < 0) | (labels > RIM)
-    if labels.dtype.kind == "f":
-        bad |= ~np.isfinite(labels) | (labels != np.round(labels))
-    if np.any(bad):
-        raise RangesimError(f"{name} must hold whole numbers 0-{RIM} (none, jump, convex, concave, rim), "
-                            f"got {labels[bad].flat[0].item()!r} at {int(np.count_nonzero(bad)):,} pixels")
 
 
 def _as_mask_labels(x: Any, name: str = "edge map") -> tuple[np.ndarray, np.ndarray | None]:
@@ -270,7 +255,7 @@ def edge_scores(
         if lab is not None and lab.shape != pred.shape:
             raise RangesimError(f"{name} {lab.shape} and the masks {pred.shape} differ in shape")
         if lab is not None:
-            _check_labels(lab, name)
+            check_labels(lab, name)  # (a -1 or a 300 fell in no type and vanished from every count)
     out = _scores(pred, gt, tolerance_px)
     out["tolerance_px"] = float(tolerance_px)
     if pred_labels is None and gt_labels is None:
