@@ -201,9 +201,8 @@ def grow(conics: np.ndarray, xy: np.ndarray, theta: np.ndarray, *, bands=(3.0, 2
         (ellipse, edge point) pairs of the inliers (by ellipse): within the last band and
         agreeing.
     """
-    theta = np.asarray(theta, np.float64)
     return grow_conics(np.ascontiguousarray(conics, np.float64).reshape(-1, 6), np.ascontiguousarray(xy, np.float64),
-                       np.cos(theta), np.sin(theta), np.asarray(bands, np.float64),
+                       np.ascontiguousarray(theta, np.float64), np.asarray(bands, np.float64),
                        float(np.cos(np.deg2rad(direction_tol_deg))), float(GROW_MARGIN_PX), 32.0)
 
 

@@ -812,13 +812,16 @@ def distinct_conics(conics, center_px, rel_size, max_px):  # pragma: no cover - 
 # -- growth -------------------------------------------------------------------------------------
 
 @numba.njit(**_JIT)
-def grow_conics(conics, xy, ct_all, st_all, bands, cos_tol, margin, cell_px):  # pragma: no cover - compiled
+def grow_conics(conics, xy, theta, bands, cos_tol, margin, cell_px):  # pragma: no cover - compiled
     """:func:`~._arc_ellipses.grow`: each conic refitted on the edge points near it whose
     normal agrees, over narrowing bands.
 
     The candidates (once, as :func:`~._arc_ellipses.box_candidates` finds them, in its order:
     by conic, then by grid cell, then by point) are the points within each conic's box
     (semi-major axis + ``bands[0]`` + ``margin`` + 1 px) and ``bands[0] + margin`` px of it.
+
+    ``theta`` (N,): the points' edge normals, radians (their cosines and sines are taken for
+    the candidates only).
 
     Returns conics (K, 6), ok (K,) and the (conic, point) pairs of the last band's inliers.
     """
@@ -853,36 +856,42 @@ def grow_conics(conics, xy, ct_all, st_all, bands, cos_tol, margin, cell_px):  #
             order[fill[key]] = i
             fill[key] += 1
     lim = bands[0] + margin
-    hyp = np.empty(0, np.int64)
-    pt = np.empty(0, np.int64)
-    for fill_ in range(2):  # count, then fill
-        P = 0
-        for k in range(K):
-            if not ok[k] or not (np.isfinite(cx[k]) and np.isfinite(cy[k]) and np.isfinite(reach[k])):
-                continue
-            r = reach[k]
-            x0 = min(max(np.floor((cx[k] - r) / cell_px), 0), nx)
-            x1 = min(max(np.floor((cx[k] + r) / cell_px), -1), nx - 1)
-            y0 = min(max(np.floor((cy[k] - r) / cell_px), 0), ny)
-            y1 = min(max(np.floor((cy[k] + r) / cell_px), -1), ny - 1)
-            for yc in range(int(y0), int(y1) + 1):
-                for xc in range(int(x0), int(x1) + 1):
-                    c = yc * nx + xc
-                    for at in range(cstart[c], cstart[c + 1]):
-                        i = order[at]
-                        x, y = xy[i, 0], xy[i, 1]
-                        if abs(x - cx[k]) <= r and abs(y - cy[k]) <= r and _sampson(conics[k], x, y) <= lim:
-                            if fill_ == 1:
-                                hyp[P] = k
-                                pt[P] = i
-                            P += 1
-        if fill_ == 0:
-            hyp = np.empty(P, np.int64)
-            pt = np.empty(P, np.int64)
+    # one pass: room for every point of every conic's cells (a bound read off the cell
+    # counts, without visiting the points), then the candidates in order
+    box = np.zeros((K, 4), np.int64)
+    cap = 0
+    for k in range(K):
+        if not ok[k] or not (np.isfinite(cx[k]) and np.isfinite(cy[k]) and np.isfinite(reach[k])):
+            box[k, 0], box[k, 1], box[k, 2], box[k, 3] = 0, -1, 0, -1
+            continue
+        r = reach[k]
+        box[k, 0] = int(min(max(np.floor((cx[k] - r) / cell_px), 0), nx))
+        box[k, 1] = int(min(max(np.floor((cx[k] + r) / cell_px), -1), nx - 1))
+        box[k, 2] = int(min(max(np.floor((cy[k] - r) / cell_px), 0), ny))
+        box[k, 3] = int(min(max(np.floor((cy[k] + r) / cell_px), -1), ny - 1))
+        for yc in range(box[k, 2], box[k, 3] + 1):
+            if box[k, 1] >= box[k, 0]:
+                cap += cstart[yc * nx + box[k, 1] + 1] - cstart[yc * nx + box[k, 0]]
+    hyp = np.empty(cap, np.int64)
+    pt = np.empty(cap, np.int64)
+    P = 0
+    for k in range(K):
+        r = reach[k]
+        for yc in range(box[k, 2], box[k, 3] + 1):
+            for xc in range(box[k, 0], box[k, 1] + 1):
+                c = yc * nx + xc
+                for at in range(cstart[c], cstart[c + 1]):
+                    i = order[at]
+                    x, y = xy[i, 0], xy[i, 1]
+                    if abs(x - cx[k]) <= r and abs(y - cy[k]) <= r and _sampson(conics[k], x, y) <= lim:
+                        hyp[P] = k
+                        pt[P] = i
+                        P += 1
+    hyp, pt = hyp[:P], pt[:P]
     px, py = np.empty(len(pt)), np.empty(len(pt))
     ct, st = np.empty(len(pt)), np.empty(len(pt))
     for j in range(len(pt)):
-        px[j], py[j], ct[j], st[j] = xy[pt[j], 0], xy[pt[j], 1], ct_all[pt[j]], st_all[pt[j]]
+        px[j], py[j], ct[j], st[j] = xy[pt[j], 0], xy[pt[j], 1], np.cos(theta[pt[j]]), np.sin(theta[pt[j]])
     new, v = np.empty(6), np.empty(6)
     sel = np.zeros(len(pt), np.bool_)
     for b in range(len(bands)):
