@@ -181,11 +181,19 @@ def _plane_law(scan, sensor):
     return P, d_C, d_L, cos_i, sin_theta
 
 
-def _width_ratio(sensor, d_C, cos_i):
-    """w / w0 from the stated law (sensor params: stripe FWHM s mm, blur psf px, f px)."""
+def _width_ratio(sensor, P):
+    """w / w0 from the stated law on a plane facing the camera (normal (0, 0, -1)) under the
+    rotating sheet (sensor params: stripe FWHM s mm, blur psf px, f px): the imaged stripe is
+    s / a px, a the mm of the sheet's thickness one pixel along the row crosses. On the plane
+    a pixel step moves the point by z / f mm along x (not d_C / f: the rays crowd towards the
+    image's edges), and the sheet through P and L = (b, 0, 0) holding the y axis has the unit
+    normal (-z, 0, x - b) / sqrt(z^2 + (x - b)^2), so a = z^2 / (f sqrt(z^2 + (x - b)^2))."""
     f, z_ref = sensor.K[0, 0], sensor.reference_distance
+    b = sensor.params["laser"]["baseline"]
     s, psf = sensor.params["laser"]["stripe_width"], sensor.params["camera"]["psf_px"]
-    w = np.sqrt(psf**2 + (f * s / (d_C * cos_i)) ** 2)
+    x, z = P[:, 0], P[:, 2]
+    a = z**2 / (f * np.sqrt(z**2 + (x - b) ** 2))
+    w = np.sqrt(psf**2 + (s / a) ** 2)
     w0 = math.sqrt(psf**2 + (f * s / z_ref) ** 2)
     return w / w0
 
@@ -215,7 +223,9 @@ def test_blur_sets_the_signal_limited_noise_on_a_plane(z):
     ``correlation_mm`` 0, every other term off):
 
         sigma_u = signal_px sqrt(w / w0) / A,  A = albedo cos i (z_ref / d_L)^2,
-        w  = sqrt(psf^2 + (f s / (d_C cos i))^2),  w0 = sqrt(psf^2 + (f s / z_ref)^2)   px,
+        w  = sqrt(psf^2 + (s / a)^2),  w0 = sqrt(psf^2 + (f s / z_ref)^2)   px,
+
+(a = z^2 / (f sqrt(z^2 + (x - b)^2)), :func:`_width_ratio`)
 
     and, for the rotating sheet (the plane through L = (b, 0, 0) holding P and the y axis),
     a peak moved by e px moves the point along the ray to z = b / ((u + e) / f - k): on a
@@ -229,11 +239,53 @@ def test_blur_sets_the_signal_limited_noise_on_a_plane(z):
     assert f * 2.5 / z_ref == pytest.approx(1.0, rel=0.01)
     scan = rs.scan([plane()], sensor, pose=top_down_pose(z), seed=1)
     P, d_C, d_L, cos_i, _ = _plane_law(scan, sensor)
-    sigma_u = 0.05 * np.sqrt(_width_ratio(sensor, d_C, cos_i)) / (ALBEDO * cos_i * (z_ref / d_L) ** 2)
+    sigma_u = 0.05 * np.sqrt(_width_ratio(sensor, P)) / (ALBEDO * cos_i * (z_ref / d_L) ** 2)
     sigma_z = P[:, 2] ** 2 * sigma_u / (f * b)
     zs = _zscores(scan, sigma_z)
     assert zs.std() == pytest.approx(1.0, abs=0.03) and abs(zs.mean()) < 0.05
     np.testing.assert_allclose(scan.sigma.reshape(-1), sigma_z, rtol=1e-3)
+
+
+@pytest.mark.parametrize("tilt_deg", [-35.0, 35.0])
+def test_an_oblique_view_foreshortens_the_imaged_stripe(tilt_deg):
+    """The imaged stripe is as wide as the sheet's thickness s spans along the row:
+    w = s / a px (psf 0), a the mm of the sheet's thickness that one pixel along the row
+    crosses, a = |n_s . dP/du|, measured here from the scan's true points (the central
+    difference of the neighbouring pixels' points) and the rotating sheet's normal n_s
+    through P and L = (b, 0, 0). On a plane tilted by t about the camera's y axis, at the
+    image centre, this is the footprint s / cos i seen foreshortened by the viewing angle
+    e = t: w = (f / z) s cos e / cos i (within 1 %; without the cosine of the view the width
+    is 1 / cos 35 deg = 1.22x too large). The signal-limited term follows it,
+    sigma_u = signal_px sqrt(w / w0) / A, and the depth std is sigma_u dz/du with
+    dz/du = z |n_s,x| / (f |n_s . r|), r the pixel's ray with unit z (the peak moved along
+    the row triangulated against the same sheet)."""
+    s_mm, z = 2.5, 400.0
+    sensor = make_sensor(**{"noise.signal_px": 0.05, "laser.stripe_width": s_mm, "camera.psf_px": 0.0})
+    f, b, z_ref = sensor.K[0, 0], sensor.params["laser"]["baseline"], sensor.reference_distance
+    t = math.radians(tilt_deg)
+    tilted = plane(size=600.0).apply_transform(trimesh.transformations.rotation_matrix(-t, [0, 1, 0]))
+    scan = rs.scan([tilted], sensor, pose=top_down_pose(z), seed=1)
+    H, W = scan.depth.shape
+    i, j = H // 2, W // 2
+    P = scan.xyz_true.astype(np.float64)
+    p = P[i, j]
+    n = np.array([-math.sin(t), 0.0, -math.cos(t)])  # the plane's normal towards the camera, camera frame
+    measured = np.cross(P[i + 1, j] - p, P[i, j + 1] - p)
+    np.testing.assert_allclose(measured / np.linalg.norm(measured), n, atol=1e-4)
+    n_s = np.array([-p[2], 0.0, p[0] - b]) / math.hypot(p[2], p[0] - b)
+    a = abs(n_s @ (P[i, j + 1] - P[i, j - 1]) / 2)
+    to_laser = np.array([b, 0.0, 0.0]) - p
+    d_L = np.linalg.norm(to_laser)
+    cos_i = abs(n @ to_laser) / d_L
+    w = s_mm / a
+    view = -n @ p / np.linalg.norm(p)
+    assert w == pytest.approx(f / p[2] * s_mm * view / cos_i, rel=0.01)
+    assert view == pytest.approx(math.cos(t), rel=0.01)
+    w0 = f * s_mm / z_ref
+    sigma_u = 0.05 * math.sqrt(w / w0) / (ALBEDO * cos_i * (z_ref / d_L) ** 2)
+    r = p / p[2]
+    dz_du = p[2] * abs(n_s[0]) / (f * abs(n_s @ r))
+    assert float(scan.sigma[i, j]) == pytest.approx(sigma_u * dz_du, rel=2e-3)
 
 
 def test_blur_alone_leaves_the_noise_at_its_facing_value():
@@ -364,21 +416,29 @@ def test_dorsch_sigma_and_its_width_widening_in_the_model():
 def test_speckle_noise_of_a_wide_stripe_is_dorsch_times_sqrt_w_over_w0(z):
     """A plane facing the camera at z mm, only speckle on (C = 1, lambda 670 nm, aperture
     6 mm, white: ``correlation_mm`` 0), a 2.5 mm sheet and no blur (psf 0), so that
-    w / w0 = z_ref / (d_C cos i) exactly:
+    w / w0 = z_ref / (f a) exactly (a as in :func:`_width_ratio`):
 
-        sigma_z = C lambda / (2 pi sin u_obs sin theta) * sqrt(z_ref / (d_C cos i))   mm
+        sigma_z = C lambda / (2 pi sin u_obs sin theta) * cos(alpha) * sqrt(z_ref / (f a))   mm
 
-    per pixel (d_C, d_L, cos i = z / d_L, sin theta = |r_C x r_L| from the geometry). At
-    250 mm the factor is sqrt(2.56) = 1.60, at 900 mm sqrt(0.62) = 0.79: the measured error
-    over this law has std 1 within 3 %, and ``scan.sigma`` is the law."""
+    per pixel (d_C, d_L, sin theta = |r_C x r_L| from the geometry). Dorsch's limit is a
+    displacement along the laser ray, and the scanner's error runs along that ray, so its
+    depth (z) part is cos(alpha) of it, alpha the ray's angle from the optical axis
+    (cos alpha = z / d_L). At 250 mm the width factor is about sqrt(2.56) = 1.60, at 900 mm
+    sqrt(0.62) = 0.79: the measured error over this law has std 1 within 3 %, and
+    ``scan.sigma`` is the law; and the 3D error along the laser ray is Dorsch's limit itself."""
     sensor = make_sensor(**{"noise.speckle_contrast": 1.0, "laser.stripe_width": 2.5, "camera.psf_px": 0.0})
-    z_ref = sensor.reference_distance
+    z_ref, f, b = sensor.reference_distance, sensor.K[0, 0], sensor.params["laser"]["baseline"]
     scan = rs.scan([plane()], sensor, pose=top_down_pose(z), seed=1)
-    _, d_C, d_L, cos_i, sin_theta = _plane_law(scan, sensor)
-    ratio = z_ref / (d_C * cos_i)
-    np.testing.assert_allclose(ratio, _width_ratio(sensor, d_C, cos_i), rtol=1e-12)
+    P, d_C, d_L, cos_i, sin_theta = _plane_law(scan, sensor)
+    a = P[:, 2] ** 2 / (f * np.sqrt(P[:, 2] ** 2 + (P[:, 0] - b) ** 2))
+    ratio = z_ref / (f * a)
+    np.testing.assert_allclose(ratio, _width_ratio(sensor, P), rtol=1e-12)
     sin_u = 3.0 / np.sqrt(9.0 + d_C**2)
-    sigma_z = 1.0 * 670e-6 / (2 * math.pi * sin_u * sin_theta) * np.sqrt(ratio)
+    dorsch = 1.0 * 670e-6 / (2 * math.pi * sin_u * sin_theta) * np.sqrt(ratio)
+    sigma_z = dorsch * P[:, 2] / d_L
+    # along the laser ray: the error vector's length over Dorsch's limit
+    err3 = np.linalg.norm(scan.xyz.reshape(-1, 3).astype(np.float64) - P, axis=1)
+    assert np.sqrt(np.mean((err3 / dorsch) ** 2)) == pytest.approx(1.0, abs=0.03)
     zs = _zscores(scan, sigma_z)
     assert zs.std() == pytest.approx(1.0, abs=0.03) and abs(zs.mean()) < 0.05
     np.testing.assert_allclose(scan.sigma.reshape(-1), sigma_z, rtol=1e-3)

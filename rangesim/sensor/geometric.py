@@ -155,9 +155,20 @@ def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], 
     sin_theta = dr.norm(dr.cross(points / d_camera, to_laser / d_laser))
     f_op = opaque_scalar(f)
     dzdu = dr.abs(points.z * sheet_n.x / (f_op * dr.dot(sheet_n, rays)))
+    # a peak shift moves the point along the laser ray (the row's plane of camera rays holds
+    # the laser's origin, so it meets the sheet in that ray): dz/du / cos(alpha) mm along it
+    # per pixel, alpha the ray's angle from the optical axis. Dorsch's limit is a displacement
+    # along the illumination, so in pixels it is sigma_D cos(alpha) / (dz/du).
+    cos_alpha = dr.abs(to_laser.z) / d_laser
     speckle_px = dorsch_sigma_mm(d_camera, sin_theta, noise.speckle_contrast, noise.wavelength_nm,
-                                 noise.aperture_mm) / dzdu
-    magnification = f_op / d_camera
+                                 noise.aperture_mm) * cos_alpha / dzdu
+    # pixels per mm on the surface along the row, foreshortened by the view: one pixel along
+    # the row moves the seen point by dP/du = (z / f) (e_x - n_x P / (n . P)) on the surface
+    # (normal n), which crosses a = |n_s . dP/du| mm of the sheet's thickness; the stripe's
+    # image is s / a px wide, i.e. (cos i / a) s / cos i: f / d cos(e) on a plane seen at
+    # viewing angle e in the sheet's plane of incidence
+    across = dr.abs(points.z / f_op * (sheet_n.x - normals.x * dr.dot(sheet_n, points) / dr.dot(normals, points)))
+    magnification = dr.abs(cos_i) / across
     cos_i, amplitude, magnification, speckle_px, dzdu = (
         dr.select(dr.isfinite(v), v, 0.0) for v in (cos_i, amplitude, magnification, speckle_px, dzdu))
     candidate = status == int(Status.VALID)

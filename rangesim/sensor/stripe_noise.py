@@ -9,10 +9,16 @@ code serves the geometric scanner (camera pixels) and the twin of a recording (g
 Terms of the peak error (all in pixels, added in quadrature)
 ------------------------------------------------------------
 Imaged stripe width. A sheet of FWHM ``s`` (mm) falling on a surface at laser incidence
-``i`` covers ``s / cos i`` across the stripe; imaged with magnification ``m = f / d``
-(pixels per mm) and blurred by the optics (``camera.psf_px``, Gaussian FWHM), the stripe is
+``i`` covers ``s / cos i`` across the stripe; imaged with magnification ``m`` (pixels per mm
+on the surface along the row: ``f / d cos e`` for a surface seen at viewing angle ``e`` in
+the sheet's plane of incidence, whose footprint the camera sees foreshortened) and blurred by
+the optics (``camera.psf_px``, Gaussian FWHM), the stripe is
 
     w = sqrt(psf^2 + (m s / cos i)^2)  pixels,  w0 = the same on a facing surface at z_ref.
+
+(``m s / cos i`` is ``s / a``, ``a`` the mm of the sheet's thickness that one pixel along
+the row crosses; the geometric scanner computes ``m = cos i / a`` from each pixel's surface
+normal, the twin of a recording, whose grid has no camera model, takes ``f / z_ref``.)
 
 1. ``noise.sigma_px`` -- the sub-pixel estimator's and the detector's floor, white (each
    pixel's own read-out), independent of the stripe.
@@ -32,7 +38,10 @@ Imaged stripe width. A sheet of FWHM ``s`` (mm) falling on a surface at laser in
    like term 3.
 3. Speckle (``noise.speckle_contrast`` C, ``camera.aperture_mm`` D, ``laser.wavelength_nm``):
    the Dorsch et al. (1994) limit sigma_z = C lambda / (2 pi sin u_obs sin theta) for a
-   stripe as narrow as a speckle grain; a wider stripe holds w / w0 more grains, whose
+   stripe as narrow as a speckle grain, a displacement along the illumination: a peak shift
+   moves the triangulated point along the laser ray, ``dz/du / cos alpha`` mm per pixel
+   (alpha the ray's angle from the optical axis), so the callers give it as
+   ``sigma_z cos alpha / (dz/du)`` pixels; a wider stripe holds w / w0 more grains, whose
    random intensities move the centroid as a random walk, so sigma_speckle ~ sqrt(w / w0).
    Terms 2-4 share one **correlated field**: white noise filtered with a Gaussian of std
    ``noise.correlation_mm`` (mm on a facing surface at the reference distance: the caller
@@ -196,7 +205,8 @@ def stripe_width_px(cos_incidence: np.ndarray, magnification: np.ndarray | float
         Cosine of the laser's incidence angle on the surface (NumPy, or Dr.Jit: then the
         result is a Dr.Jit array too).
     magnification : (N,) array or float
-        Pixels per mm on the surface across the stripe (f / distance).
+        Pixels per mm on the surface across the stripe (f / distance on a surface seen
+        face-on; times the cosine of the viewing angle on one seen obliquely).
     stripe_width_mm, psf_px : float
         Sheet FWHM (mm) and optical blur FWHM (pixels).
 
