@@ -15,7 +15,7 @@ def _sensor(**changes):
 
 
 @pytest.mark.parametrize(("key", "value", "words"), [
-    ("noise.correlation_mm", 1e9, ["noise.correlation_mm", "px at mid-range", "64 px"]),
+    ("noise.correlation_mm", 1e9, ["noise.correlation_mm", "px at the reference distance", "64 px"]),
     ("render.max_depth", 10**6, ["render.max_depth", f"[2, {MAX_RENDER_DEPTH}]"]),
     ("render.max_depth", 1, ["render.max_depth", "[2, "]),
     ("render.exposure_e", 1e30, ["render.exposure_e", "must lie in"]),

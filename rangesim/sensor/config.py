@@ -42,8 +42,21 @@ MAX_RENDER_DEPTH = 32
 MAX_DOT_SIGMA_PX = 10.0
 
 def mid_range(range_table: Mapping[str, Any]) -> float:
-    """The middle of a ``[range]`` table's working range (mm): the reference distance."""
+    """The middle of a ``[range]`` table's working range (mm)."""
     return 0.5 * (range_table["near"] + range_table["far"])
+
+
+def reference_distance(range_table: Mapping[str, Any]) -> float:
+    """A ``[range]`` table's reference distance (mm): ``reference`` where given, else mid-range.
+
+    The photometry and the noise terms are stated there (a white target facing the sensor at
+    this distance returns signal 1; ``noise.signal_px``, ``noise.correlation_mm``, the
+    structured-light exposure and reference plane). Given explicitly it is a property of the
+    device, so changing ``near`` or ``far`` leaves a surface at a fixed distance as bright and
+    as noisy as before; left out, it moves with the working range.
+    """
+    given = range_table.get("reference")
+    return float(given) if given is not None else mid_range(range_table)
 
 
 def focal_px(width: int, fov_deg: float) -> float:
@@ -67,7 +80,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "stripe_width": 0.0,
         "wavelength_nm": 670.0,
     },
-    "range": {"near": None, "far": None},
+    # reference: the photometric and noise reference distance, mm (default mid-range; see
+    # reference_distance)
+    "range": {"near": None, "far": None, "reference": None},
     "noise": {
         "sigma_px": 0.0,
         "quantization_px": 0.0,
@@ -123,7 +138,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
 #: keys whose None default means "derived from other keys" rather than "required"
-OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos"}
+OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos", "reference"}
 
 
 @dataclass(frozen=True)
@@ -174,8 +189,8 @@ class Sensor:
     @property
     def reference_distance(self) -> float:
         """Distance (mm) at which a white target facing both the laser and the camera (at this distance
-        from each) returns signal 1: mid-range."""
-        return mid_range(self.params["range"])
+        from each) returns signal 1: ``range.reference``, else mid-range (:func:`reference_distance`)."""
+        return reference_distance(self.params["range"])
 
     @property
     def tilt_rad(self) -> float:
@@ -310,16 +325,18 @@ def _validate(params: dict[str, dict[str, Any]], source, mode: str = "geometric"
             f"({params['range']['far']})",
             source=source,
         )
+    if params["range"]["reference"] is not None:
+        _number(params, "range", "reference", source, positive=True)
     for key in ("sigma_px", "quantization_px", "speckle_contrast", "signal_px", "correlation_mm", "edge_gain",
                 "signal_contrast"):
         _number(params, "noise", key, source, nonneg=True)
     cam = params["camera"]
-    corr_px = params["noise"]["correlation_mm"] * focal_px(cam["width"], cam["fov_deg"]) / mid_range(params["range"])
+    corr_px = params["noise"]["correlation_mm"] * focal_px(cam["width"], cam["fov_deg"]) / reference_distance(params["range"])
     if corr_px > max(cam["width"], cam["height"]):
         # a field correlated over more than the image is one offset of the whole scan (and its
         # smoothing kernel would outgrow memory): a calibration error, not speckle
         raise RangesimError(f"noise.correlation_mm = {params['noise']['correlation_mm']:g} mm is {corr_px:,.0f} px at "
-                            f"mid-range, more than the image's {max(cam['width'], cam['height'])} px; speckle "
+                            f"the reference distance, more than the image's {max(cam['width'], cam['height'])} px; speckle "
                             "correlates over a few pixels", source=source)
     _number(params, "camera", "psf_px", source, nonneg=True)
     for key in ("theta_deg", "alpha_deg", "min_cos"):
