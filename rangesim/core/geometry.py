@@ -47,11 +47,20 @@ def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return pose
 
 
+#: the largest |R^T R - I| (any element) of a pose's rotation block that :func:`check_pose` takes
+#: as a rotation written with a few decimals: 4 decimals leave up to about 2e-4, and the
+#: shared data's shapes_pose.json (8 decimals, fitted) 7e-4
+POSE_ORTHONORMAL_TOL = 1e-3
+
+
 def check_pose(pose: Any, source: Any = None) -> np.ndarray:
     """``pose`` as a float64 (4, 4) rigid camera-to-world transform, or a one-line refusal.
 
-    A rigid transform has an orthonormal, right-handed rotation block (to 1e-6) and the bottom
-    row 0 0 0 1 (anything else would scale or project the rays the scanner casts).
+    A rigid transform has an orthonormal, right-handed rotation block and the bottom row
+    0 0 0 1 (anything else would scale or project the rays the scanner casts). A rotation
+    block within :data:`POSE_ORTHONORMAL_TOL` of orthonormal (a pose written to 4-6 decimals,
+    a calibration's output) is replaced by the nearest rotation (``U V^T`` of its SVD, a
+    change of the same order); one farther off is refused with the measured deviation.
 
     Parameters
     ----------
@@ -75,11 +84,21 @@ def check_pose(pose: Any, source: Any = None) -> np.ndarray:
         raise RangesimError("pose must be a finite 4x4 camera-to-world matrix (it holds NaN or infinity)",
                             source=source)
     rot = pose[:3, :3]
-    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise RangesimError("pose rotation must be orthonormal and right-handed", source=source)
+    off = float(np.abs(rot.T @ rot - np.eye(3)).max())
+    if off > POSE_ORTHONORMAL_TOL:
+        raise RangesimError(f"pose rotation must be orthonormal: R^T R differs from the identity by up to {off:.3g} "
+                            f"(allowed {POSE_ORTHONORMAL_TOL:g}); is the 3x3 block scaled, or not a rotation?",
+                            source=source)
+    if np.linalg.det(rot) < 0:
+        raise RangesimError("pose rotation must be right-handed (its determinant is negative: a mirror)",
+                            source=source)
     if not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-9):
         raise RangesimError(f"pose must be a rigid transform: bottom row 0 0 0 1, got {pose[3].tolist()}",
                             source=source)
+    if off > 0:  # the nearest rotation (polar decomposition): a pose written to a few decimals
+        u, _, vt = np.linalg.svd(rot)
+        pose = pose.copy()
+        pose[:3, :3] = u @ vt
     return pose
 
 
