@@ -40,6 +40,7 @@ import dataclasses
 import inspect
 import itertools
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -395,7 +396,7 @@ def _check_values(spec: SweepSpec) -> None:
     """Build every sensor and pose table of the grid once (cheap): bad values fail here."""
     sensor_keys = [k for k in spec.grid if key_kind(k)[0] == "sensor"]
     pose_keys = [k for k in spec.grid if key_kind(k)[0] == "pose"]
-    from rangesim.sensor.config import sensor_from_dict
+    from rangesim.sensor.config import UNUSED_BY_MODE, UnusedSensorKeyWarning, sensor_from_dict
 
     for sensor in spec.sensors:
         base = sensor_from_dict(sensor.data, source=sensor.label)
@@ -404,11 +405,17 @@ def _check_values(spec: SweepSpec) -> None:
             if not changes:
                 continue
             try:
-                base.with_params(changes)
+                with warnings.catch_warnings():  # refused below, by name, where a swept key is unused
+                    warnings.simplefilter("ignore", UnusedSensorKeyWarning)
+                    made = base.with_params(changes)
             except RangesimError as exc:
                 shown = ", ".join(f"{k} = {v!r}" for k, v in changes.items())
                 raise RangesimError(f"sensor {sensor.label} with {shown}: {_strip_source(exc)}",
                                     source=spec.path) from exc
+            idle = [k for k in sensor_keys if k in UNUSED_BY_MODE.get(made.mode, ())]
+            if idle:
+                raise RangesimError(f"[grid] varies {', '.join(idle)}, which sensor {sensor.label} ({made.mode} mode) "
+                                    "does not use: every value would give the same scans", source=spec.path)
     fixed_pose = split_overrides(spec.fixed)[1]
     for values in itertools.product(*(spec.grid[k] for k in pose_keys)):
         table = {**spec.pose, **fixed_pose, **{key_kind(k)[1]: v for k, v in zip(pose_keys, values)}}

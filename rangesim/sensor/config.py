@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -141,6 +142,38 @@ TOP_KEYS = {"name", "description", "mode", *SCHEMA}
 OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos", "reference"}
 
 
+#: keys a mode reads nothing from: the structured-light mode's noise comes from its IR image and
+#: block matcher (``structured_light.*``), not from the laser stripe's peak-error model, sweep or
+#: blur; the rendered mode's from its frames (photon counts, speckle), with ``noise.min_signal``
+#: and ``noise.speckle_contrast`` alone of the stripe model's keys. Set on a sensor of that mode
+#: they change nothing in its scans (:func:`unused_keys`)
+UNUSED_BY_MODE: dict[str, tuple[str, ...]] = {
+    "structured_light": ("camera.psf_px", "laser.sweep", "laser.step", "laser.stripe_width", "laser.tilt_deg",
+                         "noise.sigma_px", "noise.quantization_px", "noise.min_signal", "noise.signal_px",
+                         "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast"),
+    "rendered": ("camera.psf_px", "noise.sigma_px", "noise.quantization_px", "noise.signal_px",
+                 "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast"),
+}
+_WHY_UNUSED = {
+    "structured_light": "its noise comes from the IR image and the block matcher (the structured_light keys)",
+    "rendered": "its range error comes from the rendered frames",
+}
+
+
+class UnusedSensorKeyWarning(UserWarning):
+    """A sensor sets keys its mode does not read (:data:`UNUSED_BY_MODE`)."""
+
+
+def unused_keys(params: Mapping[str, Mapping[str, Any]], mode: str) -> list[str]:
+    """The dotted keys of ``params`` that ``mode`` does not read and that differ from their defaults."""
+    out = []
+    for dotted in UNUSED_BY_MODE.get(mode, ()):
+        table, key = dotted.split(".")
+        if params.get(table, {}).get(key, SCHEMA[table][key]) != SCHEMA[table][key]:
+            out.append(dotted)
+    return out
+
+
 @dataclass(frozen=True)
 class Sensor:
     """A laser-stripe triangulation sensor.
@@ -257,6 +290,10 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
             f"mode {mode!r} is not available; available: {', '.join(MODES)}", source=source
         )
     _validate(params, source, mode)
+    unused = unused_keys(params, mode)
+    if unused:  # a sweep or a --set over them would change nothing, silently
+        warnings.warn(f"{source}: the {mode} mode does not use {', '.join(unused)}: {_WHY_UNUSED[mode]}; "
+                      "they change nothing in its scans", UnusedSensorKeyWarning, stacklevel=3)
     return Sensor(
         params=params,
         name=str(data.get("name", Path(str(source)).stem)),

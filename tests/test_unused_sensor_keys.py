@@ -1,0 +1,61 @@
+"""Keys a sensor's mode does not read are named, not silently ignored.
+
+The structured-light mode's noise comes from its IR image and block matcher, so the laser
+stripe's peak-error keys (``noise.sigma_px``, ``noise.quantization_px``, ...), its sweep and
+stripe width change nothing in its scans: a new-user review swept ``noise.sigma_px`` over
+``structured_light_bench`` and got a table and plots of identical scans, without a word.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import rangesim as rs
+from rangesim.core.errors import RangesimError
+from rangesim.sensor.config import UNUSED_BY_MODE, UnusedSensorKeyWarning, preset_names
+from tests.conftest import BOX_SCENE_TOML
+
+
+def test_setting_a_key_the_mode_does_not_read_warns_and_changes_nothing():
+    small = {"camera.width": 160, "camera.height": 120}
+    base = rs.load_sensor("structured_light_bench").with_params(small)
+    with pytest.warns(UnusedSensorKeyWarning, match=r"structured_light mode does not use noise\.sigma_px, "
+                                                    r"noise\.quantization_px"):
+        changed = base.with_params({"noise.sigma_px": 3.0, "noise.quantization_px": 3.0})
+    plate = rs.datasets.plate_scene()
+    pose = rs.datasets.plate_scan().pose
+    a = rs.scan(plate, base, pose=pose, seed=0)
+    b = rs.scan(plate, changed, pose=pose, seed=0)
+    np.testing.assert_array_equal(a.depth, b.depth)  # what the warning says
+    for key in UNUSED_BY_MODE["structured_light"]:
+        assert key.split(".")[0] in ("camera", "laser", "noise")
+
+
+def test_no_shipped_preset_sets_a_key_its_mode_does_not_read():
+    for name in preset_names():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UnusedSensorKeyWarning)
+            rs.load_sensor(name)
+
+
+def test_a_sweep_over_a_key_the_mode_does_not_read_is_refused(tmp_path):
+    from rangesim.experiments.sweep_file import load_sweep
+
+    (tmp_path / "scene.toml").write_text(BOX_SCENE_TOML)
+    (tmp_path / "sweep.toml").write_text('name = "idle"\nscenes = ["scene.toml"]\nsensors = ["structured_light_bench"]\n'
+                                         'views = 1\n\n[detectors.gradient]\n\n[grid]\n"noise.sigma_px" = [0, 0.5]\n')
+    with pytest.raises(RangesimError, match=r"varies noise\.sigma_px, which sensor structured_light_bench "
+                                            r"\(structured_light mode\) does not use"):
+        load_sweep(tmp_path / "sweep.toml")
+
+
+def test_the_cli_says_so_in_one_line(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "rangesim", "scan", "scenes/green_piece.toml", "--sensor", "kinect_v1",
+                          "--set", "noise.sigma_px=5", "--set", "camera.width=64", "--set", "camera.height=48",
+                          "--out", str(tmp_path / "k.npz")], capture_output=True, text=True)
+    lines = [line for line in out.stderr.splitlines() if "does not use" in line]
+    assert len(lines) == 1 and "noise.sigma_px" in lines[0], out.stderr
