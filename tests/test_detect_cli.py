@@ -126,7 +126,7 @@ def test_mosd_pcd_scores_against_regions(data_dir, tmp_path, capsys):
     _check_edge_files(out, (480, 640))
     _check_scores(out, "regions")
     assert (out / "ground_truth.png").is_file()
-    assert "truth: regions" in stdout
+    assert "truth: regions (the boundaries of the file's label regions: object outlines, no creases)" in stdout
 
 
 def test_missing_scan_is_a_one_line_error(tmp_path, capsys):

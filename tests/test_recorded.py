@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import gzip
 import struct
+import warnings
 
 import numpy as np
 import pytest
@@ -156,6 +157,36 @@ def test_rangesim_ply_export_reads_back_as_point_list(tmp_path):
     assert back.meta["organized"] is False and back.meta["frame"] == "file"
 
 
+def test_xyz_text_as_other_tools_write_it(tmp_path):
+    """XYZ files as CloudCompare, spreadsheets and scripts export them: commas or semicolons
+    between columns, a first line of column names; a decimal comma, a word among the numbers
+    and a ragged line are refused naming the file's line; a point list under 2 mm across is
+    named as probably metres (it read as mm)."""
+    pts = np.random.default_rng(0).uniform(0, 100, (20, 3))
+    plain = tmp_path / "plain.xyz"
+    np.savetxt(plain, pts)
+    want = rs.load_scan(plain).xyz
+    for name, text in (("comma.xyz", "\n".join(",".join(map(str, p.tolist())) for p in pts)),
+                       ("semi.xyz", "\n".join("; ".join(map(str, p.tolist())) for p in pts)),
+                       ("header.xyz", "x y z\n" + "\n".join(" ".join(map(str, p.tolist())) for p in pts)),
+                       ("cc.xyz", "//X,Y,Z,R,G,B\n" + "\n".join(",".join(map(str, [*p.tolist(), 1, 2, 3])) for p in pts))):
+        (tmp_path / name).write_text(text)
+        np.testing.assert_array_equal(rs.load_scan(tmp_path / name).xyz, want, err_msg=name)
+    bad = tmp_path / "bad.xyz"
+    for text, words in (("1,5 2,5 3,5\n", r"line 1: a column holds spaces .*decimal commas"),
+                        ("# c\n1 2 3\n4 5 x\n", r"line 3: not numbers: '4 5 x'"),
+                        ("1 2 3\n\n4 5\n", r"line 1 has 3, line 3 has 2")):
+        bad.write_text(text)
+        expect_error(bad, words)
+    metres = tmp_path / "metres.xyz"
+    np.savetxt(metres, pts / 1000)
+    with pytest.warns(UserWarning, match=r"span 0\.0\d+ mm at most \(written in metres\? pass units='m'\)"):
+        rs.load_scan(metres)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_allclose(rs.load_scan(metres, units="m").xyz, want, rtol=1e-6)
+
+
 def test_xyz_and_npz_point_lists(tmp_path):
     xyz = tmp_path / "pts.xyz"
     xyz.write_text("# x y z r g b\n1 2 3 0 0 0\n4 5 6 1 1 1\n\nnan 0 0 2 2 2\n")
@@ -166,7 +197,7 @@ def test_xyz_and_npz_point_lists(tmp_path):
     xyz.write_text("1 2 3\n4 5\n")
     expect_error(xyz, r"XYZ data: every line needs the same number")
     xyz.write_text("1 2 3\n4 5\n6 7 8 9\n")  # 9 numbers: once read as (1,2,3), (4,5,6), (7,8,9)
-    expect_error(xyz, r"line 1 has 3, data line 2 has 2")
+    expect_error(xyz, r"line 1 has 3, line 2 has 2")
 
     npz = tmp_path / "pts.npz"
     points = np.arange(12, dtype=np.float64).reshape(4, 3)

@@ -169,7 +169,10 @@ def cmd_detect(args: argparse.Namespace) -> int:
     for old in stale:
         old.unlink(missing_ok=True)
 
-    print(f"{path}: {scan.shape[1]} x {scan.shape[0]} px, truth: {truth.kind if truth else 'none'}")
+    kind = truth.kind if truth else "none"
+    if kind == "regions":  # a rangesim scan saved as PCD keeps its parts as labels, not its scene
+        kind += " (the boundaries of the file's label regions: object outlines, no creases)"
+    print(f"{path}: {scan.shape[1]} x {scan.shape[0]} px, truth: {kind}")
     if args.sensor is not None:
         print(describe_sensor(scan, args.sensor))
     print(f"{'method':<15}{'edges':>9}{'seconds':>9}" + ("" if truth is None else f"{'P':>7}{'R':>7}{'F1':>7}{'FOM':>7}"))
