@@ -7,6 +7,7 @@ to a fixed unit have constant gaps.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -110,6 +111,21 @@ def test_reader_sensor_keyword(kinect_recording, tmp_path):
     laser = tmp_path / "laser.pcd"
     _laser_scan("white_scanner").save(laser)
     assert "sensor" not in load_pcd(laser, sensor="auto").meta
+
+
+def test_a_sensor_of_another_image_size_is_named(kinect_recording, tmp_path):
+    """A preset whose camera is not the frame's size (a 2x-binned Kinect frame read with
+    kinect_v1's 640 x 480) is attached, as asked, with a one-line warning naming both sizes:
+    its matching window and noise law are in its own pixels. The frame's own size is quiet."""
+    path = tmp_path / "frame.pcd"
+    kinect_recording.save(path)
+    h, w = kinect_recording.shape
+    with pytest.warns(UserWarning, match=rf"frame.pcd: the file is {w} x {h} px, sensor kinect_v1 640 x 480"):
+        scan = load_pcd(path, sensor="kinect_v1")
+    assert matching_window(scan) == 9
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_pcd(path, sensor=rs.load_sensor("kinect_v1").with_params(SMALL_KINECT))
 
 
 @pytest.mark.parametrize("bad, words", [("kinectv1", "unknown sensor preset"), (3, "sensor= must be")])

@@ -24,6 +24,7 @@ from __future__ import annotations
 import io
 import math
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -169,6 +170,13 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None,
             scan.meta["sensor_evidence"] = {"rule": "disparity lattice", **evidence}
     elif described is not None:
         scan.meta["sensor"] = described
+    if isinstance(scan.meta.get("sensor"), dict) and h > 1:
+        cam = scan.meta["sensor"].get("camera", {})
+        if (cam.get("width"), cam.get("height")) != (w, h):
+            # the window, noise law and intrinsics are the sensor's own, in its pixels
+            warnings.warn(f"{path}: the file is {w} x {h} px, sensor {scan.meta['sensor'].get('name', '?')} "
+                          f"{cam.get('width')} x {cam.get('height')}: its block-matching window and noise law are "
+                          "used as they are (a binned or cropped frame?)", stacklevel=2)
     extras = {name: grid(name) for name in names if name not in _SCAN_FIELDS or columns[name].ndim != 1}
     return apply_conf(scan, conf, path), extras
 
