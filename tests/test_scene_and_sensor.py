@@ -208,6 +208,28 @@ def test_a_pose_written_with_a_few_decimals_is_taken_as_the_nearest_rotation():
         check_pose(skewed)
 
 
+def test_a_default_view_that_crops_the_scene_says_so():
+    """Without a pose the camera frames the scene's bounding sphere in 90 % of the narrower
+    field, inside the working range: a part too large for that (a 300 mm box for white_scanner,
+    whose range ends at 450 mm) was cropped without a word (a new-user review: the bunny in
+    metres). The sphere fits iff radius <= distance sin(narrow / 2)."""
+    import math
+    import warnings
+
+    from rangesim.sensor._scan import default_pose
+
+    sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 64, "camera.height": 60})
+    big = rs.load_scene(trimesh.creation.box((300, 300, 50)))
+    with pytest.warns(UserWarning, match=r"fills the view at \d+ mm, past the working range \(250-450 mm\)"):
+        pose = default_pose(big, sensor)
+    distance = np.linalg.norm(pose[:3, 3] - big.bounds.mean(axis=0))
+    narrow = 2 * math.atan(math.tan(math.radians(22.0) / 2) * 60 / 64)
+    assert big.bounding_radius > distance * math.sin(narrow / 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        default_pose(rs.load_scene(trimesh.creation.box((60, 40, 10))), sensor)
+
+
 def test_scene_objects_with_one_name_are_refused(tmp_path):
     from rangesim.experiments.scenes import apply_object_overrides
     from rangesim.experiments.sweep_file import load_sweep
