@@ -187,6 +187,23 @@ def test_xyz_text_as_other_tools_write_it(tmp_path):
         np.testing.assert_allclose(rs.load_scan(metres, units="m").xyz, want, rtol=1e-6)
 
 
+def test_a_pcd_written_in_millimetres_is_named(tmp_path):
+    """PCD coordinates are metres: a frame written in mm reads 1000x too far (a plate at
+    0.3 m as 300 m) and gets a warning saying so; the same frame in metres is quiet."""
+    metres = tmp_path / "m.pcd"
+    rs.datasets.plate_scan().save(metres)
+    scan, _ = rec.read_pcd(metres)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec.read_pcd(metres)
+    scan.xyz = scan.xyz * 1000
+    millimetres = tmp_path / "mm.pcd"
+    rec.write_pcd(scan, millimetres)
+    with pytest.warns(UserWarning, match=r"mm.pcd: its points lie \d+ m from the sensor \(median\); PCD coordinates "
+                                         r"are metres: was the file written in millimetres\?"):
+        rec.read_pcd(millimetres)
+
+
 def test_xyz_and_npz_point_lists(tmp_path):
     xyz = tmp_path / "pts.xyz"
     xyz.write_text("# x y z r g b\n1 2 3 0 0 0\n4 5 6 1 1 1\n\nnan 0 0 2 2 2\n")

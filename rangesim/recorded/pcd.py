@@ -99,6 +99,11 @@ def _unit_normals(normal: np.ndarray) -> np.ndarray:
     return np.where(unit, normal, scaled)
 
 
+#: a PCD whose points lie farther than this (mm, median) from the sensor was most likely written in
+#: millimetres (PCD's unit is the metre): a Kinect frame at 0.5-1.2 m then reads as 500-1200 m
+PCD_FAR_MM = 100_000.0
+
+
 def read_pcd(path: str | Path, *, conf: str | Path | None = None,
              sensor: Any = None) -> tuple[RangeScan, dict[str, np.ndarray]]:
     """Read a PCD v0.7 file: the scan and its other fields.
@@ -158,6 +163,12 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None,
         "pcd", path, "file", organized=h > 1, pcd_fields=names,
         pcd={"version": header.version, "data": header.data, "viewpoint": header.viewpoint},
     )
+    with np.errstate(invalid="ignore"):
+        reach = np.linalg.norm(xyz, axis=-1)
+    reach = reach[np.isfinite(reach)]
+    if reach.size and float(np.median(reach)) > PCD_FAR_MM:  # PCD's unit is the metre, by its spec
+        warnings.warn(f"{path}: its points lie {np.median(reach) / 1e3:,.0f} m from the sensor (median); PCD "
+                      "coordinates are metres: was the file written in millimetres?", stacklevel=2)
     scan = grid_scan(xyz, meta, normal=normal, intensity=intensity)
     if described == "auto":
         from rangesim.core.quantisation import DEFAULT_MATCHER_PRESET, disparity_lattice
