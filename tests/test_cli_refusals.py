@@ -373,6 +373,38 @@ def test_pose_files_that_are_no_pose_file_say_what_they_are(tmp_path, capsys):
     assert not (tmp_path / "s.exr").exists()
 
 
+def test_a_json_pose_in_the_scenes_view_form(tmp_path, capsys):
+    """{"position", "look_at", "up"} (mm), as a scene's [view] table, is the look_at pose; other
+    dicts get a message listing the three forms and the keys found (it was 'got shape (0,)')."""
+    import json
+
+    from rangesim.cli.main import _load_pose
+    from rangesim.core.geometry import look_at
+
+    view = tmp_path / "view.json"
+    view.write_text(json.dumps({"position": [0, -200, 300], "look_at": [0, 0, 10]}))
+    np.testing.assert_allclose(_load_pose(view), look_at((0, -200, 300), (0, 0, 10)))
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"pos": [0, -200, 300]}))
+    _refused(capsys, ["scan", GREEN, "--pose", other, "--out", tmp_path / "s.exr"], "other.json",
+             '{"position": [x, y, z]', "got the keys pos")
+    assert not (tmp_path / "s.exr").exists()
+
+
+def test_detect_on_a_tiny_image_says_it_is_too_small(tmp_path, capsys):
+    """A 2 x 2 px scan is a grid, just too small for 3 x 3 operators: it was called 'not an
+    organized range image'; a point list still is one."""
+    tiny = rs.scan(rs.datasets.plate_scene(), rs.load_sensor("white_scanner").with_params(
+        {"camera.width": 2, "camera.height": 2}), pose=rs.datasets.plate_scan().pose)
+    tiny.save(tmp_path / "tiny.npz")
+    _refused(capsys, ["detect", tmp_path / "tiny.npz", "--out", tmp_path / "d"], "tiny.npz",
+             "a 2 x 2 px image is too small for the edge detectors (at least 3 x 3)")
+    points = tmp_path / "points.xyz"
+    np.savetxt(points, np.random.default_rng(0).uniform(0, 50, (30, 3)))
+    _refused(capsys, ["detect", points, "--out", tmp_path / "d"], "not an organized range image")
+    assert not (tmp_path / "d").exists()
+
+
 def test_unknown_units_list_the_inch_sign_quoted(tmp_path, capsys):
     line = _refused(capsys, ["points", "green_piece", "--resolution", "3 furlong", "--out", tmp_path / "p.ply"],
                     "furlong")

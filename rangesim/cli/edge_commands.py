@@ -25,9 +25,11 @@ from rangesim.core.errors import RangesimError
 def require_grid(scan, path: Path) -> None:
     """Edge detectors need an organized range image, not a list of points."""
     h, w = scan.shape
-    if min(h, w) < 3:
+    if min(h, w) == 1 or scan.meta.get("organized") is False:
         raise RangesimError(f"not an organized range image ({w:,} x {h:,} points): the edge detectors need a "
                             "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
+    if min(h, w) < 3:  # their 3 x 3 operators have no interior pixel
+        raise RangesimError(f"a {w} x {h} px image is too small for the edge detectors (at least 3 x 3)", source=path)
 
 
 def describe_sensor(scan, given) -> str:

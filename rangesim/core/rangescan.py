@@ -34,8 +34,9 @@ OPTIONAL_PIXEL_FIELDS: tuple[tuple[str, type, tuple[int, ...]], ...] = (
 class RangeScan:
     """A single-view range image with per-pixel labels, in the camera frame.
 
-    The camera frame follows OpenCV: x right, y down, z forward; units are those of the
-    scene (millimetres by default). H x W is the sensor's image size.
+    The camera frame follows OpenCV: x right, y down, z forward; lengths are millimetres
+    whatever the scene's ``units`` (a scene in metres is scaled on loading), and so are the
+    pose's translation and ``sigma``. H x W is the sensor's image size.
 
     Attributes
     ----------
