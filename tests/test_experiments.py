@@ -803,3 +803,13 @@ def test_sweep_range_check_runs_once_per_scene_and_optics(sweep_dir, monkeypatch
     assert len({json.dumps(t.payload["sensor"], sort_keys=True) for t in tasks}) == 2
     _check_parts_in_range(tasks, None)
     assert calls == {"scene": 2, "check": 2}   # one per albedo (the scene's objects), not per noise level
+
+
+def test_a_sweep_over_a_bare_mesh_says_how_to_make_it_a_scene(tmp_path):
+    from rangesim.experiments.sweep_file import load_sweep
+
+    (tmp_path / "part.stl").write_text("solid x\nendsolid x\n")
+    (tmp_path / "sweep.toml").write_text('name = "m"\nscenes = ["part.stl"]\nsensors = ["white_scanner"]\n'
+                                         'views = 1\n\n[detectors.gradient]\n')
+    with pytest.raises(RangesimError, match=r"'part.stl' is a mesh; a sweep takes scene .toml files"):
+        load_sweep(tmp_path / "sweep.toml")

@@ -59,3 +59,4 @@ def test_the_cli_says_so_in_one_line(tmp_path):
                           "--out", str(tmp_path / "k.npz")], capture_output=True, text=True)
     lines = [line for line in out.stderr.splitlines() if "does not use" in line]
     assert len(lines) == 1 and "noise.sigma_px" in lines[0], out.stderr
+

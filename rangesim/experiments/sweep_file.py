@@ -178,6 +178,11 @@ def _string_list(data: dict, key: str, default: list[str] | None, source: Path) 
 def _scene_ref(label: str, base: Path, source: Path) -> SceneRef:
     path = (base / label).resolve()
     if path.suffix.lower() != ".toml":
+        from rangesim.scene.scene import MESH_SUFFIXES
+
+        if path.suffix.lower() in MESH_SUFFIXES:  # its objects' names and units are what overrides key on
+            raise RangesimError(f"scenes: {label!r} is a mesh; a sweep takes scene .toml files: write one holding it "
+                                f"([[object]] with mesh = {path.name!r} and the scene's units)", source=source)
         raise RangesimError(f"scenes: {label!r} is not a scene .toml file", source=source)
     if not path.is_file():
         raise RangesimError(f"scenes: no such scene file {label!r} (looked for {path})", source=source)
