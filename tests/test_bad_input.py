@@ -267,6 +267,14 @@ def test_empty_scan_warnings_say_why():
     loud = sensor.with_params({"noise.sigma_px": 1e6})
     with pytest.warns(EmptyScanWarning, match="inside tiny's working range 100-1000 mm, but the depth noise"):
         rs.scan([box], loud, pose=look_at((0, 0, 500), (0, 0, 0), up=(0, 1, 0)))
+    # a pose in metres: the camera among an open plate's surfaces (no closed part to be inside);
+    # the hits, a few mm away, said only that they lay outside the range
+    plate = rs.datasets.plate_scene()
+    metres = look_at((0, -180, 300), (0, 0, 10))
+    metres[:3, 3] /= 1000
+    with pytest.warns(EmptyScanWarning, match=r"hits lie at [\d.]+-[\d.]+ mm, outside .*inside the scene's bounding "
+                                              r"box: a pose written in metres\?"):
+        rs.scan(plate, sensor, pose=metres)
 
 
 @pytest.mark.parametrize(("variant", "words"), [("scalar_rgb", "traces one ray at a time"),

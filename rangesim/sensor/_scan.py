@@ -163,8 +163,13 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
                 return (f"{head}: {share} hits lie at {z.min():.0f}-{z.max():.0f} mm, inside {sensor.name}'s "
                         f"working range {near:g}-{far:g} mm, but the depth noise put {np.count_nonzero(inside):,} of "
                         f"their measured depths outside it (check the [noise] settings)")
-            return (f"{head}: {share} hits lie at {z.min():.0f}-{z.max():.0f} mm, outside "
-                    f"{sensor.name}'s working range {near:g}-{far:g} mm")
+            hint = ""
+            if z.max() < near and nearest == 0:  # the camera among the scene's surfaces
+                hint = (f" (the camera at ({eye[0]:.3g}, {eye[1]:.3g}, {eye[2]:.3g}) mm is inside the scene's "
+                        "bounding box: a pose written in metres?)")
+            shown = "-".join(f"{v:.0f}" if v >= 10 else f"{v:.3g}" for v in (z.min(), z.max()))
+            return (f"{head}: {share} hits lie at {shown} mm, outside "
+                    f"{sensor.name}'s working range {near:g}-{far:g} mm{hint}")
     if worst == Status.OUT_OF_RANGE:
         return f"{head}: {counts[worst]:,} of the {n_hits:,} hits lie outside the working range {near:g}-{far:g} mm"
     structured = sensor.mode == "structured_light"
