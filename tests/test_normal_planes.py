@@ -180,4 +180,6 @@ def test_normal_leaves_no_lone_crease_specks_on_a_noisy_part():
     sizes = np.bincount(parts.ravel())
     assert crease.sum() > 300 and not (crease & (sizes[parts] <= 2)).any()
     scores = rs.evaluate.score_edges(em, scan, truth=rs.evaluate.visible_truth(scan, scene))
-    assert scores["f1"] > 0.85
+    # 0.856 until the stripe was also cut at occluding edges over a measured background
+    # (eighteenth session): 13 more outline pixels drop out (38 against 25), F1 0.848
+    assert scores["f1"] > 0.84

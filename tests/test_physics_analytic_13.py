@@ -353,6 +353,49 @@ def test_truncated_stripe_dimming_drops_exactly_the_outline_column():
     assert scan.valid[hit & (k >= 1)].all()
 
 
+def test_an_occluding_edge_over_a_measured_floor_cuts_the_stripe_as_an_outline_does():
+    """The same plate 50 mm above a floor. Its right outline now borders the lit floor, not
+    empty space (its left one borders the laser shadow it casts on the floor, as before): the stripe's
+    light past the outline falls on the floor about 50 sin(alpha) / a ~ 60 px away along the
+    row, far outside the detector's window, so the plate's stripe is cut there exactly as
+    over nothing. Until an independent review found it, only unmeasurable cells were borders:
+    over a floor the outline column was neither dimmed nor given the edge term. Now the
+    plate's pixels drop out (min_signal between the outline column's and the next one's dimmed
+    returns, as in the test above) and carry the predicted std (edge_gain 1: sigma_edge = m sigma_s phi(t) / Phi(t))
+    exactly as without the floor."""
+    z, b = 350.0, 150.0
+    sensor = make_sensor()
+    f = sensor.K[0, 0]
+    s = FWHM_PER_SIGMA * z / math.hypot(z, b) * (z / f)
+    plate = plane(1.0)
+    plate.apply_scale([30.0, 60.0, 1.0])
+    floor = plane(2000.0, z=-50.0)
+    probe = rs.scan([plate], make_sensor(**{"laser.stripe_width": s}), pose=top_down_pose(z), seed=0)
+    S = probe.intensity[probe.status == Status.VALID]  # the undimmed return (t_0 ~ 1/2, t_1 ~ 3/2)
+    threshold = 0.5 * (S.max() * _Phi(0.5) + S.min() * _Phi(1.5))
+    scans = {}
+    for name, meshes in (("alone", [plate]), ("floor", [plate, floor])):
+        for min_signal in (0.0, threshold):
+            quiet = make_sensor(**{"laser.stripe_width": s, "noise.min_signal": min_signal, "noise.edge_gain": 1.0})
+            scans[name, min_signal] = rs.scan(meshes, quiet, pose=top_down_pose(z), seed=0)
+    # the right half: at the left outline the sheet that grazes the plate's corner lands on the
+    # floor at the end of the plate's laser shadow, ~12 px away, inside the 16 px window, and
+    # that light mixes in (a phantom point, rangesim.sensor.mixed_pixels: not this test's law)
+    on_plate = (np.abs(scans["alone", 0.0].xyz_true[..., 2] - z) < 1e-3) & (scans["alone", 0.0].xyz_true[..., 0] > 0)
+    assert on_plate.sum() > 200
+    for min_signal in (0.0, threshold):
+        a, b_ = scans["alone", min_signal], scans["floor", min_signal]
+        np.testing.assert_array_equal(a.status[on_plate], b_.status[on_plate])
+        both = on_plate & a.valid
+        np.testing.assert_allclose(b_.sigma[both], a.sigma[both], rtol=1e-5)
+    dropped = scans["floor", threshold].status[on_plate] == Status.DROPOUT
+    assert 30 < dropped.sum() < on_plate.sum() / 3  # the outline column, not the plate
+    # the right outline borders lit, measured floor
+    h = a.shape[0] // 2
+    right = np.flatnonzero(on_plate[h])[-1]
+    assert scans["floor", 0.0].valid[h, right + 1:right + 4].all()
+
+
 # 5. camera occlusion ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("D, h, x1, x2", [(400.0, 100.0, 20.0, 80.0), (600.0, 150.0, 30.0, 100.0)])
 def test_camera_occlusion_behind_a_box_is_x_e_h_over_D_minus_h(D, h, x1, x2):

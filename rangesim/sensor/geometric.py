@@ -32,7 +32,7 @@ from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.config import Sensor
 from rangesim.sensor.laser import sheet_through
 from rangesim.sensor.metadata import scan_meta
-from rangesim.sensor.mixed_pixels import peak_window_px, stripe_mixing_shift
+from rangesim.sensor.mixed_pixels import peak_window_px, row_steps, stripe_mixing_shift
 from rangesim.sensor.rays import camera_hits
 from rangesim.sensor.shadows import laser_reach
 from rangesim.sensor.signal import return_signal
@@ -174,14 +174,17 @@ def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], 
     candidate = status == int(Status.VALID)
 
     def border_mm(where) -> "mi.Float":
-        # the stripe is truncated where the surface ends or the laser cannot reach it
+        # the stripe is truncated where the surface ends, the laser cannot reach it, or a depth
+        # step sends the rest of its light onto another surface, elsewhere in the image (an
+        # occluding edge over a measured background: row_steps, as the mixed pixels find them)
         # (px on the image over magnification px/mm), only at the cells asked: the others +inf
         status_np = np.asarray(status)
         reached = (status_np == Status.VALID) | (status_np == Status.DROPOUT)
         ask = np.flatnonzero(np.asarray(where) & reached)
         m = np.asarray(magnification)[ask]
         d = np.full(status_np.size, np.inf, np.float32)
-        d[ask] = border_distance_at(reached.reshape(shape), ask) / np.where(
+        cuts = np.asarray(row_steps(points, sheet_n, mi.Bool(aligned(reached)), shape[1])).reshape(shape)
+        d[ask] = border_distance_at(reached.reshape(shape), ask, cuts=cuts) / np.where(
             (status_np[ask] == Status.VALID) & (m > 0), m, 1.0)
         return mi.Float(aligned(d))
 

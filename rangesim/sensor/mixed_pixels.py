@@ -57,13 +57,15 @@ def peak_window_px(stripe_width: float, focal_px: float, near: float) -> int:
     return int(min(max(math.ceil(2.0 * stripe_width * focal_px / near), 1), MAX_WINDOW_PX))
 
 
-def _near_break(points, sheet_normal, lit, measured, width: int, window: int, min_shift_px: float):
-    """Flat indices (mi.UInt32) of measured pixels with a step or a lit/unlit break in their window.
+def row_steps(points, sheet_normal, lit, width: int, min_shift_px: float = MIN_SHIFT_PX):
+    """mi.Bool per pixel: a depth step between it and its right neighbour, both lit.
 
     A step between u and u + 1: the sheet-normal increment ``n . (P[u+1] - P[u])`` lies by
     ``delta`` (mm) outside the range of the increments on either side, and
     ``delta > 2 min_shift_px a`` with ``a`` the smaller of those increments (mm per pixel): the
-    largest centroid shift it causes, ``delta / (2 a)`` pixels, is above ``min_shift_px``.
+    largest centroid shift it causes, ``delta / (2 a)`` pixels, is above ``min_shift_px``. A
+    crease (the increment changes from one value to the other) is no step. There the stripe
+    breaks: its light beyond the step lands on the other surface, elsewhere in the image.
     """
     mi = mitsuba()
     n = dr.width(lit)
@@ -89,8 +91,18 @@ def _near_break(points, sheet_normal, lit, measured, width: int, window: int, mi
     delta = dr.maximum(dr.maximum(lo - mid, mid - hi), 0.0)  # how far outside the neighbours' range
     a = dr.minimum(dr.select(has_left, dr.abs(left), big), dr.select(has_next, dr.abs(nxt), big))
     floor = opaque_scalar(ROUNDING_RELATIVE) * dr.abs(points.z)
-    step = lit & has_right & (has_left | has_next) & (
-        delta > dr.maximum(opaque_scalar(2.0 * min_shift_px) * a, floor))
+    return lit & has_right & (has_left | has_next) & (delta > dr.maximum(opaque_scalar(2.0 * min_shift_px) * a, floor))
+
+
+def _near_break(points, sheet_normal, lit, measured, width: int, window: int, min_shift_px: float):
+    """Flat indices (mi.UInt32) of measured pixels with a step (:func:`row_steps`) or a lit/unlit
+    break in their window."""
+    mi = mitsuba()
+    n = dr.width(lit)
+    index = dr.arange(mi.Int32, n)
+    step = row_steps(points, sheet_normal, lit, width, min_shift_px)
+    width = opaque_scalar(width, "Int32")
+    col = index % width
     lit_right = dr.gather(mi.Bool, lit, mi.UInt32(index + 1), col < width - 1)
     brk = step | ((col < width - 1) & (lit ^ lit_right))  # break between a pixel and its right neighbour
     # a break within the window (clipped to the row): the running count of breaks rises

@@ -48,8 +48,10 @@ normal, the twin of a recording, whose grid has no camera model, takes ``f / z_r
    converts it to pixels once, ``correlation_mm f / z_ref``, so the grains keep one size on
    the sensor at every range, as subjective speckle's do) and
    scaled back to unit variance.
-4. Partial stripes (``noise.edge_gain`` g): where an outline or a shadow border lies inside
-   the stripe's footprint, the imaged stripe is truncated (Curless and Levoy 1995). A
+4. Partial stripes (``noise.edge_gain`` g): where an outline, a shadow border or a depth
+   step (an occluding edge over a measured background: the rest of the stripe's light lands
+   on the far surface, elsewhere in the image) lies inside the stripe's footprint, the
+   imaged stripe is truncated (Curless and Levoy 1995). A
    Gaussian profile of std sigma_s = s / (2.355 cos i) on the surface cut at distance delta
    from its centre has its centroid moved by sigma_s phi(t) / Phi(t), t = delta / sigma_s
    (the mean of a truncated normal); the peak estimator keeps a fraction g of it. The
@@ -75,7 +77,7 @@ fluctuation). A pixel is detected when S X >= ``noise.min_signal``:
 so dropouts become likely as S falls (grazing angles, dark surfaces) and appear sparsely,
 but not never, on bright facing surfaces. The uniform draws behind the decision come
 from a correlated field too (``Phi`` of a Gaussian field), so dropouts form small holes.
-Where an outline or shadow border cuts the stripe's footprint, only the share Phi(t) of its
+Where an outline, shadow border or depth step cuts the stripe's footprint, only the share Phi(t) of its
 light is left (:func:`partial_stripe_fraction`), so S is multiplied by it: truncated
 stripes at outlines drop out first, the thin rim of missing cells real scans show.
 
@@ -516,20 +518,26 @@ def draw_detected(rng, shape: tuple[int, int], probability: np.ndarray,
     return xp.ndtr(_draws(rng).field(shape, corr_px)) < probability
 
 
-def _row_border_distance(m: np.ndarray, spacing: float) -> np.ndarray:
-    """(R, W) distance along each row of ``m`` (R, W) bool to its nearest unmeasurable cell,
-    half a cell beyond it (+inf where the row holds none on either side; 0 on those cells)."""
+def _row_border_distance(m: np.ndarray, spacing: float, cuts: np.ndarray | None = None) -> np.ndarray:
+    """(R, W) distance along each row of ``m`` (R, W) bool to its nearest border: half a cell beyond
+    an unmeasurable cell, or the middle between cells j and j + 1 where ``cuts[:, j]`` (+inf where
+    the row holds none on either side; 0 on unmeasurable cells)."""
     R, W = m.shape
     j = np.arange(W)
     left = np.maximum.accumulate(np.where(m, -1, j), axis=1)  # the last unmeasurable cell at or before j
     right = np.minimum.accumulate(np.where(m, W, j)[:, ::-1], axis=1)[:, ::-1]  # the first at or after
+    if cuts is not None and cuts.any():
+        # a cut between b and b + 1 borders cell b + 1 as an unmeasurable b would, and cell b as b + 1 would
+        last = np.maximum.accumulate(np.where(cuts, j, -1), axis=1)
+        left = np.maximum(left, np.concatenate([np.full((R, 1), -1), last[:, :-1]], axis=1))
+        right = np.minimum(right, np.minimum.accumulate(np.where(cuts, j + 1, W)[:, ::-1], axis=1)[:, ::-1])
     with np.errstate(invalid="ignore"):
         steps = np.minimum(np.where(left >= 0, j - left, np.inf), np.where(right < W, right - j, np.inf))
     return np.where(m, np.maximum(steps * spacing - 0.5 * spacing, 0.0), 0.0)
 
 
 def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0, 1.0),
-                    where: np.ndarray | None = None) -> np.ndarray:
+                    where: np.ndarray | None = None, cuts: np.ndarray | None = None) -> np.ndarray:
     """Distance from each cell to the nearest outline or shadow border **along its row**, flat (H * W,).
 
     The stripe's width profile lies along the row (the axis the peak is located on, the
@@ -539,9 +547,11 @@ def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0
 
     ``measurable`` (H, W) bool: cells whose surface the stripe reaches (not a miss, shadow
     or out of range). The border lies half a cell beyond the last measurable cell, so a
-    cell next to it gets half a cell's spacing. ``sampling``: cell spacing (rows, columns)
-    in the output's unit (the columns' is used). Cells whose row holds no unmeasurable cell
-    get +inf.
+    cell next to it gets half a cell's spacing. ``cuts`` (H, W) bool, optional: a border
+    between cells j and j + 1 that are both measurable (an occluding edge over a measured
+    background: the stripe's light beyond it lands on the far surface, elsewhere in the
+    image, so the near surface's stripe ends there too). ``sampling``: cell spacing (rows,
+    columns) in the output's unit (the columns' is used). Cells whose row holds no border get +inf.
 
     ``where`` (H * W,) bool, optional: only these cells are needed (the other measurable
     cells get +inf, the unmeasurable ones 0); :func:`border_distance_at` answers them.
@@ -554,21 +564,25 @@ def border_distance(measurable: np.ndarray, sampling: tuple[float, float] = (1.0
     >>> m = np.ones((5, 7), bool); m[0] = False   # a border along the rows cuts no stripe
     >>> border_distance(m)[7:14].tolist()
     [inf, inf, inf, inf, inf, inf, inf]
+    >>> cut = np.zeros((5, 7), bool); cut[:, 2] = True   # a step between columns 2 and 3
+    >>> border_distance(np.ones((5, 7), bool), cuts=cut)[:7].tolist()
+    [2.5, 1.5, 0.5, 0.5, 1.5, 2.5, 3.5]
     """
     m = np.asarray(measurable, bool)
-    if m.all():
+    cuts = None if cuts is None else np.asarray(cuts, bool).reshape(m.shape)
+    if m.all() and (cuts is None or not cuts.any()):
         return np.full(m.size, np.inf)
     if where is None:
-        return _row_border_distance(m, float(sampling[1])).reshape(-1)
+        return _row_border_distance(m, float(sampling[1]), cuts).reshape(-1)
     out = np.full(m.size, np.inf)
     out[np.flatnonzero(~m.reshape(-1))] = 0.0
     ask = np.flatnonzero(np.asarray(where, bool).reshape(-1) & m.reshape(-1))
-    out[ask] = border_distance_at(m, ask, sampling)
+    out[ask] = border_distance_at(m, ask, sampling, cuts)
     return out
 
 
 def border_distance_at(measurable: np.ndarray, cells: np.ndarray,
-                       sampling: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+                       sampling: tuple[float, float] = (1.0, 1.0), cuts: np.ndarray | None = None) -> np.ndarray:
     """:func:`border_distance` of the measurable cells ``cells`` only (flat indices), (K,).
 
     Only the rows holding an asked cell are scanned (a few rows' work when few cells are
@@ -576,11 +590,12 @@ def border_distance_at(measurable: np.ndarray, cells: np.ndarray,
     """
     m = np.asarray(measurable, bool)
     cells = np.asarray(cells, np.int64)
-    if cells.size == 0 or m.all():
+    cuts = None if cuts is None else np.asarray(cuts, bool).reshape(m.shape)
+    if cells.size == 0 or (m.all() and (cuts is None or not cuts.any())):
         return np.full(cells.size, np.inf)
     rows, cols = np.divmod(cells, m.shape[1])
     needed, at = np.unique(rows, return_inverse=True)
-    return _row_border_distance(m[needed], float(sampling[1]))[at, cols]
+    return _row_border_distance(m[needed], float(sampling[1]), None if cuts is None else cuts[needed])[at, cols]
 
 
 @dataclass
