@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ import numpy as np
 
 from rangesim.core.errors import RangesimError
 from rangesim.experiments.sweep_file import SweepSpec, split_overrides
+from rangesim.sensor.config import UnusedSensorKeyWarning
 
 #: bump when a task's output changes meaning: old task files then no longer match any key
 TASK_FORMAT = 1
@@ -140,7 +142,9 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
             for combo in combos:
                 sensor_changes, pose_changes, object_changes = split_overrides(combo)
                 changes = {**fixed_sensor, **sensor_changes}
-                sensor = sensors[sensor_ref.label].with_params(changes) if changes else sensors[sensor_ref.label]
+                with warnings.catch_warnings():  # a swept mode leaves the other mode's keys idle: no news
+                    warnings.simplefilter("ignore", UnusedSensorKeyWarning)
+                    sensor = sensors[sensor_ref.label].with_params(changes) if changes else sensors[sensor_ref.label]
                 sensor_data = sensor.to_dict()
                 objects = _merge_objects(fixed_objects, object_changes)
                 pose_table = None if spec.views == 0 else {**spec.pose, **fixed_pose, **pose_changes}
