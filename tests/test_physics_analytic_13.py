@@ -354,22 +354,24 @@ def test_truncated_stripe_dimming_drops_exactly_the_outline_column():
 
 
 def test_an_occluding_edge_over_a_measured_floor_cuts_the_stripe_as_an_outline_does():
-    """The same plate 50 mm above a floor. Its right outline now borders the lit floor, not
-    empty space (its left one borders the laser shadow it casts on the floor, as before): the stripe's
-    light past the outline falls on the floor about 50 sin(alpha) / a ~ 60 px away along the
-    row, far outside the detector's window, so the plate's stripe is cut there exactly as
-    over nothing. Until an independent review found it, only unmeasurable cells were borders:
-    over a floor the outline column was neither dimmed nor given the edge term. Now the
-    plate's pixels drop out (min_signal between the outline column's and the next one's dimmed
-    returns, as in the test above) and carry the predicted std (edge_gain 1: sigma_edge = m sigma_s phi(t) / Phi(t))
-    exactly as without the floor."""
+    """The same plate 150 mm above a floor. Its right outline now borders the lit floor, not
+    empty space (its left one borders the laser shadow it casts on the floor, as before): the
+    stripe's light past the outline falls on the floor delta / a ~ 150 sin(alpha) / 1.46 ~ 40 px
+    away along the row, outside the peak detector's +-16 px window, so the plate's stripe is cut
+    there exactly as over nothing. Until an independent review found it, only unmeasurable
+    cells were borders: over a floor the outline column was neither dimmed nor given the edge
+    term. Now the plate's pixels drop out (min_signal between the outline column's and the next
+    one's dimmed returns, as in the test above) and carry the predicted std (edge_gain 1:
+    sigma_edge = m sigma_s phi(t) / Phi(t)) exactly as without the floor. A step whose light
+    stays inside the window cuts nothing (the mixed pixels' centroid takes it): a 0.2 mm ledge
+    gets no edge term."""
     z, b = 350.0, 150.0
     sensor = make_sensor()
     f = sensor.K[0, 0]
     s = FWHM_PER_SIGMA * z / math.hypot(z, b) * (z / f)
     plate = plane(1.0)
     plate.apply_scale([30.0, 60.0, 1.0])
-    floor = plane(2000.0, z=-50.0)
+    floor = plane(2000.0, z=-150.0)
     probe = rs.scan([plate], make_sensor(**{"laser.stripe_width": s}), pose=top_down_pose(z), seed=0)
     S = probe.intensity[probe.status == Status.VALID]  # the undimmed return (t_0 ~ 1/2, t_1 ~ 3/2)
     threshold = 0.5 * (S.max() * _Phi(0.5) + S.min() * _Phi(1.5))
@@ -394,6 +396,11 @@ def test_an_occluding_edge_over_a_measured_floor_cuts_the_stripe_as_an_outline_d
     h = a.shape[0] // 2
     right = np.flatnonzero(on_plate[h])[-1]
     assert scans["floor", 0.0].valid[h, right + 1:right + 4].all()
+    # a 0.2 mm ledge: the same sigma with and without the edge term
+    ledge = [plate.copy().apply_translation([0, 0, 0.2]), plane(2000.0)]
+    sig = {g: rs.scan(ledge, make_sensor(**{"laser.stripe_width": s, "noise.edge_gain": g}),
+                      pose=top_down_pose(z), seed=0).sigma for g in (0.0, 1.0)}
+    np.testing.assert_array_equal(sig[0.0], sig[1.0])
 
 
 # 5. camera occlusion ------------------------------------------------------------------------------------

@@ -169,7 +169,10 @@ def test_xyz_text_as_other_tools_write_it(tmp_path):
     for name, text in (("comma.xyz", "\n".join(",".join(map(str, p.tolist())) for p in pts)),
                        ("semi.xyz", "\n".join("; ".join(map(str, p.tolist())) for p in pts)),
                        ("header.xyz", "x y z\n" + "\n".join(" ".join(map(str, p.tolist())) for p in pts)),
-                       ("cc.xyz", "//X,Y,Z,R,G,B\n" + "\n".join(",".join(map(str, [*p.tolist(), 1, 2, 3])) for p in pts))):
+                       ("cc.xyz", "//X,Y,Z,R,G,B\n" + "\n".join(",".join(map(str, [*p.tolist(), 1, 2, 3])) for p in pts)),
+                       ("units.xyz", "x[mm] y[mm] z[mm]\n" + "\n".join(" ".join(map(str, p.tolist())) for p in pts)),
+                       ("trailing.xyz", "\n".join(",".join(map(str, p.tolist())) + "," for p in pts)),
+                       ("decimal.xyz", "\n".join(";".join(str(v).replace(".", ",") for v in p.tolist()) for p in pts))):
         (tmp_path / name).write_text(text)
         np.testing.assert_array_equal(rs.load_scan(tmp_path / name).xyz, want, err_msg=name)
     bad = tmp_path / "bad.xyz"

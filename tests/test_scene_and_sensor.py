@@ -220,7 +220,7 @@ def test_a_default_view_that_crops_the_scene_says_so():
 
     sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 64, "camera.height": 60})
     big = rs.load_scene(trimesh.creation.box((300, 300, 50)))
-    with pytest.warns(UserWarning, match=r"fills the view at \d+ mm, past the working range \(250-450 mm\)"):
+    with pytest.warns(UserWarning, match=r"fits the view from \d+ mm away \(its centre\), which puts its far side past the working range \(250-450 mm\)"):
         pose = default_pose(big, sensor)
     distance = np.linalg.norm(pose[:3, 3] - big.bounds.mean(axis=0))
     narrow = 2 * math.atan(math.tan(math.radians(22.0) / 2) * 60 / 64)

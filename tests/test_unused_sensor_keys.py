@@ -60,3 +60,28 @@ def test_the_cli_says_so_in_one_line(tmp_path):
     lines = [line for line in out.stderr.splitlines() if "does not use" in line]
     assert len(lines) == 1 and "noise.sigma_px" in lines[0], out.stderr
 
+
+
+def test_switching_a_presets_mode_is_no_news():
+    """The README's rendered-mode workflow (white_scanner with mode = rendered) keeps the
+    preset's own stripe-noise keys, which the rendered mode ignores as documented: no warning;
+    a key the change itself sets still gets one."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnusedSensorKeyWarning)
+        rs.load_sensor("white_scanner").with_params({"mode": "rendered", "camera.width": 96})
+    with pytest.warns(UnusedSensorKeyWarning, match=r"rendered mode does not use noise\.sigma_px:"):
+        rs.load_sensor("white_scanner").with_params({"mode": "rendered", "noise.sigma_px": 0.3})
+
+
+def test_a_sweep_key_some_sensors_read_warns_for_the_others(tmp_path):
+    """Comparing sensors: noise.sigma_px swept over white_scanner and kinect_v1 matters for the
+    first; the plan warns that the Kinect's scans repeat along it instead of refusing the sweep."""
+    from rangesim.experiments.sweep_file import load_sweep
+
+    (tmp_path / "scene.toml").write_text(BOX_SCENE_TOML)
+    (tmp_path / "sweep.toml").write_text('name = "mixed"\nscenes = ["scene.toml"]\n'
+                                         'sensors = ["white_scanner", "kinect_v1"]\nviews = 1\n\n'
+                                         '[detectors.gradient]\n\n[grid]\n"noise.sigma_px" = [0, 0.5]\n')
+    with pytest.warns(UserWarning, match=r"varies noise\.sigma_px, which kinect_v1 \(structured_light mode\) does not "
+                                         r"use: those scans repeat"):
+        load_sweep(tmp_path / "sweep.toml")

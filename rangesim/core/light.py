@@ -68,7 +68,9 @@ def light_sources(points: np.ndarray, sensor: Mapping[str, Any]) -> np.ndarray |
     # a structured-light projector sits at L: as a rotating mirror (its presets' sweep key)
     sweep = "rotating" if mode == "structured_light" else laser.get("sweep", "rotating")
     rng = sensor.get("range") or {}
-    reference = 0.5 * (float(rng.get("near", 0.0)) + float(rng.get("far", 0.0)))
+    # the sensor's reference distance (range.reference, else mid-range), as Sensor.tilt_rad takes it
+    given = rng.get("reference")
+    reference = float(given) if given is not None else 0.5 * (float(rng.get("near", 0.0)) + float(rng.get("far", 0.0)))
     tilt = sheet_tilt_rad(laser.get("tilt_deg"), float(baseline), reference)
     out[:, 0] = source_x(points[:, 0], points[:, 2], sweep, float(baseline), tilt)
     return out

@@ -403,6 +403,8 @@ def _check_values(spec: SweepSpec) -> None:
     pose_keys = [k for k in spec.grid if key_kind(k)[0] == "pose"]
     from rangesim.sensor.config import UNUSED_BY_MODE, UnusedSensorKeyWarning, sensor_from_dict
 
+    idle_in: dict[str, list[str]] = {}  # swept key -> the sensors (and modes) that do not read it
+    read: set[str] = set()  # swept keys some sensor of some combination reads
     for sensor in spec.sensors:
         base = sensor_from_dict(sensor.data, source=sensor.label)
         for values in itertools.product(*(spec.grid[k] for k in sensor_keys)):
@@ -417,10 +419,18 @@ def _check_values(spec: SweepSpec) -> None:
                 shown = ", ".join(f"{k} = {v!r}" for k, v in changes.items())
                 raise RangesimError(f"sensor {sensor.label} with {shown}: {_strip_source(exc)}",
                                     source=spec.path) from exc
-            idle = [k for k in sensor_keys if k in UNUSED_BY_MODE.get(made.mode, ())]
-            if idle:
-                raise RangesimError(f"[grid] varies {', '.join(idle)}, which sensor {sensor.label} ({made.mode} mode) "
-                                    "does not use: every value would give the same scans", source=spec.path)
+            for key in sensor_keys:
+                if key in UNUSED_BY_MODE.get(made.mode, ()):
+                    idle_in.setdefault(key, []).append(f"{sensor.label} ({made.mode} mode)")
+                else:
+                    read.add(key)
+    for key, where in idle_in.items():
+        where = ", ".join(dict.fromkeys(where))
+        if key not in read:
+            raise RangesimError(f"[grid] varies {key}, which sensor {where} does not use: every value would give "
+                                "the same scans", source=spec.path)
+        warnings.warn(f"{spec.path}: [grid] varies {key}, which {where} does not use: those scans repeat across "
+                      "that axis", stacklevel=3)
     fixed_pose = split_overrides(spec.fixed)[1]
     for values in itertools.product(*(spec.grid[k] for k in pose_keys)):
         table = {**spec.pose, **fixed_pose, **{key_kind(k)[1]: v for k, v in zip(pose_keys, values)}}

@@ -186,8 +186,8 @@ def read_pcd(path: str | Path, *, conf: str | Path | None = None,
         if (cam.get("width"), cam.get("height")) != (w, h):
             # the window, noise law and intrinsics are the sensor's own, in its pixels
             warnings.warn(f"{path}: the file is {w} x {h} px, sensor {scan.meta['sensor'].get('name', '?')} "
-                          f"{cam.get('width')} x {cam.get('height')}: its block-matching window and noise law are "
-                          "used as they are (a binned or cropped frame?)", stacklevel=2)
+                          f"{cam.get('width')} x {cam.get('height')}: its intrinsics, window and noise law, in its own "
+                          "pixels, are used as they are (a binned or cropped frame?)", stacklevel=2)
     extras = {name: grid(name) for name in names if name not in _SCAN_FIELDS or columns[name].ndim != 1}
     return apply_conf(scan, conf, path), extras
 

@@ -6,7 +6,6 @@ place with status 1 (no surface), so pixel j is always the file's point j.
 """
 from __future__ import annotations
 
-import re
 import warnings
 from pathlib import Path
 from typing import Any
@@ -154,28 +153,49 @@ def _comment_pose(comments: list[str], scale: float, path: Path) -> np.ndarray |
 #: a point list whose points all lie within this many mm of each other was most likely written
 #: in metres (a 0.15 m bunny read as 0.15 mm): :func:`read_xyz` says so
 TINY_EXTENT_MM = 2.0
-_HEADER_WORD = re.compile(rb"[A-Za-z_/][A-Za-z0-9_/]*")
 
 
 def _xyz_fields(line: bytes) -> list[bytes]:
-    """The fields of one XYZ data line: separated by whitespace, or by commas or semicolons
-    (CloudCompare's and spreadsheets' exports), each then stripped."""
-    for sep in (b",", b";"):
-        if sep in line:
-            return [f.strip() for f in line.split(sep)]
+    """The fields of one XYZ data line: separated by whitespace, or by semicolons or commas
+    (spreadsheets' and CloudCompare's exports; semicolons first, which may hold decimal commas),
+    each stripped; a trailing separator ends the line."""
+    if b";" in line:  # a comma between semicolons is a decimal comma (1,5;2,5;3,5)
+        return [f.strip().replace(b",", b".") for f in line.rstrip().rstrip(b";").split(b";")]
+    if b"," in line:
+        return [f.strip() for f in line.rstrip().rstrip(b",").split(b",")]
     return line.split()
+
+
+def _not_numbers(fields: list[bytes]) -> bool:
+    try:
+        [float(f) for f in fields]
+    except ValueError:
+        return True
+    return False
+
+
+def _numbers_in(fields: list[bytes]) -> int:
+    count = 0
+    for f in fields:
+        try:
+            float(f)
+            count += 1
+        except ValueError:
+            pass
+    return count
 
 
 def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = None) -> RangeScan:
     """Read an XYZ text file (one point per line, ``x y z`` first) as a 1 x N scan.
 
-    Lines starting with ``#`` or ``//`` and blank lines are skipped, and so is a first line of
-    column names (``x y z``, ``X,Y,Z,R,G,B``). Columns are separated by whitespace, or by
-    commas or semicolons (one separator per line; a comma inside a space-separated column, a
-    decimal comma, is refused). Every line must have the same number of columns (at least
-    3); columns after the third are ignored (their count is ``meta["xyz_columns"]``). A point
-    list under :data:`TINY_EXTENT_MM` across read in mm gets a warning: it was most likely
-    written in metres.
+    Lines starting with ``#`` or ``//`` and blank lines are skipped, and so is a first line
+    without any number (column names: ``x y z``, ``X,Y,Z,R,G,B``, ``x[mm] y[mm] z[mm]``).
+    Columns are separated by whitespace, or by semicolons (with decimal commas or points) or
+    commas (one separator per line; a comma inside a space-separated column, a decimal comma
+    there, is refused). Every line must have
+    the same number of columns (at least 3); columns after the third are ignored (their count
+    is ``meta["xyz_columns"]``). A point list under :data:`TINY_EXTENT_MM` across read in mm
+    gets a warning: it was most likely written in metres.
 
     Parameters
     ----------
@@ -193,34 +213,42 @@ def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
     raw = read_bytes(path)
     numbered = [(k, line) for k, line in enumerate(raw.splitlines(), start=1)
                 if line.strip() and not line.lstrip().startswith((b"#", b"//"))]
-    first = _xyz_fields(numbered[0][1]) if numbered else []
-    if first and all(_HEADER_WORD.fullmatch(f) for f in first) and _not_numbers(first):
+    if numbered and _numbers_in(_xyz_fields(numbered[0][1])) == 0:
         numbered = numbered[1:]  # column names
     if not numbered:
         raise RangesimError("no points in the file", path)
-    rows = [_xyz_fields(line) for _, line in numbered]
-    columns = len(rows[0])
+    separated = any(sep in line for _, line in numbered for sep in (b",", b";"))
+    # whitespace columns (the common case) are parsed in one vectorised pass; per-line fields
+    # only for separated columns
+    rows = [_xyz_fields(line) for _, line in numbered] if separated else None
+    counts = [len(row) for row in rows] if separated else [len(line.split()) for _, line in numbered]
+    columns = counts[0]
     # each line's own count: a total alone lets ragged lines regroup into other points
-    ragged = next((k for k, row in enumerate(rows) if len(row) != columns), None)
+    ragged = next((k for k, c in enumerate(counts) if c != columns), None)
     if columns < 3 or ragged is not None:
         raise RangesimError(
             f"XYZ data: every line needs the same number (>= 3) of columns; line {numbered[0][0]} has {columns}"
-            + ("" if ragged is None else f", line {numbered[ragged][0]} has {len(rows[ragged])}"),
+            + ("" if ragged is None else f", line {numbered[ragged][0]} has {counts[ragged]}"),
             path,
         )
-    mixed = next((k for k, row in enumerate(rows) if any(len(f.split()) != 1 for f in row)), None)
-    if mixed is not None:
-        raise RangesimError(f"XYZ data line {numbered[mixed][0]}: a column holds spaces between its separators "
-                            f"({numbered[mixed][1][:60].decode(errors='replace')!r}; decimal commas?)", path)
+    if separated:
+        mixed = next((k for k, row in enumerate(rows) if any(len(f.split()) != 1 for f in row)), None)
+        if mixed is not None:
+            raise RangesimError(f"XYZ data line {numbered[mixed][0]}: a column holds spaces between its separators "
+                                f"({numbered[mixed][1][:60].decode(errors='replace')!r}; decimal commas?)", path)
+        text = b"\n".join(b" ".join(row) for row in rows)
+    else:
+        text = b"\n".join(line for _, line in numbered)
     try:
-        values = parse_numbers(b"\n".join(b" ".join(row) for row in rows), path, "XYZ data")
+        values = parse_numbers(text, path, "XYZ data")
     except RangesimError:
-        bad = next(k for k, row in enumerate(rows) if _not_numbers(row))
+        fields = rows if separated else [line.split() for _, line in numbered]
+        bad = next(k for k, row in enumerate(fields) if _not_numbers(row))
         raise RangesimError(f"XYZ data line {numbered[bad][0]}: not numbers: "
                             f"{numbered[bad][1][:60].decode(errors='replace')!r}", path) from None
-    if values.size != columns * len(rows):
-        raise RangesimError(f"XYZ data: {len(rows)} lines of {columns} columns hold {values.size} numbers", path)
-    table = values.reshape(len(rows), columns)
+    if values.size != columns * len(numbered):
+        raise RangesimError(f"XYZ data: {len(numbered)} lines of {columns} columns hold {values.size} numbers", path)
+    table = values.reshape(len(numbered), columns)
     scale = unit_scale(units, path)
     finite = table[:, :3][np.isfinite(table[:, :3]).all(axis=1)] * scale
     if len(finite) > 1 and np.ptp(finite, axis=0).max() < TINY_EXTENT_MM and scale == 1.0:
@@ -228,14 +256,6 @@ def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
                       "(written in metres? pass units='m')", stacklevel=2)
     scan = _points_scan(table[:, :3], path, "xyz", scale, xyz_columns=columns)
     return apply_conf(scan, conf, path)
-
-
-def _not_numbers(row: list[bytes]) -> bool:
-    try:
-        [float(f) for f in row]
-    except ValueError:
-        return True
-    return False
 
 
 def read_points_npz(path: str | Path, *, units: str = "mm", conf: str | Path | None = None) -> RangeScan:

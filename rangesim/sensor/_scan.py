@@ -33,9 +33,10 @@ def default_pose(scene: Scene, sensor: Sensor) -> np.ndarray:
     near, far = sensor.params["range"]["near"], sensor.params["range"]["far"]
     distance = min(max(fit, near + radius), max(near + radius, far - radius))
     if radius > distance * math.sin(narrow / 2):  # the working range holds it only closer than it fits
-        warnings.warn(f"{sensor.name}: the scene ({2 * radius:.0f} mm across) fills the view at {fit:.0f} mm, past "
-                      f"the working range ({near:g}-{far:g} mm); placed at {distance:.0f} mm it is cropped at the "
-                      "image's edges (give a pose or a scene [view], or a sensor whose range reaches)", stacklevel=3)
+        warnings.warn(f"{sensor.name}: the scene ({2 * radius:.0f} mm across) fits the view from {fit:.0f} mm away "
+                      f"(its centre), which puts its far side past the working range ({near:g}-{far:g} mm); placed "
+                      f"at {distance:.0f} mm it is cropped at the image's edges (give a pose or a scene [view], or "
+                      "a sensor whose range reaches)", stacklevel=3)
     return scene.framing_pose(distance)
 
 

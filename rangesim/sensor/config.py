@@ -253,12 +253,17 @@ class Sensor:
             else:
                 data[table][key] = value
         source = str(self.source)
-        # changed twice is still "modified", once
-        return sensor_from_dict(data, source=source if source.endswith(" (modified)") else f"{source} (modified)")
+        # changed twice is still "modified", once; of the keys the mode does not read, only those
+        # set here are news (a preset switched to another mode keeps its own, as the docs say)
+        return sensor_from_dict(data, source=source if source.endswith(" (modified)") else f"{source} (modified)",
+                                warn_unused=set(changes))
 
 
-def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
+def sensor_from_dict(data: Mapping[str, Any], source: str = "dict", *, warn_unused: set[str] | None = None) -> Sensor:
     """Validate a sensor description and fill in defaults.
+
+    Keys its mode does not read (:data:`UNUSED_BY_MODE`) set off their defaults get a one-line
+    :class:`UnusedSensorKeyWarning`; with ``warn_unused``, only those among these dotted keys.
 
     Raises
     ------
@@ -290,7 +295,7 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict") -> Sensor:
             f"mode {mode!r} is not available; available: {', '.join(MODES)}", source=source
         )
     _validate(params, source, mode)
-    unused = unused_keys(params, mode)
+    unused = [k for k in unused_keys(params, mode) if warn_unused is None or k in warn_unused]
     if unused:  # a sweep or a --set over them would change nothing, silently
         warnings.warn(f"{source}: the {mode} mode does not use {', '.join(unused)}: {_WHY_UNUSED[mode]}; "
                       "they change nothing in its scans", UnusedSensorKeyWarning, stacklevel=3)

@@ -87,13 +87,13 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows: tup
     candidate = status == int(Status.VALID)
     draws = PixelDraws(np.random.default_rng(seed), h * w, first_index=first * w, rows=rows,
                        image_shape=(sensor.height, w), fields=fields)
+    window = peak_window_px(p["laser"]["stripe_width"], f, near)  # the peak detector's, +-px
     draw, dz_du = _stripe_draw(noise, draws, (h, w), f, sensor.reference_distance, status, points, normals, sources,
-                               sheet_n, rays, signal, albedo)
+                               sheet_n, rays, signal, albedo, window)
     status = dr.select(candidate & ~draw.detected, int(Status.DROPOUT), status)
     valid = status == int(Status.VALID)
 
     # 6. mixed pixels at depth edges
-    window = peak_window_px(p["laser"]["stripe_width"], f, near)
     shift = stripe_mixing_shift(points, sheet_n, lit, signal, valid, w, p["laser"]["stripe_width"], window)
 
     # 7b. the peak error triangulated against the sheet; the predicted std (mm): the model's
@@ -137,14 +137,15 @@ def scan_geometric(scene, sensor: Sensor, pose: np.ndarray, seed: int, rows: tup
 
 
 def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], f: float, z_ref: float,
-                 status, points, normals, sources, sheet_n, rays, signal, albedo):
+                 status, points, normals, sources, sheet_n, rays, signal, albedo, window: int):
     """:func:`rangesim.sensor.stripe_noise.simulate` on the camera-frame geometry, in Dr.Jit.
 
     The per-pixel inputs, the model's arithmetic and its white draws (a PCG32 stream per
     pixel) stay lazy Dr.Jit expressions, so they fuse into the scan's last kernel; only the
     border distance of the few cells that need it and any correlated field are made in
-    NumPy. Returns the draw (Dr.Jit arrays) and dz/du (mm of depth per pixel of peak
-    shift), which turns its std into mm.
+    NumPy. ``window``: the peak detector's half-width W (px; a depth step whose image jump
+    exceeds it cuts the stripe). Returns the draw (Dr.Jit arrays) and dz/du (mm of depth per
+    pixel of peak shift), which turns its std into mm.
     """
     mi = mitsuba()
     to_laser = sources - points
@@ -175,15 +176,18 @@ def _stripe_draw(noise: StripeNoise, draws: PixelDraws, shape: tuple[int, int], 
 
     def border_mm(where) -> "mi.Float":
         # the stripe is truncated where the surface ends, the laser cannot reach it, or a depth
-        # step sends the rest of its light onto another surface, elsewhere in the image (an
-        # occluding edge over a measured background: row_steps, as the mixed pixels find them)
-        # (px on the image over magnification px/mm), only at the cells asked: the others +inf
+        # step sends the rest of its light onto another surface outside the peak detector's
+        # window (an occluding edge over a measured background: the step's image jump
+        # delta / a over the window's W px; a smaller step's light stays in the window, where
+        # the mixed pixels' centroid takes it) (px on the image over magnification px/mm), only
+        # at the cells asked: the others +inf
         status_np = np.asarray(status)
         reached = (status_np == Status.VALID) | (status_np == Status.DROPOUT)
         ask = np.flatnonzero(np.asarray(where) & reached)
         m = np.asarray(magnification)[ask]
         d = np.full(status_np.size, np.inf, np.float32)
-        cuts = np.asarray(row_steps(points, sheet_n, mi.Bool(aligned(reached)), shape[1])).reshape(shape)
+        cuts = np.asarray(row_steps(points, sheet_n, mi.Bool(aligned(reached)), shape[1],
+                                    min_shift_px=0.5 * max(window, 1))).reshape(shape)
         d[ask] = border_distance_at(reached.reshape(shape), ask, cuts=cuts) / np.where(
             (status_np[ask] == Status.VALID) & (m > 0), m, 1.0)
         return mi.Float(aligned(d))
