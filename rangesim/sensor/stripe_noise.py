@@ -49,9 +49,10 @@ normal, the twin of a recording, whose grid has no camera model, takes ``f / z_r
    the sensor at every range, as subjective speckle's do) and
    scaled back to unit variance.
 4. Partial stripes (``noise.edge_gain`` g): where an outline, a shadow border or a depth
-   step (an occluding edge over a measured background: the rest of the stripe's light lands
-   on the far surface, elsewhere in the image) lies inside the stripe's footprint, the
-   imaged stripe is truncated (Curless and Levoy 1995). A
+   step (an occluding edge over a measured background whose far side's light lands outside
+   the peak detector's window; a smaller step's light stays in it, where the mixed pixels'
+   centroid takes it) lies inside the stripe's footprint, the imaged stripe is truncated
+   (Curless and Levoy 1995). A
    Gaussian profile of std sigma_s = s / (2.355 cos i) on the surface cut at distance delta
    from its centre has its centroid moved by sigma_s phi(t) / Phi(t), t = delta / sigma_s
    (the mean of a truncated normal); the peak estimator keeps a fraction g of it. The
