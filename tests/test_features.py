@@ -256,3 +256,24 @@ def test_segment_lengths_are_measured_on_the_surface_the_edge_bounds(tmp_path):
                    pose=look_at((0.0, -260.0, 300.0), (0.0, 0.0, 15.0), up=(0, 0, 1)), seed=0)
     found = [s for s in F.lines(rs.edges.gradient(scan), scan=scan, min_length=15) if s.length_mm is not None]
     assert found and max(s.length_mm for s in found) <= 62.0
+
+
+def test_arcs_must_bow_away_from_a_straight_edge():
+    """A straight edge 2-3 px thick (a jump and its crease side by side, as on a plain box's
+    outline) let a circle of radius 5-10 px thread it over 60-90 degrees with an RMS under
+    0.8 px: `rangesim features` reported 34 arcs along a box's outline. An arc's run must now
+    lie LINE_RATIO times farther from its best line than from the arc: none on the thick edge,
+    while drawn arcs of radius 7-30 px over 70-120 degrees are still found."""
+    from rangesim.features._arcs import LINE_RATIO
+
+    assert LINE_RATIO > 1
+    y, x = np.mgrid[0:120, 0:200]
+    for thick in (2, 3):
+        band = (y >= 60) & (y < 60 + thick) & (x > 10) & (x < 190)
+        band |= (y == 60 + thick) & (x % 7 == 0) & (x > 10) & (x < 190)  # a ragged side
+        assert F.arcs(band, radii=(5, 40)) == [], thick
+    for r, span in ((7, 90), (10, 70), (20, 70), (30, 120)):
+        ring = np.abs(np.hypot(x - 100.3, y - 59.6) - r) < 0.5
+        arc = ring & (np.degrees(np.arctan2(y - 59.6, x - 100.3)) % 360 <= span)
+        found = F.arcs(arc, radii=(5, 40))
+        assert found and abs(np.degrees(found[0].span) - span) < 25, (r, span, found)

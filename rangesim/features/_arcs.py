@@ -42,6 +42,27 @@ class Arc:
         return self.end - self.start
 
 
+#: an arc's run of points must lie this many times farther from their best straight line (RMS,
+#: total least squares) than from the arc: a small circle threads a straight edge 2-3 px thick
+#: (a jump and its crease side by side) over 60-90 degrees as closely as the line does
+LINE_RATIO = 1.5
+
+
+def _bows(points: np.ndarray, c: np.ndarray, r: float, start: float, end: float) -> bool:
+    """Whether the points of the run ``start``..``end`` (radians about ``c``) are an arc rather
+    than a straight edge: their RMS distance from their total-least-squares line is at least
+    :data:`LINE_RATIO` times their RMS distance from the circle (``c``, ``r``)."""
+    d = points - c
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]) - start, 2 * np.pi)
+    run = points[ang <= (end - start) + 1e-9]
+    if len(run) < 3:
+        return False
+    arc_rms = float(np.sqrt(np.mean((np.hypot(*(run - c).T) - r) ** 2)))
+    centred = run - run.mean(axis=0)
+    line_rms = float(np.sqrt(max(np.linalg.eigvalsh(centred.T @ centred / len(run))[0], 0.0)))
+    return line_rms >= LINE_RATIO * max(arc_rms, 0.1)
+
+
 def arcs(
     edge_map: Any,
     radii: tuple[float, float] = (5, 80),
@@ -58,8 +79,11 @@ def arcs(
     Same accumulator as :func:`~rangesim.features.circles` with a lower threshold (a
     fraction of 2 pi r, so proportional to r); kept when the longest contiguous supported run
     spans at least ``min_span_deg`` while the total coverage stays below ``max_coverage``
-    (above it the hypothesis is a circle). As for circles, the centre must lie inside the
-    image: the arc of a large rim whose centre the frame cuts off is not found.
+    (above it the hypothesis is a circle), and when the run's points bow: they lie
+    :data:`LINE_RATIO` times farther from their best straight line than from the arc (a small
+    circle threads a thick straight edge as closely as the line does). As for circles, the
+    centre must lie inside the image: the arc of a large rim whose centre the frame cuts off
+    is not found.
 
     Returns
     -------
@@ -95,8 +119,9 @@ def arcs(
                                             threshold=threshold, keep=keep):
         if not radii[0] <= r <= radii[1]:
             continue  # refined out of the radii searched
-        _, cov, s, e, rms = _support(xy, c, r)
-        if cov < max_coverage and (e - s) >= np.deg2rad(min_span_deg) and rms <= max_residual:
+        on, cov, s, e, rms = _support(xy, c, r)
+        if cov < max_coverage and (e - s) >= np.deg2rad(min_span_deg) and rms <= max_residual \
+                and _bows(xy[on], c, r, s, e):
             found.append(Arc((float(c[0]), float(c[1])), float(r), s, e, cov, votes, rms))
     # of near-duplicates the one covering more of its circle stays (then the closer fit), so a
     # hypothesis refined 1 px off does not win by a few degrees more of run
