@@ -46,6 +46,24 @@ def source_x(x: Any, z: Any, sweep: str, baseline: float, tilt_rad: float) -> An
     raise ValueError(f"unknown sweep {sweep!r}")
 
 
+def mid_range(range_table: Mapping[str, Any]) -> float:
+    """The middle of a ``[range]`` table's working range (mm)."""
+    return 0.5 * (float(range_table["near"]) + float(range_table["far"]))
+
+
+def reference_distance(range_table: Mapping[str, Any]) -> float:
+    """A ``[range]`` table's reference distance (mm): ``reference`` where given, else mid-range.
+
+    The photometry and the noise terms are stated there (a white target facing the sensor at
+    this distance returns signal 1; ``noise.signal_px``, ``noise.correlation_mm``, the
+    structured-light exposure and reference plane). Given explicitly it is a property of the
+    device, so changing ``near`` or ``far`` leaves a surface at a fixed distance as bright and
+    as noisy as before; left out, it moves with the working range.
+    """
+    given = range_table.get("reference")
+    return float(given) if given is not None else mid_range(range_table)
+
+
 def light_sources(points: np.ndarray, sensor: Mapping[str, Any]) -> np.ndarray | None:
     """(N, 3) light source of each point, camera frame, mm; None for a sensor without one.
 
@@ -68,9 +86,8 @@ def light_sources(points: np.ndarray, sensor: Mapping[str, Any]) -> np.ndarray |
     # a structured-light projector sits at L: as a rotating mirror (its presets' sweep key)
     sweep = "rotating" if mode == "structured_light" else laser.get("sweep", "rotating")
     rng = sensor.get("range") or {}
-    # the sensor's reference distance (range.reference, else mid-range), as Sensor.tilt_rad takes it
-    given = rng.get("reference")
-    reference = float(given) if given is not None else 0.5 * (float(rng.get("near", 0.0)) + float(rng.get("far", 0.0)))
+    # the sensor's reference distance, as Sensor.tilt_rad takes it
+    reference = reference_distance({"near": 0.0, "far": 0.0, **rng})
     tilt = sheet_tilt_rad(laser.get("tilt_deg"), float(baseline), reference)
     out[:, 0] = source_x(points[:, 0], points[:, 2], sweep, float(baseline), tilt)
     return out

@@ -16,7 +16,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rangesim.core.errors import RangesimError
-from rangesim.core.light import sheet_tilt_rad
+from rangesim.core.light import reference_distance, sheet_tilt_rad
 from rangesim.core.params import MAX_WINDOW_PX
 from rangesim.core.tomlfile import check_keys, read_toml
 
@@ -41,24 +41,6 @@ MAX_RENDER_DEPTH = 32
 #: the widest structured-light dot (Gaussian std, projector pixels): the pattern has at most one
 #: dot per pixel, so dots this wide already overlap into a nearly flat field with nothing to match
 MAX_DOT_SIGMA_PX = 10.0
-
-def mid_range(range_table: Mapping[str, Any]) -> float:
-    """The middle of a ``[range]`` table's working range (mm)."""
-    return 0.5 * (range_table["near"] + range_table["far"])
-
-
-def reference_distance(range_table: Mapping[str, Any]) -> float:
-    """A ``[range]`` table's reference distance (mm): ``reference`` where given, else mid-range.
-
-    The photometry and the noise terms are stated there (a white target facing the sensor at
-    this distance returns signal 1; ``noise.signal_px``, ``noise.correlation_mm``, the
-    structured-light exposure and reference plane). Given explicitly it is a property of the
-    device, so changing ``near`` or ``far`` leaves a surface at a fixed distance as bright and
-    as noisy as before; left out, it moves with the working range.
-    """
-    given = range_table.get("reference")
-    return float(given) if given is not None else mid_range(range_table)
-
 
 def focal_px(width: int, fov_deg: float) -> float:
     """Focal length (px) of a pinhole camera ``width`` px wide with horizontal field ``fov_deg`` degrees."""
