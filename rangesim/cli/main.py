@@ -163,25 +163,6 @@ def _parse_setting(text: str) -> tuple[str, Any]:
     return key, document["value"]
 
 
-def _view_pose(data: dict, path: Path) -> np.ndarray:
-    """A JSON pose in the scene's [view] form: {"position": [x, y, z], "look_at": [...], "up": [...]} (mm)."""
-    from rangesim.core.geometry import look_at
-    from rangesim.scene.scene import VIEW_KEYS
-
-    if "position" not in data or set(data) - VIEW_KEYS:
-        raise RangesimError(f"a JSON pose is a 4x4 list, {{\"pose\": 4x4}} or a view {{\"position\": [x, y, z], "
-                            f"\"look_at\": [...], \"up\": [...]}} in mm; got the keys {', '.join(map(str, data))}",
-                            source=path)
-    try:
-        vectors = [np.asarray(data.get(k, d), dtype=np.float64)
-                   for k, d in (("position", None), ("look_at", (0, 0, 0)), ("up", (0, 0, 1)))]
-        if any(v.shape != (3,) or not np.isfinite(v).all() for v in vectors):
-            raise ValueError("position, look_at and up must be 3 finite numbers each")
-        return look_at(*vectors)
-    except (TypeError, ValueError) as exc:
-        raise RangesimError(f"view pose: {exc}", source=path) from None
-
-
 def _load_pose(path: Path) -> np.ndarray:
     """A 4x4 camera-to-world matrix from ``.npy`` or ``.json`` (nested list, {"pose": ...}, or a
     view {"position", "look_at", "up"} as a scene's [view] table, mm)."""
@@ -210,8 +191,14 @@ def _load_pose(path: Path) -> np.ndarray:
             raise RangesimError(f"invalid JSON: {exc}", source=path) from exc
         if isinstance(data, dict) and "pose" in data:
             data = data["pose"]
-        elif isinstance(data, dict):
-            data = _view_pose(data, path)
+        elif isinstance(data, dict):  # the scene's [view] form, mm
+            from rangesim.scene.scene import VIEW_KEYS, view_pose
+
+            if "position" not in data or set(data) - VIEW_KEYS:
+                raise RangesimError(f"a JSON pose is a 4x4 list, {{\"pose\": 4x4}} or a view {{\"position\": [x, y, z], "
+                                    f"\"look_at\": [...], \"up\": [...]}} in mm; got the keys "
+                                    f"{', '.join(map(str, data))}", source=path)
+            data = view_pose(data, 1.0, path)
     else:
         raise RangesimError("pose must be a .json or .npy file", source=path)
     # scan() checks it too, but without the file's name

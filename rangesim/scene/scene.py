@@ -318,6 +318,20 @@ def _vector(table: dict, key: str, default, where: str, source) -> np.ndarray:
     return value
 
 
+def view_pose(view: dict, scale: float = 1.0, source=None) -> np.ndarray:
+    """The camera-to-world pose of a ``[view]`` table: ``position`` (required), ``look_at``
+    (default the origin) and ``up`` (default +z), in units of ``scale`` mm; a one-line
+    RangesimError naming ``source`` where they are not 3 finite numbers each, lie beyond the
+    world, or make no view (``up`` along the viewing direction)."""
+    position = _in_world(_vector(view, "position", None, "view", source) * scale, "view.position", source)
+    target = _in_world(_vector(view, "look_at", (0, 0, 0), "view", source) * scale, "view.look_at", source)
+    up = _vector(view, "up", (0, 0, 1), "view", source)
+    try:
+        return look_at(position, target, up)
+    except ValueError as exc:
+        raise RangesimError(str(exc), source=source) from exc
+
+
 def _scene_from_toml(path: Path) -> Scene:
     data = read_toml(path)
     check_keys(data, SCENE_KEYS, "the scene", path)
@@ -337,13 +351,7 @@ def _scene_from_toml(path: Path) -> Scene:
         if not isinstance(v, dict):
             raise RangesimError("'view' must be a [view] table", source=path)
         check_keys(v, VIEW_KEYS, "[view]", path)
-        position = _in_world(_vector(v, "position", None, "view", path) * scene_mm, "view.position", path)
-        target = _in_world(_vector(v, "look_at", (0, 0, 0), "view", path) * scene_mm, "view.look_at", path)
-        up = _vector(v, "up", (0, 0, 1), "view", path)
-        try:
-            view = look_at(position, target, up)
-        except ValueError as exc:
-            raise RangesimError(str(exc), source=path) from exc
+        view = view_pose(v, scene_mm, path)
     return Scene(objects, view=view, source=str(path.resolve()))
 
 
