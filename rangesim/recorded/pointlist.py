@@ -166,15 +166,8 @@ def _xyz_fields(line: bytes) -> list[bytes]:
     return line.split()
 
 
-def _not_numbers(fields: list[bytes]) -> bool:
-    try:
-        [float(f) for f in fields]
-    except ValueError:
-        return True
-    return False
-
-
 def _numbers_in(fields: list[bytes]) -> int:
+    """How many of ``fields`` read as numbers."""
     count = 0
     for f in fields:
         try:
@@ -217,7 +210,7 @@ def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
         numbered = numbered[1:]  # column names
     if not numbered:
         raise RangesimError("no points in the file", path)
-    separated = any(sep in line for _, line in numbered for sep in (b",", b";"))
+    separated = b"," in raw or b";" in raw  # (a comment's comma only costs the per-line path)
     # whitespace columns (the common case) are parsed in one vectorised pass; per-line fields
     # only for separated columns
     rows = [_xyz_fields(line) for _, line in numbered] if separated else None
@@ -243,7 +236,7 @@ def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
         values = parse_numbers(text, path, "XYZ data")
     except RangesimError:
         fields = rows if separated else [line.split() for _, line in numbered]
-        bad = next(k for k, row in enumerate(fields) if _not_numbers(row))
+        bad = next(k for k, row in enumerate(fields) if _numbers_in(row) < len(row))
         raise RangesimError(f"XYZ data line {numbered[bad][0]}: not numbers: "
                             f"{numbered[bad][1][:60].decode(errors='replace')!r}", path) from None
     if values.size != columns * len(numbered):
