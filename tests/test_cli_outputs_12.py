@@ -141,6 +141,25 @@ def test_calibrate_refuses_one_recording_twice(tmp_path, capsys):
                       "--out", tmp_path / "c.toml"], "twice")
 
 
+
+def test_calibrate_refuses_to_overwrite_the_preset_it_names(tmp_path, capsys, monkeypatch):
+    """``--sensor NAME --out sensors/NAME.toml`` read the preset and wrote over it (exit 0)."""
+    from tests.conftest import grid_recording
+
+    presets = tmp_path / "presets"
+    presets.mkdir()
+    preset = presets / "my_scanner.toml"
+    preset.write_bytes((ROOT / "sensors" / "cyberware_3030.toml").read_bytes())
+    before = preset.read_bytes()
+    monkeypatch.setenv("RANGESIM_SENSORS", str(presets))
+    rec = tmp_path / "rec.npz"
+    grid_recording(40, 50).save(rec)
+    mesh = tmp_path / "m.stl"
+    _box_mesh(mesh)
+    _refused(capsys, ["calibrate", rec, "--mesh", mesh, "--sensor", "my_scanner", "--out", preset],
+             "would overwrite", "an input of this command")
+    assert preset.read_bytes() == before
+
 def test_sigterm_leaves_no_temporary_file(tmp_path):
     """A terminated command (SIGTERM, as a batch system or `timeout` sends) removes its temporary
     files and exits 143 without a traceback."""

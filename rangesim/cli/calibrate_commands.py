@@ -27,8 +27,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if report is not None:
         if report.suffix.lower() != ".json":
             raise RangesimError("the fit's report must be written to a .json file", source=report)
+    # a preset given by name is read from its file (sensors/NAME.toml): an input like any other
+    from rangesim.sensor import load_sensor
+    sensor_file = load_sensor(args.sensor).source
     check_outputs([(out, "calibrated sensor"), (report, "report")],
-                  [args.mesh, args.conf, args.sensor, *args.recorded])
+                  [args.mesh, args.conf, args.sensor, sensor_file, *args.recorded])
     for k, name in enumerate(args.recorded):  # one view twice would count twice in the joint fit
         twin = next((other for other in args.recorded[:k] if same_file(other, name)), None)
         if twin is not None:
