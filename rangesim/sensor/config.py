@@ -114,9 +114,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "speckle_range": 2.0,  # largest disparity step (px) between 4-neighbours of one region
         # predicted disparity error (rangesim.sensor.matching_noise), px: sqrt(s0^2 + (a s)^2 + (c s^2)^2),
         # s = window x the surface's disparity gradient; calibrated on tilted planes
-        "match_sigma_px": 0.08,  # s0: on a fronto-parallel plane
-        "slant_linear": 0.09,  # a
-        "slant_quadratic": 0.036,  # c, per px
+        # (benchmarks/calibrate_matching_noise.py; these are structured_light_bench's: a sensor
+        # with another pattern, window or noise should have its own fitted)
+        "match_sigma_px": 0.067,  # s0: on a fronto-parallel plane
+        "slant_linear": 0.086,  # a
+        "slant_quadratic": 0.035,  # c, per px
     },
 }
 TOP_KEYS = {"name", "description", "mode", *SCHEMA}
@@ -129,14 +131,18 @@ OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos", "reference"}
 #: blur; the rendered mode's from its frames (photon counts, speckle), with ``noise.min_signal``
 #: and ``noise.speckle_contrast`` alone of the stripe model's keys. Set on a sensor of that mode
 #: they change nothing in its scans (:func:`unused_keys`)
+_RENDER_KEYS = tuple(f"render.{k}" for k in SCHEMA["render"])
+_MATCHING_KEYS = tuple(f"structured_light.{k}" for k in SCHEMA["structured_light"])
 UNUSED_BY_MODE: dict[str, tuple[str, ...]] = {
+    "geometric": ("camera.full_well_e", "camera.read_noise_e", *_RENDER_KEYS, *_MATCHING_KEYS),
     "structured_light": ("camera.psf_px", "laser.sweep", "laser.step", "laser.stripe_width", "laser.tilt_deg",
                          "noise.sigma_px", "noise.quantization_px", "noise.min_signal", "noise.signal_px",
-                         "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast"),
+                         "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast", *_RENDER_KEYS),
     "rendered": ("camera.psf_px", "noise.sigma_px", "noise.quantization_px", "noise.signal_px",
-                 "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast"),
+                 "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast", *_MATCHING_KEYS),
 }
 _WHY_UNUSED = {
+    "geometric": "the render and structured_light keys are the rendered and structured-light modes'",
     "structured_light": "its noise comes from the IR image and the block matcher (the structured_light keys)",
     "rendered": "its range error comes from the rendered frames",
 }
