@@ -20,6 +20,8 @@ def _sensor(**changes):
     ("render.max_depth", 1, ["render.max_depth", "[2, "]),
     ("render.exposure_e", 1e30, ["render.exposure_e", "must lie in"]),
     ("structured_light.dot_sigma_px", 1e3, ["structured_light.dot_sigma_px", "at most"]),
+    ("noise.speckle_contrast", 50.0, ["noise.speckle_contrast", "[0, 1]", "fully developed speckle"]),
+    ("noise.signal_contrast", 1.5, ["noise.signal_contrast", "[0, 1]"]),
 ])
 def test_unphysical_values_are_refused(key, value, words):
     with pytest.raises(RangesimError) as info:
@@ -41,6 +43,7 @@ def test_the_limits_themselves_are_accepted():
         _sensor(**{"noise.correlation_mm": widest * 1.001})
     _sensor(**{"render.max_depth": MAX_RENDER_DEPTH, "render.exposure_e": MAX_EXPOSURE_E,
                "structured_light.dot_sigma_px": MAX_DOT_SIGMA_PX})
+    _sensor(**{"noise.speckle_contrast": 1.0, "noise.signal_contrast": 1.0})
 
 
 def test_a_long_correlation_still_scans_a_plane():

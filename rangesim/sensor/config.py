@@ -360,6 +360,11 @@ def _validate(params: dict[str, dict[str, Any]], source, mode: str = "geometric"
     for key in ("sigma_px", "quantization_px", "speckle_contrast", "signal_px", "correlation_mm", "edge_gain",
                 "signal_contrast"):
         _number(params, "noise", key, source, nonneg=True)
+    for key in ("speckle_contrast", "signal_contrast"):
+        if params["noise"][key] > 1:  # the unit-mean Gamma's std; fully developed speckle is the exponential's 1
+            raise RangesimError(f"noise.{key} must lie in [0, 1] (fully developed speckle has contrast 1, "
+                                f"averaging over a pixel or the aperture lowers it), got {params['noise'][key]:g}",
+                                source=source)
     cam = params["camera"]
     corr_px = params["noise"]["correlation_mm"] * focal_px(cam["width"], cam["fov_deg"]) / reference_distance(params["range"])
     if corr_px > max(cam["width"], cam["height"]):
