@@ -230,8 +230,9 @@ def test_a_plane_just_inside_the_far_end_is_measured():
     scan = rs.scan([plane(40000)], sensor, pose=top_down_pose(z), seed=0)
     inner = np.zeros(scan.shape, bool)
     inner[4:-4, 4:-4] = True  # where the 9 px window fits
-    # a third of the plane rounds to that level: it was dropout (status 3): 63 % valid
-    assert np.mean(scan.status[inner] == Status.VALID) > 0.99
+    # most of the plane rounds to that level: it was dropout (status 3): 63 % valid; the
+    # matcher's own error (0.05 px) takes a few pixels a whole step further, out of range
+    assert np.mean(scan.status[inner] == Status.VALID) > 0.95
     # the depths sit on the lattice, at most half a step beyond the range
     assert np.isclose(scan.depth[inner], fb / level, rtol=1e-5).mean() > 0.2
     assert np.nanmax(scan.depth) <= fb / (fb / far - q / 2) + 1e-3
