@@ -243,8 +243,27 @@ def test_reused_dataset_folder_loses_stale_views(tmp_path):
     for name in ("0000_a.exr", "0000_a_truth.npz", "0000_a.json", "0001_b.exr", "0001_b.json", "0000_a.npz",
                  "notes.txt"):
         (views / name).write_text("x")
-    _remove_stale_views(views, ["0000_a"], "exr")
+    assert _remove_stale_views(views, ["0000_a"], "exr") == 1  # one view of the other plan (its record)
     assert sorted(p.name for p in views.iterdir()) == ["0000_a.exr", "0000_a.json", "0000_a_truth.npz", "notes.txt"]
+
+
+def test_a_dataset_over_another_says_it_replaced_it(tmp_path, capsys):
+    """A second ``dataset`` into the folder of another (here another image width) removed the
+    first one's views without a word; ``sweep`` says so in the same case."""
+    from rangesim.cli.main import main
+    from tests.conftest import BOX_SCENE_TOML
+
+    scene = tmp_path / "box.toml"
+    scene.write_text(BOX_SCENE_TOML)
+    out = tmp_path / "ds"
+    base = ["dataset", "--scene", str(scene), "--views", "2", "--out", str(out)]
+    assert main([*base, "--set", "camera.width=40", "--set", "camera.height=30"]) == 0
+    assert "another dataset" not in capsys.readouterr().err
+    assert main([*base, "--set", "camera.width=48", "--set", "camera.height=30"]) == 0
+    err = capsys.readouterr().err
+    assert f"{out} held 2 view(s) of another dataset" in err and "removed" in err
+    assert main([*base, "--set", "camera.width=48", "--set", "camera.height=30"]) == 0  # the same again: quiet
+    assert "another dataset" not in capsys.readouterr().err
 
 
 def test_empty_scan_warnings_say_why():

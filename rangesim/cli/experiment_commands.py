@@ -88,6 +88,10 @@ def cmd_dataset(args: argparse.Namespace) -> int:
                        cap_deg=args.cap_deg, distance=distance, axis=args.axis, target=args.target,
                        sensor_changes=changes or None, crease_deg=args.crease_deg, workers=args.workers,
                        scheduler=args.scheduler, progress=_progress(args))
+    if run.replaced:  # as sweep says when its folder held another sweep
+        print(f"rangesim: warning: {args.out} held {run.replaced} view(s) of another dataset (another scene, "
+              "sensor, seed, view count or format): they were removed, the folder now holds this one",
+              file=sys.stderr)
     for index, reason in run.empty:  # as `rangesim scan --keep-empty`: kept, and said once per view
         print(f"rangesim: warning: view {index}: {reason} (kept in the dataset)", file=sys.stderr)
     done = f"{run.n_run} rendered on {run.executor}, {run.n_reused} reused" if run.n_run else "all reused"

@@ -79,6 +79,8 @@ class DatasetRun:
     records: list[dict[str, Any]] = field(default_factory=list, repr=False)
     #: (view index, why it is empty) of the views rendered now with no (or almost no) valid pixel
     empty: list[tuple[int, str]] = field(default_factory=list)
+    #: views of another plan (scene, sensor, seed, views, format) the folder held, now removed
+    replaced: int = 0
 
 
 def _json_features(features: dict[str, list]) -> dict[str, list[dict[str, Any]]]:
@@ -284,17 +286,21 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
         "views": records,
     }
     manifest_path = write_json(out / MANIFEST, manifest)
-    _remove_stale_views(views_dir, [_stem(p["index"], p["key"]) for p in payloads], fmt)
+    replaced = _remove_stale_views(views_dir, [_stem(p["index"], p["key"]) for p in payloads], fmt)
     return DatasetRun(out, manifest_path, views, len(todo), views - len(todo), time.perf_counter() - start,
-                      where, records, sorted(empty))
+                      where, records, sorted(empty), replaced)
 
 
-def _remove_stale_views(views_dir: Path, stems: list[str], fmt: str) -> None:
-    """Delete view files of an earlier plan (other views, counts or formats) left in a reused folder."""
+def _remove_stale_views(views_dir: Path, stems: list[str], fmt: str) -> int:
+    """Delete view files of an earlier plan (other views, counts or formats) left in a reused
+    folder; the number of views (their records) removed."""
     keep = {name for stem in stems for name in (f"{stem}.{fmt}", f"{stem}_truth.npz", f"{stem}.json")}
+    removed = 0
     for path in views_dir.glob("*"):
         if path.is_file() and path.name not in keep and path.suffix in (".exr", ".npz", ".json"):
+            removed += path.suffix == ".json"
             path.unlink(missing_ok=True)
+    return removed
 
 
 def _write_view(views_dir: Path, payload: dict[str, Any], result: dict[str, Any], fmt: str) -> None:
