@@ -813,3 +813,19 @@ def test_a_sweep_over_a_bare_mesh_says_how_to_make_it_a_scene(tmp_path):
                                          'views = 1\n\n[detectors.gradient]\n')
     with pytest.raises(RangesimError, match=r"'part.stl' is a mesh; a sweep takes scene .toml files"):
         load_sweep(tmp_path / "sweep.toml")
+
+
+def test_a_misspelt_model_parameter_is_refused_before_any_task(sweep_dir, tmp_path):
+    """``object.NAME.params.KEY`` is the model's to check, so the sweep file passes; a key no
+    task's scene can take failed every task after the folder was made. Now refused first,
+    with the model's own message, and nothing written."""
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "tiny.toml").write_text((sweep_dir / "tiny.toml").read_text())
+    path = tmp_path / "typo.toml"
+    path.write_text(f'name = "typo"\nscenes = ["{root / "scenes" / "green_piece.toml"}"]\nsensors = ["tiny.toml"]\n'
+                    'views = 1\n[detectors.gradient]\n[grid]\n"object.green_piece.params.thicknes" = [10, 12]\n')
+    with pytest.raises(RangesimError) as info:
+        run_sweep(path, tmp_path / "out", workers=0, progress=False)
+    message = str(info.value)
+    assert "\n" not in message and "thicknes" in message and "no task's scene can be built" in message, message
+    assert not (tmp_path / "out").exists()

@@ -174,13 +174,27 @@ def _check_parts_in_range(tasks: list[SweepTask], source: Any) -> None:
     scan. Checked once per scene, object overrides, pose table and the sensor's camera and
     working range (what the check reads: a grid over noise parameters is one check, not one per
     combination, which took ~10 ms each and kept a 10^4-task sweep silent for minutes); each
-    scene loaded once."""
+    scene loaded once. Object overrides that no task's scene can take (a misspelt parameter:
+    every task would fail the same way) are refused here too, with the first one's message;
+    a value only some grid points make bad fails just those tasks, named, when they run."""
     from rangesim.experiments.poses import check_distance_in_range, resolve_pose_table
     from rangesim.experiments.scenes import load_task_scene
     from rangesim.sensor import load_sensor
 
     seen = set()
     scenes: dict[str, Any] = {}
+    errors: list[RangesimError] = []
+    for task in tasks:
+        p = task.payload
+        scene_key = json.dumps([p["scene_path"], p["objects"]], sort_keys=True, default=str)
+        if scene_key not in scenes:
+            try:
+                scenes[scene_key] = load_task_scene(p["scene_path"], p["objects"])
+            except RangesimError as exc:
+                scenes[scene_key] = None
+                errors.append(exc)
+    if errors and all(scene is None for scene in scenes.values()):
+        raise RangesimError(f"no task's scene can be built: {errors[0]}", source=source)
     for task in tasks:
         p = task.payload
         if p["pose"] is None:
@@ -191,13 +205,13 @@ def _check_parts_in_range(tasks: list[SweepTask], source: Any) -> None:
         if key in seen:
             continue
         seen.add(key)
-        scene_key = json.dumps([p["scene_path"], p["objects"]], sort_keys=True, default=str)
-        try:
-            if scene_key not in scenes:
-                scenes[scene_key] = load_task_scene(p["scene_path"], p["objects"])
-            scene, sensor = scenes[scene_key], load_sensor(p["sensor"])
-        except RangesimError:
+        scene = scenes[json.dumps([p["scene_path"], p["objects"]], sort_keys=True, default=str)]
+        if scene is None:
             continue  # a bad override value fails its own tasks, named, when they run
+        try:
+            sensor = load_sensor(p["sensor"])
+        except RangesimError:
+            continue
         check_distance_in_range(resolve_pose_table(p["pose"], scene, sensor), scene, sensor, source=source)
 
 
