@@ -424,3 +424,12 @@ def test_points_takes_the_units_of_a_mesh_file_and_warns_of_a_tiny_one(tmp_path,
     assert len(a.vertices) < 50 < 500 < len(b.vertices)             # a few points per face, against its surface
     _refused(capsys, ["points", "green_piece", "--units", "m", "--resolution", "2mm", "--out", tmp_path / "c.ply"],
              "--units applies to a mesh file")
+
+
+def test_a_missing_recording_is_named_before_its_conf(tmp_path, capsys):
+    """From a folder where the README's ``../shared/data`` paths do not exist, ``compare`` named
+    the missing ``--conf`` file, not the missing recording given first."""
+    rec, conf = tmp_path / "gone" / "bun000.ply", tmp_path / "gone" / "bun.conf"
+    line = _refused(capsys, ["compare", rec, "--conf", conf, "--mesh", tmp_path / "m.ply", "--out", tmp_path / "o"],
+                    rec, "no such file")
+    assert "conf" not in line.split(str(rec))[1]

@@ -284,5 +284,7 @@ def check_conf(scan_path: Path | str, conf: str | None) -> None:
     if Path(scan_path).suffix.lower() != ".ply":
         raise RangesimError(f"--conf applies to Stanford .ply range grids only (got --conf {conf} with a "
                             f"{Path(scan_path).suffix or 'suffix-less'} file)", source=scan_path)
+    if not Path(scan_path).is_file():  # the recording first: a wrong folder misses both
+        raise RangesimError("no such file", source=scan_path)
     if not Path(conf).is_file():
         raise RangesimError("no such --conf file", source=conf)

@@ -201,6 +201,6 @@ def register(sub) -> None:
     p.add_argument("--fit", action="store_true",
                    help="refit the angles and a white noise on this view even if the sensor is calibrated")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--detector", default="gradient", choices=list(DETECTORS), help="edges shown in the picture")
+    p.add_argument("--detector", default="gradient", choices=list(DETECTORS), help="edges shown in the picture (default gradient)")
     p.add_argument("--tolerance", type=float, default=2.0, help="edge matching tolerance, pixels (without --mesh)")
     p.set_defaults(func=cmd_compare)

@@ -195,7 +195,8 @@ def register(sub) -> None:
                        description="Run edge detectors on a scan (synthetic or recorded); write edge maps "
                        "(NPZ), overlay pictures (PNG) and, where ground truth exists, scores (JSON).")
     p.add_argument("scan", metavar="SCAN", help="scan file (.exr, .npz, .ply range grid, .pcd, .msu)")
-    p.add_argument("--method", default="all", choices=[*DETECTORS, "all"])
+    p.add_argument("--method", default="all", choices=[*DETECTORS, "all"],
+                   help="edge detector, or all of them (default all)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--scene", help="scene of a synthetic scan (default: the one named in the scan)")
     p.add_argument("--conf", help="Stanford .conf pose file for a recorded scan")

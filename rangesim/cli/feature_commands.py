@@ -115,7 +115,8 @@ def register(sub) -> None:
                        description="Find segments, circles, arcs and (model-guided with --scene) ellipses "
                        "in a scan's edge map; write features.json, relations.csv and features.png.")
     p.add_argument("scan", metavar="SCAN", help="scan file (.exr, .npz)")
-    p.add_argument("--edges", default="gradient", choices=list(DETECTORS), help="edge detector")
+    p.add_argument("--edges", default="gradient", choices=list(DETECTORS),
+                   help="edge detector the features are found on (default gradient)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--scene", help="scene of the scan (default: the one named in a synthetic scan)")
     p.add_argument("--rmin", type=float, default=5.0, help="least circle radius, px")
