@@ -433,3 +433,21 @@ def test_a_missing_recording_is_named_before_its_conf(tmp_path, capsys):
     line = _refused(capsys, ["compare", rec, "--conf", conf, "--mesh", tmp_path / "m.ply", "--out", tmp_path / "o"],
                     rec, "no such file")
     assert "conf" not in line.split(str(rec))[1]
+
+
+def test_calibrate_refuses_a_mesh_that_covers_a_small_part_of_the_recording(tmp_path, capsys):
+    """An unrelated mesh (the flat target for the bunny) reached a valid-mask IoU of 0.16, over
+    the 0.1 that refuses no overlap at all, and a sensor file of nonsense was written with a
+    warning. A calibration now needs the joint fit's IoU at MIN_SENSOR_FIT_IOU (0.5); compare
+    keeps its warning for such a twin."""
+    from rangesim.twin.calibration import MIN_SENSOR_FIT_IOU
+
+    rec = tmp_path / "rec.npz"
+    grid_recording(60, 70, x0=-17.0, y0=-21.0).save(rec)  # 35 x 42 mm
+    small = trimesh.creation.box(extents=(12.0, 14.0, 1.0))  # about a ninth of it
+    mesh = tmp_path / "small.stl"
+    small.export(mesh)
+    out = tmp_path / "c.toml"
+    _refused(capsys, ["calibrate", rec, "--mesh", mesh, "--sensor", "cyberware_3030", "--out", out,
+                      "--geometry-only"], "overlap too little to calibrate on", f"at least {MIN_SENSOR_FIT_IOU}")
+    assert not out.exists()

@@ -37,17 +37,25 @@ MIN_CALIBRATION_IOU = 0.1
 POOR_OVERLAP_IOU = 0.8
 
 
-def check_overlap(iou: float, what: str, *, plural: bool = False, view: str | None = None) -> None:
+#: the least valid-mask IoU of the joint fit that ``rangesim calibrate`` writes a sensor file
+#: from: under it most of what the scanner recorded is not the mesh (an unrelated part reached
+#: 0.16, a pose 45 degrees off 0.44), and the file would hold a fit to another object
+MIN_SENSOR_FIT_IOU = 0.5
+
+
+def check_overlap(iou: float, what: str, *, plural: bool = False, view: str | None = None,
+                  minimum: float = MIN_CALIBRATION_IOU) -> None:
     """Refuse a twin that does not overlap its recording(s): ``iou`` (``what`` it is) under
-    :data:`MIN_CALIBRATION_IOU`, or NaN; warn when it is under :data:`POOR_OVERLAP_IOU`.
-    ``view``: the recording's name, said in the message."""
+    ``minimum`` (:data:`MIN_CALIBRATION_IOU`), or NaN; warn when it is under
+    :data:`POOR_OVERLAP_IOU`. ``view``: the recording's name, said in the message."""
     recording, poses = ("recording(s)", "recordings' poses") if plural else ("recording", "recording's pose")
     if view is not None:
         recording, poses = f"recording '{view}'", "recording's pose"
-    if not iou >= MIN_CALIBRATION_IOU:  # NaN included
+    if not iou >= minimum:  # NaN included
+        overlap = "overlap too little to calibrate on" if iou >= MIN_CALIBRATION_IOU else "do not overlap"
         raise RangesimError(
-            f"the mesh and the {recording} do not overlap: {what} is {float(iou):.4f} (at least "
-            f"{MIN_CALIBRATION_IOU} needed); check the mesh, the {poses} and the units")
+            f"the mesh and the {recording} {overlap}: {what} is {float(iou):.4f} (at least "
+            f"{minimum} needed); check the mesh, the {poses} and the units")
     if iou < POOR_OVERLAP_IOU:
         warnings.warn(f"the mesh and the {recording} overlap only in part: {what} is {float(iou):.4f} (a posed "
                       f"twin of the right mesh reaches {POOR_OVERLAP_IOU} and more); check the mesh, the {poses} "

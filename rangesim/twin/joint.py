@@ -40,7 +40,7 @@ from rangesim.core import params as P
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
 from rangesim.sensor.stripe_noise import StripeNoise, detection_probability, partial_stripe_fraction
-from rangesim.twin.calibration import check_overlap
+from rangesim.twin.calibration import MIN_SENSOR_FIT_IOU, check_overlap
 from rangesim.twin.comparison import RANGE_AXIS
 from rangesim.twin.realism import MIN_BIN_CELLS, binned_robust_std, incidence_deg, neighbour_correlation
 from rangesim.twin.stage import Registration, TwinOptics, TwinStage
@@ -238,7 +238,7 @@ def calibrate_views(recordings: Sequence[RangeScan], mesh: Any, sensor: Any, *,
     if stages is None:
         stages = [TwinStage(rec, mesh, base_sensor) for rec in recordings]
     iou, (theta, alpha, min_cos, views) = search_geometry(stages, views=(1, 2))
-    check_overlap(iou, "the best twin's valid-mask IoU", plural=True)
+    check_overlap(iou, "the best twin's valid-mask IoU", plural=True, minimum=MIN_SENSOR_FIT_IOU)
     geometry = {"theta_deg": theta, "alpha_deg": alpha, "min_cos": min_cos, "camera_views": views}
     if len(stages) > 1:  # one view off (a pose left out) hides in the joint figure
         for st, name in zip(stages, names):
