@@ -161,3 +161,28 @@ def test_a_face_turned_from_the_laser_beyond_the_range_is_out_of_range():
     assert beyond.sum() > 200 and within.sum() > 200
     assert np.all(scan.status[beyond] == Status.OUT_OF_RANGE)
     assert np.all(scan.status[within] == Status.SHADOW)
+
+
+# -- ground truth of an open sheet seen from its back ------------------------------------------
+@pytest.mark.parametrize(("eye_z", "label"), [(300.0, EdgeLabel.CONVEX), (-300.0, EdgeLabel.CONCAVE)])
+def test_an_open_roof_is_a_ridge_from_above_and_a_valley_from_below(eye_z, label):
+    """An open sheet folded into a roof (two 100 x 60 mm panels meeting at a ridge along y,
+    dropping 25 mm to either side) is seen from either side: from above its fold is a convex
+    crease, from below a concave one (mesh convexity is the front's; from the back it swaps).
+    No test scanned an open mesh from behind: not swapping passed, and from below the fold was
+    no crease at all (the faces' normals were compared with the scan's, which face the camera)."""
+    import trimesh
+
+    from rangesim.core.geometry import look_at
+    from tests.conftest import make_sensor
+
+    v = np.array([[-50, -30, -25], [0, -30, 0], [50, -30, -25], [-50, 30, -25], [0, 30, 0], [50, 30, -25]], float)
+    roof = trimesh.Trimesh(v, np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]]), process=False)
+    scene = rs.load_scene(roof)
+    assert not scene.objects[0].watertight
+    pose = look_at((0.0, 0.0, eye_z), (0.0, 0.0, -12.0), up=(0, 1, 0))
+    scan = rs.scan(scene, make_sensor(), pose=pose, seed=0)
+    truth = rs.evaluate.visible_truth(scan, scene)
+    creases = np.isin(truth, (EdgeLabel.CONVEX, EdgeLabel.CONCAVE))
+    assert creases.sum() > 40  # the fold, across the image
+    assert np.all(truth[creases] == label)

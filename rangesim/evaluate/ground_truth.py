@@ -477,7 +477,10 @@ def _mesh_creases(
     cos_half = np.cos(np.radians(crease_deg) / 2)
     seen0 = np.zeros(len(pts), dtype=bool)
     seen1 = np.zeros(len(pts), dtype=bool)
-    n0, n1 = normals[pairs[seg, 0]], normals[pairs[seg, 1]]
+    # the scan's normals are turned to face the camera (the visible side): so are the faces'
+    # (an open sheet seen from its back; a watertight mesh's kept faces face it already)
+    seen_side = np.where(facing[:, None], normals, -normals)
+    n0, n1 = seen_side[pairs[seg, 0]], seen_side[pairs[seg, 1]]
     for dr in (-1, 0, 1):
         for dc in (-1, 0, 1):
             r, c = row + dr, col + dc
