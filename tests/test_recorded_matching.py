@@ -158,3 +158,23 @@ def test_the_default_matcher_is_the_kinect_presets():
     sensor = rs.load_sensor(DEFAULT_MATCHER_PRESET)
     assert sensor.mode == "structured_light"
     assert sensor.params["structured_light"]["window"] == DEFAULT_MATCHER_WINDOW
+
+
+def test_features_takes_the_recording_sensor_as_detect_does(data_dir, tmp_path, capsys):
+    """``rangesim features`` read a .pcd frame with no sensor, so its detectors never took their
+    block-matched paths (``detect`` has had ``--sensor``): on mOSD test31 no cylinder top was
+    found. With ``--sensor auto`` (kinect_v1, from the disparity lattice) the tall cylinder's
+    top, an ellipse centred near (349, 186) px with semi-axes about 33 x 17 px (fitted to the
+    top face's labelled pixels), is."""
+    import json
+
+    from rangesim.cli.main import main
+
+    frame = data_dir / "mosd-kinect" / "test31.pcd"
+    out = tmp_path / "f"
+    assert main(["features", str(frame), "--out", str(out), "--sensor", "auto"]) == 0
+    assert "sensor auto: kinect_v1" in capsys.readouterr().out
+    found = json.loads((out / "features.json").read_text())["ellipses"]
+    tops = [e for e in found if math.dist(e["center"], (349, 186)) < 4]
+    assert len(tops) == 1
+    assert 28 < max(tops[0]["axes"]) < 38 and 12 < min(tops[0]["axes"]) < 20

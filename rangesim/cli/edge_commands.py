@@ -32,6 +32,12 @@ def require_grid(scan, path: Path) -> None:
         raise RangesimError(f"a {w} x {h} px image is too small for the edge detectors (at least 3 x 3)", source=path)
 
 
+#: ``--sensor`` of the commands that read a recording (detect, features)
+RECORDED_SENSOR_HELP = ("what recorded a .pcd frame (a preset such as kinect_v1, a sensor TOML, or auto: kinect_v1 "
+                        "only if the depths sit on a block matcher's disparity lattice); a structured-light sensor "
+                        "runs the detectors' block-matched paths. Default: none (recordings carry no sensor)")
+
+
 def describe_sensor(scan, given) -> str:
     """One line on what ``--sensor given`` made of a recording's sensor metadata."""
     sensor = scan.meta.get("sensor")
@@ -200,10 +206,7 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--scene", help="scene of a synthetic scan (default: the one named in the scan)")
     p.add_argument("--conf", help="Stanford .conf pose file for a recorded scan")
-    p.add_argument("--sensor", metavar="NAME|TOML|auto",
-                   help="what recorded a .pcd frame (a preset such as kinect_v1, a sensor TOML, or auto: kinect_v1 "
-                   "only if the depths sit on a block matcher's disparity lattice); a structured-light sensor runs "
-                   "the detectors' block-matched paths. Default: none (recordings carry no sensor)")
+    p.add_argument("--sensor", metavar="NAME|TOML|auto", help=RECORDED_SENSOR_HELP)
     p.add_argument("--tolerance", type=float, default=2.0, help="score matching tolerance, pixels (default 2)")
     p.add_argument("--crease-deg", type=float, default=20.0, help="ground-truth crease angle, degrees (default 20)")
     p.set_defaults(func=cmd_detect)

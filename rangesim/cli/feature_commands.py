@@ -39,9 +39,14 @@ def cmd_features(args: argparse.Namespace) -> int:
     if args.rmin > args.rmax:  # equal: one radius, as the API's radii=(r, r)
         raise RangesimError(f"--rmin ({args.rmin:g}) must not exceed --rmax ({args.rmax:g})")
     names = ["features.json", "relations.csv", "features.png"]
-    check_out_files(out, names, [args.scan, args.scene])
-    scan = load_scan(args.scan)
-    from rangesim.cli.edge_commands import require_grid
+    check_out_files(out, names, [args.scan, args.scene, args.sensor])
+    if args.sensor is None:
+        scan = load_scan(args.scan)
+    else:  # as detect: a recording's sensor (a .pcd frame's) switches the detectors' block-matched paths on
+        from rangesim.evaluate.runs import load_scan_with_labels
+
+        scan = load_scan_with_labels(args.scan, None, sensor=args.sensor)[0]
+    from rangesim.cli.edge_commands import describe_sensor, require_grid
 
     require_grid(scan, Path(args.scan))
     if not np.any(scan.valid & ~np.isnan(scan.depth)):  # (an infinite one: the detectors name it)
@@ -97,6 +102,8 @@ def cmd_features(args: argparse.Namespace) -> int:
     ])
     print(f"{args.scan}: {len(segs)} segments, {len(circ)} circles, {len(arc)} arcs, {len(ell)} ellipses, "
           f"{len(rows)} relations")
+    if args.sensor is not None:
+        print(describe_sensor(scan, args.sensor))
     if "scores" in report:
         s = report["scores"]
         def share(value):  # a share of nothing (no truth, nothing found) is no number
@@ -109,16 +116,18 @@ def cmd_features(args: argparse.Namespace) -> int:
 
 
 def register(sub) -> None:
+    from rangesim.cli.edge_commands import RECORDED_SENSOR_HELP
     from rangesim.edges import DETECTORS
 
     p = sub.add_parser("features", help="lines, circles, arcs and ellipses of a scan's edges",
                        description="Find segments, circles, arcs and (model-guided with --scene) ellipses "
                        "in a scan's edge map; write features.json, relations.csv and features.png.")
-    p.add_argument("scan", metavar="SCAN", help="scan file (.exr, .npz)")
+    p.add_argument("scan", metavar="SCAN", help="scan file (.exr, .npz, .ply range grid, .pcd, .msu)")
     p.add_argument("--edges", default="gradient", choices=list(DETECTORS),
                    help="edge detector the features are found on (default gradient)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--scene", help="scene of the scan (default: the one named in a synthetic scan)")
     p.add_argument("--rmin", type=float, default=5.0, help="least circle radius, px")
     p.add_argument("--rmax", type=float, default=80.0, help="largest circle radius, px")
+    p.add_argument("--sensor", metavar="NAME|TOML|auto", help=RECORDED_SENSOR_HELP)
     p.set_defaults(func=cmd_features)
