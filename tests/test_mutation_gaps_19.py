@@ -186,3 +186,26 @@ def test_an_open_roof_is_a_ridge_from_above_and_a_valley_from_below(eye_z, label
     creases = np.isin(truth, (EdgeLabel.CONVEX, EdgeLabel.CONCAVE))
     assert creases.sum() > 40  # the fold, across the image
     assert np.all(truth[creases] == label)
+
+
+# -- a rim seen whole counts as seen whole ------------------------------------------------------
+def test_open_hole_rims_seen_head_on_are_wholly_visible():
+    """Head-on, nothing hides the Green Piece's top rims; yet half the pixels a rim's points land
+    on see past it, into the hole. A point counts as seen when any of the 2 x 2 pixels around it
+    sees its surface (the slack of ``_visible``): every top rim is then 1.0 visible, while the
+    bottom rims, hidden by the walls where the view does not reach down the hole, are not.
+    (Testing the one pixel a point lands on passed every test.)"""
+    from pathlib import Path
+
+    from rangesim.core.geometry import look_at
+
+    scene = rs.load_scene(Path(__file__).resolve().parents[1] / "scenes" / "green_piece.toml")
+    sensor = rs.load_sensor("white_scanner").with_params(
+        {"camera.width": 256, "camera.height": 240, "noise.sigma_px": 0, "noise.speckle_contrast": 0})
+    scan = rs.scan(scene, sensor, pose=look_at((0, 0, 300), (0, 0, 0), up=(0, 1, 0)), seed=0)
+    circles = rs.evaluate.ground_truth_features(scan, scene)["circles"]
+    tops = [c for c in circles if c.name.endswith("_rim_top")]
+    bottoms = [c for c in circles if c.name.endswith("_rim_bottom")]
+    assert len(tops) == 11 and len(bottoms) == 11
+    assert all(c.visible == 1.0 for c in tops), [(c.name, c.visible) for c in tops]
+    assert all(c.visible < 0.35 for c in bottoms)
