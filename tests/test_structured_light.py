@@ -41,7 +41,9 @@ def test_block_matching_recovers_a_known_shift_to_an_eighth_pixel():
 
 
 def test_depth_is_f_b_over_disparity_on_a_plane():
-    sensor = small_kinect(**{"noise.speckle_contrast": 0.0, "camera.read_noise_e": 0.0})
+    # the lattice itself: without the device's rounding to whole millimetres (depth_unit_mm)
+    sensor = small_kinect(**{"noise.speckle_contrast": 0.0, "camera.read_noise_e": 0.0,
+                             "structured_light.depth_unit_mm": 0.0})
     scan = rs.scan([plane(4000)], sensor, pose=top_down_pose(1200.0), seed=0)
     assert scan.valid.mean() > 0.9 and scan.meta["mode"] == "structured_light"
     fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
@@ -58,7 +60,7 @@ def test_depth_is_f_b_over_disparity_on_a_plane():
 
 
 def test_disparity_steps_of_an_eighth_pixel_are_depth_steps():
-    sensor = small_kinect()
+    sensor = small_kinect(**{"structured_light.depth_unit_mm": 0.0})  # the lattice, not rounded to mm
     scan = rs.scan([_tilted_plane(30.0)], sensor, pose=top_down_pose(2000.0), seed=0)
     fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
     d = fb / scan.depth[scan.valid].astype(np.float64)

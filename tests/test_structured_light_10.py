@@ -221,7 +221,8 @@ def test_the_ir_image_saturates_instead_of_overflowing_the_poisson_draw():
 
 # -- 5. a plane inside the range is measured, also where its nearest depth level lies just beyond -------
 def test_a_plane_just_inside_the_far_end_is_measured():
-    base = small_kinect(**{"noise.speckle_contrast": 0.0, "camera.read_noise_e": 0.0})
+    base = small_kinect(**{"noise.speckle_contrast": 0.0, "camera.read_noise_e": 0.0,
+                           "structured_light.depth_unit_mm": 0.0})  # depths on the lattice itself
     fb, q = base.focal_px * 75.0, 1 / 8
     level = 21 * q  # a disparity level whose depth f b / level lies just beyond far
     far = fb / (level + 0.05 * q)

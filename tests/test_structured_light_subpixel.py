@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import trimesh
 
 import rangesim as rs
@@ -30,7 +31,8 @@ def test_a_gaussian_peak_is_found_exactly_and_a_parabola_too():
 
 
 def test_no_pixel_locking_on_a_slanted_plane():
-    sensor = rs.load_sensor("kinect_v1").with_params({"camera.width": 320, "camera.height": 240})
+    sensor = rs.load_sensor("kinect_v1").with_params({"camera.width": 320, "camera.height": 240,
+                                                      "structured_light.depth_unit_mm": 0.0})  # the lattice
     fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
     tilted = plane(30000)
     tilted.apply_transform(trimesh.transformations.rotation_matrix(math.radians(40), [0, 1, 0]))
@@ -49,3 +51,35 @@ def test_no_pixel_locking_on_a_slanted_plane():
     assert occupancy.max() / occupancy.min() < 1.3, occupancy
     # and no error that depends on the true sub-pixel phase (the parabola: +-0.05 px)
     assert np.abs(error / count).max() < 0.025, error / count
+
+
+@pytest.mark.parametrize("distance", [560.0, 2000.0])
+def test_depth_in_whole_millimetres_as_a_kinect_writes_it(distance):
+    """``structured_light.depth_unit_mm = 1`` (``kinect_v1``'s): every depth a whole millimetre, the point on its
+    pixel's ray; the levels f b / d, 1/8 px apart, round to gaps within a unit of their
+    spacing z^2 / (8 f b) (here, at 320 px, 1.8 mm at 0.56 m: gaps of 1 and 2 mm, as the
+    recorded 640 px frames show at 0.7 m); sigma holds the rounding's 1/12 mm^2."""
+    base = rs.load_sensor("kinect_v1").with_params({"camera.width": 320, "camera.height": 240,
+                                                    "structured_light.depth_unit_mm": 0.0})
+    rounded = base.with_params({"structured_light.depth_unit_mm": 1.0})  # as the preset
+    fb = base.focal_px * abs(base.params["laser"]["baseline"])
+    tilted = plane(30000)
+    tilted.apply_transform(trimesh.transformations.rotation_matrix(math.radians(40), [0, 1, 0]))
+    pose = top_down_pose(distance)
+    a = rs.scan([tilted], base, pose=pose, seed=0)
+    b = rs.scan([tilted], rounded, pose=pose, seed=0)
+    z = b.depth[b.valid].astype(np.float64)
+    assert np.array_equal(b.valid, a.valid)
+    assert np.all(z == np.round(z)) and not np.all(a.depth[a.valid] == np.round(a.depth[a.valid]))
+    np.testing.assert_allclose(b.depth[b.valid], np.round(a.depth[a.valid]), atol=1e-3)
+    # the points stay on their rays: x / z and y / z as before the rounding
+    np.testing.assert_allclose(b.xyz[b.valid][:, :2] / z[:, None], a.xyz[a.valid][:, :2] / a.depth[a.valid][:, None],
+                               atol=1e-6)
+    near = np.abs(z - distance) < 0.05 * distance
+    levels = np.unique(z[near])
+    mid = 0.5 * (levels[1:] + levels[:-1])
+    spacing = mid**2 / (8 * fb)
+    assert np.all(np.abs(np.diff(levels) - spacing) < 1.0 + 0.01 * spacing)
+    if distance < 600:
+        assert set(np.diff(levels).astype(int).tolist()) == {1, 2}
+    np.testing.assert_allclose(b.sigma[b.valid] ** 2, a.sigma[a.valid] ** 2 + 1 / 12, rtol=1e-4)

@@ -107,6 +107,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "ambient": 0.02,  # ambient IR irradiance, relative to a dot's peak at mid-range
         "window": 9,  # block-matching window (odd), pixels
         "subpixel_steps": 8,  # disparity quantised to 1 / steps pixel
+        "depth_unit_mm": 0.0,  # depth written in whole units of this (a Kinect's uint16 mm: 1); 0: not rounded
         "min_score": 0.5,  # lowest accepted zero-mean normalised cross-correlation
         "uniqueness": 0.1,  # (1 - second best) must exceed (1 + uniqueness) (1 - best)
         "lr_check": True,  # left-right consistency (within 1 px)
@@ -426,8 +427,11 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
         raise RangesimError(f"structured_light.lr_check must be true or false, got {sl['lr_check']!r}", source=source)
     _number(params, "structured_light", "speckle_window", source, nonneg=True, integer=True)
     _number(params, "structured_light", "speckle_range", source, nonneg=True)
-    for key in ("match_sigma_px", "slant_linear", "slant_quadratic"):
+    for key in ("match_sigma_px", "slant_linear", "slant_quadratic", "depth_unit_mm"):
         _number(params, "structured_light", key, source, nonneg=True)
+    if sl["depth_unit_mm"] > params["range"]["near"]:
+        raise RangesimError(f"structured_light.depth_unit_mm ({sl['depth_unit_mm']:g}) exceeds range.near "
+                            f"({params['range']['near']:g} mm): every depth would round to a few values", source=source)
 
 
 def _validate_disparities(params: dict[str, dict[str, Any]], source) -> None:

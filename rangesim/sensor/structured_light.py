@@ -28,6 +28,10 @@ so the projector's field is that much wider than the camera's):
 6. Speckle filter (:func:`rangesim.sensor.speckle_filter.filter_speckles`): regions of the
    disparity image smaller than ``speckle_window`` px, whose 4-neighbours differ by at most
    ``speckle_range`` px, are chance matches and rejected, as a device's pipeline does.
+7. Depth units: with ``depth_unit_mm`` u > 0 the depth is rounded to whole u (a Kinect's
+   OpenNI frames hold uint16 millimetres), the point kept on its pixel's ray; ``sigma`` then
+   holds the rounding's u^2 / 12 in quadrature. Near range, where a 1/8 px step is under 2 u
+   (kinect_v1 at 1 mm: nearer than 0.83 m), the levels then lie 1 or 2 units apart.
 
 So depth noise follows sigma_z = z^2 sigma_d / (f b), with sigma_d (px) growing with the
 surface's slant and holding the rounding to 1 / ``subpixel_steps`` px
@@ -218,6 +222,10 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
         z = f * b / disparity
     # 6. chance matches come as small islands of the disparity image (of the working range)
     z[filter_speckles(disparity, sl["speckle_window"], sl["speckle_range"])] = np.nan
+    # 7. the depth as the device writes it: whole units (a Kinect's OpenNI frames hold uint16 mm)
+    unit = float(sl["depth_unit_mm"])
+    if unit > 0:
+        z = np.round(z / unit) * unit
     jj, ii = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
     rays = np.stack([(jj - K[0, 2]) / f, (ii - K[1, 2]) / K[1, 1], np.ones_like(jj)], axis=-1)
     matched = np.isfinite(z)
@@ -239,6 +247,8 @@ def scan_structured_light(scene, sensor: Sensor, pose: np.ndarray, seed: int) ->
         sigma = matching_sigma_mm(P, n, f, b, *noise).reshape(h, w)
         flat = z * z * float(matching_sigma_px(0.0, *noise)) / (f * abs(b))
     sigma = np.where(np.isfinite(sigma), sigma, flat)
+    if unit > 0:  # the rounding's uniform error, independent of the match
+        sigma = np.sqrt(sigma * sigma + unit * unit / 12.0)
     sigma = np.where(status == Status.VALID, sigma, np.nan).astype(np.float32)
 
     part = np.asarray(hits.part, np.int32).reshape(h, w)
