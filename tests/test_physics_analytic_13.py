@@ -95,9 +95,11 @@ def test_structured_light_disparity_noise_is_constant_over_range_and_equals_the_
 # 2. the structured-light IR image -----------------------------------------------------------------
 def _ir_sensor():
     # ambient high enough (120 e- on albedo 0.6) that no dark pixel is clipped at 0 electrons, and
-    # a full well no pixel reaches: the law below is the unclipped one
+    # a full well no pixel reaches: the law below is the unclipped one; independent dots, whose
+    # gaps leave pixels dark enough to test the law's dark end on (2 px spaced dots leave few)
     return rs.load_sensor("kinect_v1").with_params({
-        "camera.width": 256, "camera.height": 192, "structured_light.ambient": 0.1, "camera.full_well_e": 1e6})
+        "camera.width": 256, "camera.height": 192, "structured_light.ambient": 0.1, "camera.full_well_e": 1e6,
+        "structured_light.dot_min_spacing_px": 0.0})
 
 
 def test_ir_image_moments_are_shot_speckle_and_read_noise():

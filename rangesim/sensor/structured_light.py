@@ -135,7 +135,7 @@ def matching_setup(sensor: Sensor) -> MatchingSetup:
     sl = sensor.params["structured_light"]
     d_min, d_max, d0, margin, x_lo, x_hi = matching_layout(sensor)
     pattern = DotPattern.generate(x_hi - x_lo, sensor.height, sl["dot_density"], sl["dot_sigma_px"],
-                                  sl["pattern_seed"], x_min=x_lo)
+                                  sl["pattern_seed"], x_min=x_lo, min_spacing_px=sl["dot_min_spacing_px"])
     return MatchingSetup(pattern, d_min, d_max, d0, margin)
 
 
