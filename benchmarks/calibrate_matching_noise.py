@@ -38,6 +38,7 @@ from scipy.optimize import least_squares
 import rangesim as rs
 from rangesim.core.geometry import look_at
 from rangesim.sensor.matching_noise import matching_sigma_px
+from rangesim.twin.realism import clipped_std
 
 HERE = Path(__file__).resolve().parent
 #: 5 degrees, not 0: a plane square to the camera has one disparity, so one sub-pixel phase
@@ -72,19 +73,6 @@ def plane_error_std(sensor, tilt_deg: float, axis, distance: float, seed: int) -
     g = np.median(abs(sensor.params["laser"]["baseline"]) * np.hypot(normal[:, 0], normal[:, 1])
                   / np.abs(np.einsum("ik,ik->i", normal, points)))
     return float(g), clipped_std(error), int(centre.sum())
-
-
-def clipped_std(x: np.ndarray, k: float = 4.0) -> float:
-    """Std of ``x`` after dropping, until none is left, values over ``k`` std from the mean
-    (chance matches; a Gaussian loses 0.1 % of its std at k = 4). Not a percentile spread:
-    the errors come in 1/8 px steps, which would quantise it."""
-    keep = np.isfinite(x)
-    while True:
-        m, s = x[keep].mean(), x[keep].std()
-        new = keep & (np.abs(x - m) <= k * s)
-        if new.sum() == keep.sum():
-            return float(s)
-        keep = new
 
 
 def fit_law(s: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:

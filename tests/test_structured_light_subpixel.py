@@ -17,6 +17,7 @@ import trimesh
 
 import rangesim as rs
 from rangesim.sensor.block_matching import subpixel_offset
+from rangesim.twin.realism import clipped_std
 from tests.conftest import plane, top_down_pose
 
 
@@ -89,17 +90,6 @@ def test_depth_in_whole_millimetres_as_a_kinect_writes_it(distance):
     np.testing.assert_allclose(b.sigma[b.valid] ** 2, a.sigma[a.valid] ** 2 + 1 / 12, rtol=1e-4)
 
 
-def _clipped_std(x: np.ndarray, k: float = 4.0) -> float:
-    """Std after dropping values over k std from the mean until none is left (chance matches)."""
-    keep = np.isfinite(x)
-    while True:
-        m, s = x[keep].mean(), x[keep].std()
-        new = keep & (np.abs(x - m) <= k * s)
-        if new.sum() == keep.sum():
-            return float(s)
-        keep = new
-
-
 def test_slanted_plane_noise_follows_nguyen_et_al():
     """Nguyen, Izadi and Lovell (2012) measured a Kinect's axial noise on planes at distance z (m)
     and angle theta: sigma_z = 1.2 + 1.9 (z - 0.4)^2 + 0.1 / sqrt(z) theta^2 / (pi/2 - theta)^2
@@ -118,7 +108,7 @@ def test_slanted_plane_noise_follows_nguyen_et_al():
         centre = (np.abs(rows - h / 2) < 100) & (np.abs(cols - w / 2) < 100) & scan.valid
         z_true = scan.xyz_true[..., 2][centre].astype(np.float64)
         error_px = fb / scan.depth[centre].astype(np.float64) - fb / z_true
-        sigma_mm = _clipped_std(error_px) * 1000.0**2 / fb
+        sigma_mm = clipped_std(error_px) * 1000.0**2 / fb
         t = math.radians(deg)
         nguyen = 1.2 + 1.9 * 0.6**2 + 0.1 * t * t / (math.pi / 2 - t) ** 2
         assert abs(sigma_mm / nguyen - 1) < 0.15, (deg, sigma_mm, nguyen)
