@@ -100,11 +100,15 @@ NOISE_KEYS = ("noise.sigma_px", "noise.quantization_px", "noise.speckle_contrast
 
 
 def noise_free(sensor):
-    """The preset with its noise keys at 0 (stripe width, shadows and matching stay)."""
+    """The preset with its noise keys at 0 (stripe width, shadows and matching stay): those its
+    mode reads (:data:`rangesim.sensor.config.UNUSED_BY_MODE`)."""
+    from rangesim.sensor.config import UNUSED_BY_MODE
+
+    unused = set(UNUSED_BY_MODE.get(sensor.mode, ()))
     changes = {}
     for key in NOISE_KEYS:
         table, name = key.split(".")
-        if name in sensor.params.get(table, {}):
+        if name in sensor.params.get(table, {}) and key not in unused:
             changes[key] = 0.0
     return sensor.with_params(changes)
 

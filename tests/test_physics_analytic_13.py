@@ -48,7 +48,7 @@ def test_structured_light_disparity_noise_is_constant_over_range_and_equals_the_
         sigma_d = sqrt(s0^2 - (1/8)^2 / 12 + q^2 / 12 + (a s)^2 + (c s^2)^2)   px,
         q = 1 / subpixel_steps px, s = window * g px, g the disparity gradient (px / px),
 
-    with the ``kinect_v1`` constants (s0 = 0.080 px, a = 0.100, c = 0.034 / px, window 9).
+    with the ``kinect_v1`` constants (s0 = 0.078 px, a = 0.043, c = 0.022 / px, window 9).
     The measured error is e_d = f b / z_measured - f b / z_true (px); unlike
     e_z ~ z^2 e_d / (f b) it is not a linearisation, so this is not circular.
 
@@ -59,10 +59,10 @@ def test_structured_light_disparity_noise_is_constant_over_range_and_equals_the_
     g = b tan(t) / z0) sweeps exactly 2 px across the W-px image, g = 2 / W: the true
     disparity's phase then runs uniformly over every rounding quantum (16 quanta at 1/8 px,
     2 at whole pixels) and twice over the pixel-locking period, while the slant term
-    a s = 0.1 * 9 * 2 / 256 = 0.007 px adds 0.4 % in quadrature. Distances 900, 2000, 3500 mm
+    a s = 0.043 * 9 * 2 / 256 = 0.003 px adds 0.1 % in quadrature. Distances 900, 2000, 3500 mm
     span the preset's 500-4000 mm working range (disparities 24, 11, 6 px at 256 px).
     ``steps = 1`` rounds to whole pixels: the law's q^2 / 12 = 1/12 px^2 term then dominates
-    (0.297 px against 0.080 px), which tests the quantisation term on its own.
+    (0.297 px against 0.078 px), which tests the quantisation term on its own.
     """
     W, H = 256, 192
     sensor = rs.load_sensor("kinect_v1").with_params({

@@ -22,7 +22,7 @@ def _sensor(**changes):
     ("structured_light.dot_sigma_px", 1e3, ["structured_light.dot_sigma_px", "at most"]),
     ("noise.speckle_contrast", 50.0, ["noise.speckle_contrast", "[0, 1]", "fully developed speckle"]),
     # dots 3 px apart at 0.1 per pixel: their disks would cover 0.71 of the pattern (placement jams at 0.547)
-    ("structured_light.dot_min_spacing_px", 3.0, ["structured_light.dot_min_spacing_px", "0.71", "0.45"]),
+    ("structured_light.dot_min_spacing_px", 3.0, ["structured_light.dot_min_spacing_px", "0.71", "0.4"]),
     ("noise.signal_contrast", 1.5, ["noise.signal_contrast", "[0, 1]"]),
 ])
 def test_unphysical_values_are_refused(key, value, words):

@@ -90,7 +90,8 @@ def cmd_dataset(args: argparse.Namespace) -> int:
                        scheduler=args.scheduler, progress=_progress(args))
     if run.replaced:  # as sweep says when its folder held another sweep
         print(f"rangesim: warning: {args.out} held {run.replaced} view(s) of another dataset (another scene, "
-              "sensor, seed, view count or format): they were removed, the folder now holds this one",
+              "sensor, seed, view count, format or rangesim version): they were removed, the folder now holds "
+              "this one",
               file=sys.stderr)
     for index, reason in run.empty:  # as `rangesim scan --keep-empty`: kept, and said once per view
         print(f"rangesim: warning: view {index}: {reason} (kept in the dataset)", file=sys.stderr)

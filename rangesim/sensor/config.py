@@ -145,7 +145,8 @@ UNUSED_BY_MODE: dict[str, tuple[str, ...]] = {
                  "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast", *_MATCHING_KEYS),
 }
 _WHY_UNUSED = {
-    "geometric": "the render and structured_light keys are the rendered and structured-light modes'",
+    "geometric": "the render and structured_light keys and the camera's full well and read noise are the "
+                 "rendered and structured-light modes' (its noise is the stripe model's)",
     "structured_light": "its noise comes from the IR image and the block matcher (the structured_light keys)",
     "rendered": "its range error comes from the rendered frames",
 }
@@ -406,9 +407,9 @@ def _validate_structured_light(params: dict[str, dict[str, Any]], source) -> Non
         raise RangesimError(f"structured_light.dot_density must be at most 1 dot per pixel, got {sl['dot_density']}",
                             source=source)
     _number(params, "structured_light", "dot_min_spacing_px", source, nonneg=True)
-    from rangesim.sensor.dot_pattern import MAX_SPACED_COVERAGE
+    from rangesim.sensor.dot_pattern import MAX_SPACED_COVERAGE, spaced_coverage
 
-    coverage = sl["dot_density"] * math.pi * sl["dot_min_spacing_px"] ** 2 / 4
+    coverage = spaced_coverage(sl["dot_density"], sl["dot_min_spacing_px"])
     if coverage > MAX_SPACED_COVERAGE:
         raise RangesimError(f"structured_light.dot_min_spacing_px = {sl['dot_min_spacing_px']:g} at dot_density "
                             f"{sl['dot_density']:g}: the dots' exclusion disks would cover {coverage:.2f} of the "

@@ -31,7 +31,8 @@ so the projector's field is that much wider than the camera's):
 7. Depth units: with ``depth_unit_mm`` u > 0 the depth is rounded to whole u (a Kinect's
    OpenNI frames hold uint16 millimetres), the point kept on its pixel's ray; ``sigma`` then
    holds the rounding's u^2 / 12 in quadrature. Near range, where a 1/8 px step is under 2 u
-   (kinect_v1 at 1 mm: nearer than 0.83 m), the levels then lie 1 or 2 units apart.
+   (kinect_v1 at 1 mm: nearer than 0.83 m), the levels then lie 1 or 2 units apart. The
+   rounding comes after the range test, so a depth may lie half a unit more beyond the range.
 
 So depth noise follows sigma_z = z^2 sigma_d / (f b), with sigma_d (px) growing with the
 surface's slant and holding the rounding to 1 / ``subpixel_steps`` px
