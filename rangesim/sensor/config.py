@@ -132,8 +132,9 @@ OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos", "reference"}
 #: keys a mode reads nothing from: the structured-light mode's noise comes from its IR image and
 #: block matcher (``structured_light.*``), not from the laser stripe's peak-error model, sweep or
 #: blur; the rendered mode's from its frames (photon counts, speckle), with ``noise.min_signal``
-#: and ``noise.speckle_contrast`` alone of the stripe model's keys. Set on a sensor of that mode
-#: they change nothing in its scans (:func:`unused_keys`)
+#: and ``noise.speckle_contrast`` alone of the stripe model's keys; the geometric mode's from the
+#: stripe model alone (no frames, no IR image: no render keys, no matching, no full well or read
+#: noise). Set on a sensor of that mode they change nothing in its scans (:func:`unused_keys`)
 _RENDER_KEYS = tuple(f"render.{k}" for k in SCHEMA["render"])
 _MATCHING_KEYS = tuple(f"structured_light.{k}" for k in SCHEMA["structured_light"])
 UNUSED_BY_MODE: dict[str, tuple[str, ...]] = {
