@@ -9,8 +9,10 @@ overrides), :func:`rangesim.twin.kinect.compare_kinect` fits the scene (table pl
 cylinders), scans it with the sensor at the recording's own focal length and compares the
 twin with the recording: valid-mask IoU (and that of a twin without physics, valid wherever
 the fitted scene is hit), the z^2 noise coefficient of both, the gaps between adjacent depth
-levels in units of the sensor's 1/8 px step, and the edge F1 of gradient and normal between
-twin and recording. Nothing is fitted to the frames but the scene itself; the preset's
+levels in units of the sensor's 1/8 px step, the edge F1 of gradient and normal between
+twin and recording, and the median over 24 px tiles of the scene's flat faces of the twin's
+noise about its own local plane over the recording's (:func:`rangesim.twin.kinect.local_plane_std`:
+no fitted scene's error in it). Nothing is fitted to the frames but the scene itself; the preset's
 settings were chosen on other data (see ``benchmarks/README.md`` for which).
 Prints the README's table and writes ``benchmarks/results_kinect_twin.json`` by default.
 """
@@ -50,6 +52,7 @@ def twin_row(frame: str, sensor, seed: int) -> dict:
         "gaps": {k: v["median"] for k, v in m["depth_level_gaps_in_steps"].items()},
         "by_depth": m["residual_by_depth"],
         "f1": {name: e["f1"] for name, e in m["edges"].items()},
+        "local_plane": m["local_plane_std_mm"],
     }
 
 
@@ -76,8 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     sensor = rs.load_sensor(args.sensor)
     rows = []
     print("| frame | objects fitted | IoU / no-physics | k recorded / twin (mm/m^2) "
-          "| depth-level gaps, steps, rec / twin | F1 gradient / normal |")
-    print("|---|---|---|---|---|---|")
+          "| depth-level gaps, steps, rec / twin | F1 gradient / normal | local-plane noise, twin / rec |")
+    print("|---|---|---|---|---|---|---|")
     for frame in FRAMES:
         r = twin_row(frame, sensor, args.seed)
         rows.append(r)
@@ -85,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {frame} | {objects} | {r['iou']:.3f} / {r['iou_no_physics']:.3f} "
               f"| {r['k']['recorded']:.2f} / {r['k']['twin']:.2f} "
               f"| {r['gaps']['recorded']:.2f} / {r['gaps']['twin']:.2f} "
-              f"| {r['f1']['gradient']:.2f} / {r['f1']['normal']:.2f} |", flush=True)
+              f"| {r['f1']['gradient']:.2f} / {r['f1']['normal']:.2f} "
+              f"| {r['local_plane']['ratio_median']:.2f} |", flush=True)
     tmp = args.json.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(_nan_to_null(rows), indent=1, allow_nan=False))
     tmp.replace(args.json)

@@ -23,7 +23,10 @@ each pixel labelled (0 no data, 1-9 table, 20-29 first object, 30-39 second, ...
    z^2 / (8 f b); edge F1 twin vs recorded; ``noise_std_ratio``, the robust std of the twin's
    residuals over the recording's on pixels both measured (as :mod:`rangesim.twin.comparison`);
    ``z_spread``, the robust std of each residual over the twin's predicted noise ``sigma``
-   (:mod:`rangesim.sensor.matching_noise`): 1 where the noise law holds.
+   (:mod:`rangesim.sensor.matching_noise`): 1 where the noise law holds; and
+   ``local_plane_std_mm`` (:func:`local_plane_std`), the noise about planes fitted to each
+   frame's own depths in small patches of the fitted scene's planar faces, which leaves the
+   fitted scene's error (a real table is not a plane) and the camera's calibration out.
 """
 from __future__ import annotations
 
@@ -40,10 +43,10 @@ from rangesim.core.conics import fit_circle
 from rangesim.core.constants import Status
 from rangesim.core.errors import RangesimError
 from rangesim.core.rangescan import RangeScan
-from rangesim.twin.realism import robust_std
+from rangesim.twin.realism import clipped_std, robust_std
 
-__all__ = ["fit_plane", "fit_upright_object", "scene_from_labels", "kinect_twin", "compare_kinect", "DEPTH_BINS",
-           "zero_depth_as_no_data"]
+__all__ = ["fit_plane", "fit_upright_object", "scene_from_labels", "kinect_twin", "compare_kinect", "local_plane_std",
+           "DEPTH_BINS", "zero_depth_as_no_data"]
 
 #: depth bins (mm) of the residual-vs-depth statistics
 DEPTH_BINS: tuple[tuple[float, float], ...] = ((500.0, 750.0), (750.0, 1000.0), (1000.0, 1500.0), (1500.0, 2500.0),
@@ -335,6 +338,59 @@ def _z2_coefficient(residual: np.ndarray, depth: np.ndarray) -> float:
     return robust_std(residual[ok] / (depth[ok] / 1000.0) ** 2)
 
 
+#: side of the patches of :func:`local_plane_std`, px
+PATCH_PX = 24
+
+
+def local_plane_std(depth: np.ndarray, z_true: np.ndarray, usable: np.ndarray, patch: int = PATCH_PX
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Depth noise about local planes: per ``patch`` x ``patch`` px tile, the std (clipped at 4
+    std) of ``depth`` about the plane fitted to it (1 / z = a + b u + c v, least squares).
+
+    Only tiles whose ``usable`` pixels (measured, both frames) cover 90 % of them and whose
+    true depth ``z_true`` is itself a plane there (within 0.05 mm: one face of the fitted scene,
+    no edge) count, so a tile's residual is the sensor's noise and quantisation, not the
+    shape's or the fit's error.
+
+    Returns
+    -------
+    std : (K,) float, mm, per counted tile
+    depth : (K,) float, mm, the tile's median true depth
+    """
+    h, w = depth.shape
+    v, u = np.mgrid[:patch, :patch]
+    design = np.column_stack([np.ones(patch * patch), u.ravel(), v.ravel()]).astype(np.float64)
+    stds, depths = [], []
+    for i in range(0, h - patch + 1, patch):
+        for j in range(0, w - patch + 1, patch):
+            ok = usable[i:i + patch, j:j + patch].ravel()
+            if ok.mean() < 0.9:
+                continue
+            zt = z_true[i:i + patch, j:j + patch].ravel().astype(np.float64)[ok]
+            if np.abs(zt - _plane_through(design[ok], zt)).max() > 0.05:
+                continue  # an edge or a curved face crosses the tile
+            z = depth[i:i + patch, j:j + patch].ravel().astype(np.float64)[ok]
+            stds.append(clipped_std(z - _plane_through(design[ok], z)))
+            depths.append(float(np.median(zt)))
+    return np.asarray(stds), np.asarray(depths)
+
+
+def _plane_through(design: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The depths of the plane fitted to depths ``z`` at pixels (1, u, v) ``design``: a plane's
+    inverse depth is linear in the pixel (n . X = d with X = z (u', v', 1)), its depth is not."""
+    coef, *_ = np.linalg.lstsq(design, 1.0 / z, rcond=None)
+    return 1.0 / (design @ coef)
+
+
+def _local_plane_binned(stds: np.ndarray, depths: np.ndarray) -> dict[str, dict[str, float]]:
+    out = {}
+    for lo, hi in DEPTH_BINS:
+        sel = (depths >= lo) & (depths < hi)
+        out[f"{lo:.0f}-{hi:.0f}"] = {"median_std": float(np.median(stds[sel])) if sel.any() else float("nan"),
+                                     "tiles": int(np.count_nonzero(sel))}
+    return out
+
+
 def _level_gaps_in_steps(depth: np.ndarray, fb: float) -> dict[str, float]:
     """Gaps between adjacent distinct depth levels, in units of the 1/8 px step z^2 / (8 f b)."""
     z = np.unique(np.round(depth[np.isfinite(depth)].astype(np.float64), 4))
@@ -375,6 +431,13 @@ def compare_kinect(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinec
         "zero_depth_no_data": zeros,
         "edges": edge_agreement(recorded, twin_scan, detectors, edge_maps=edge_maps),
     }
+    # the noise about local planes of the scene's flat faces: each frame's own, no fit's error
+    rec_local, local_z = local_plane_std(recorded.depth, z_true, common)
+    twin_local, _ = local_plane_std(twin_scan.depth, z_true, common)
+    metrics["local_plane_std_mm"] = {"recorded": _local_plane_binned(rec_local, local_z),
+                                     "twin": _local_plane_binned(twin_local, local_z),
+                                     "ratio_median": float(np.median(twin_local / rec_local))
+                                     if len(rec_local) and np.all(rec_local > 0) else float("nan")}
     # robust std of the twin's residuals over the recording's, as rangesim.twin.comparison reports it
     rec_std, twin_std = robust_std(rec_res[common]), robust_std(twin_res[common])
     metrics["noise_std_ratio"] = float(twin_std / rec_std) if rec_std > 0 else float("nan")
