@@ -434,10 +434,11 @@ def compare_kinect(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinec
     # the noise about local planes of the scene's flat faces: each frame's own, no fit's error
     rec_local, local_z = local_plane_std(recorded.depth, z_true, common)
     twin_local, _ = local_plane_std(twin_scan.depth, z_true, common)
+    both = rec_local > 0  # (a tile of one recorded level has no spread to compare with)
     metrics["local_plane_std_mm"] = {"recorded": _local_plane_binned(rec_local, local_z),
                                      "twin": _local_plane_binned(twin_local, local_z),
-                                     "ratio_median": float(np.median(twin_local / rec_local))
-                                     if len(rec_local) and np.all(rec_local > 0) else float("nan")}
+                                     "ratio_median": float(np.median(twin_local[both] / rec_local[both]))
+                                     if both.any() else float("nan")}
     # robust std of the twin's residuals over the recording's, as rangesim.twin.comparison reports it
     rec_std, twin_std = robust_std(rec_res[common]), robust_std(twin_res[common])
     metrics["noise_std_ratio"] = float(twin_std / rec_std) if rec_std > 0 else float("nan")
