@@ -182,18 +182,21 @@ def _check_parts_in_range(tasks: list[SweepTask], source: Any) -> None:
     from rangesim.sensor import load_sensor
 
     seen = set()
-    scenes: dict[str, Any] = {}
+    scenes: dict[str, Any] = {}  # scene key -> the scene, None where it cannot be built
     errors: list[RangesimError] = []
-    for task in tasks:
-        p = task.payload
-        scene_key = json.dumps([p["scene_path"], p["objects"]], sort_keys=True, default=str)
-        if scene_key not in scenes:
+
+    def scene_of(p: dict) -> Any:
+        key = json.dumps([p["scene_path"], p["objects"]], sort_keys=True, default=str)
+        if key not in scenes:
             try:
-                scenes[scene_key] = load_task_scene(p["scene_path"], p["objects"])
+                scenes[key] = load_task_scene(p["scene_path"], p["objects"])
             except RangesimError as exc:
-                scenes[scene_key] = None
+                scenes[key] = None
                 errors.append(exc)
-    if errors and all(scene is None for scene in scenes.values()):
+        return scenes[key]
+
+    # one scene that builds is enough to know the overrides' keys are right
+    if tasks and not any(scene_of(task.payload) is not None for task in tasks):
         raise RangesimError(f"no task's scene can be built: {errors[0]}", source=source)
     for task in tasks:
         p = task.payload
@@ -205,7 +208,7 @@ def _check_parts_in_range(tasks: list[SweepTask], source: Any) -> None:
         if key in seen:
             continue
         seen.add(key)
-        scene = scenes[json.dumps([p["scene_path"], p["objects"]], sort_keys=True, default=str)]
+        scene = scene_of(p)
         if scene is None:
             continue  # a bad override value fails its own tasks, named, when they run
         try:

@@ -3,12 +3,12 @@
 The projector casts a fixed pattern of laser dots, fixed per device (``pattern_seed``): dot
 centres drawn uniformly over the projector image, ``dot_density`` dots per projector pixel,
 each a Gaussian spot of std ``dot_sigma_px`` and peak 1. With ``min_spacing_px`` D > 0 no two
-centres lie closer than D (random sequential placement: uniform draws, each kept unless it
-falls within D of one kept before): a designed pattern spreads its dots evenly, while
-independent (Poisson) dots cluster. That matters on slanted surfaces: a block matcher
-returns the disparity where its window's texture is centred, off the pixel by about
-1 / sqrt(12 density) px for Poisson dots (0.9 px at 0.1 per pixel), 0.55 px with D = 2, and
-the disparity error there is that offset times the surface's disparity gradient. The pattern is rendered on a grid
+centres lie closer than D (random sequential placement, :func:`spaced_dots`): a designed
+pattern spreads its dots evenly, while independent (Poisson) dots cluster. That matters on
+slanted surfaces: a block matcher returns the disparity where its window's texture is
+centred, off the pixel by about 1 / sqrt(12 density) px for Poisson dots (0.9 px at 0.1 per
+pixel), 0.55 px with D = 2, and the disparity error there is that offset times the surface's
+disparity gradient. The pattern is rendered on a grid
 ``OVERSAMPLE`` times finer than the projector's pixels, so sampling it at the sub-pixel
 positions where scene points project is a smooth bilinear look-up.
 
