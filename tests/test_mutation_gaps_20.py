@@ -1,4 +1,4 @@
-"""Rules the nineteenth session's mutation audit found untested (items M11 and M20): each test
+"""Rules the nineteenth session's mutation audit found untested (items M11, M20 and M28): each test
 here fails when its rule is changed by hand."""
 from __future__ import annotations
 
@@ -68,3 +68,25 @@ def test_a_ramp_narrower_than_a_pixel_has_no_creases(width, creases):
     else:
         assert convex == 0 and concave == 0
         assert (truth == EdgeLabel.JUMP).sum() > 300  # the sheet's outline is there
+
+
+# -- M28: a lattice needs (nearly) all of its resolved gaps -------------------------------------
+def test_a_frame_partly_on_a_lattice_is_not_block_matched():
+    """The disparity-lattice rule asks that at least 70 % of the level gaps deeper than where the
+    lattice's step reaches two rounding units be resolved (two units or more): a block matcher
+    leaves every such gap resolved, a fixed-unit quantiser mostly one unit. Here rows of a Kinect
+    lattice (8 f b = 344 k px mm, 700-1500 mm, rounded to whole mm) are accepted alone; beside a
+    region holding every whole millimetre over 1100-1500 mm (a frame partly interpolated, or two
+    sensors' depths merged) 22 % of the deeper gaps are resolved and the frame is refused,
+    though the resolved gaps left (700-1100 mm) still follow q z^2."""
+    from rangesim.core.quantisation import disparity_lattice
+
+    fb8 = 344000.0
+    lattice = np.sort(np.round(fb8 / np.arange(fb8 / 1500.0, fb8 / 700.0)))
+    alone = disparity_lattice(np.repeat(lattice[:, None], 40, axis=1))
+    assert alone is not None and alone["resolved_share"] == 1.0
+    every_mm = np.arange(1100.0, 1500.0)
+    mixed = np.full((max(lattice.size, every_mm.size), 80), np.nan)
+    mixed[:lattice.size, :40] = lattice[:, None]
+    mixed[:every_mm.size, 40:] = every_mm[:, None]
+    assert disparity_lattice(mixed) is None
