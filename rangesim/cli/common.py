@@ -288,3 +288,20 @@ def check_conf(scan_path: Path | str, conf: str | None) -> None:
         raise RangesimError("no such file", source=scan_path)
     if not Path(conf).is_file():
         raise RangesimError("no such --conf file", source=conf)
+
+
+def is_point_list(scan) -> bool:
+    """True for a scan read from an unorganized point list (a point .ply: one row of points,
+    its unmeasured pixels absent), not a grid of rows and columns."""
+    return min(scan.shape) == 1 or scan.meta.get("organized") is False
+
+
+def require_grid(scan, path: Path | str, needs: str = "the edge detectors need", operators: bool = True) -> None:
+    """Refuse a point list where a command needs an organized range image (rows and columns),
+    and, for the edge detectors (``operators``), an image under 3 x 3 px."""
+    h, w = scan.shape
+    if is_point_list(scan):
+        raise RangesimError(f"not an organized range image ({w:,} x {h:,} points): {needs} a "
+                            "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
+    if operators and min(h, w) < 3:  # their 3 x 3 operators have no interior pixel
+        raise RangesimError(f"a {w} x {h} px image is too small for the edge detectors (at least 3 x 3)", source=path)

@@ -111,7 +111,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     check_conf(path, args.conf)
     check_out_files(out, OUT_FILES, [path, args.conf, args.mesh, args.sensor, args.recorded_sensor])
     scan, labels = load_scan_with_labels(path, args.conf, sensor=args.recorded_sensor)
-    from rangesim.cli.edge_commands import describe_sensor, require_grid
+    from rangesim.cli.common import require_grid
+    from rangesim.cli.edge_commands import describe_sensor
 
     require_grid(scan, path)
     if args.recorded_sensor is not None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangesim.cli.common import check_outputs, check_suffix, positive, writing
+from rangesim.cli.common import check_outputs, check_suffix, positive, require_grid, writing
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
@@ -21,6 +21,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
     from rangesim.core.errors import RangesimError
 
     for scan, path in ((a, args.scan_a), (b, args.scan_b)):
+        require_grid(scan, path, needs="diff compares pixel by pixel: it needs", operators=False)
         if scan.valid.size == 0:
             raise RangesimError(f"empty scan ({scan.shape[1]} x {scan.shape[0]} px): nothing to compare", source=path)
     if a.shape != b.shape:
@@ -50,7 +51,7 @@ def register(sub) -> None:
     p = sub.add_parser("diff", help="compare two scans of one view (depth difference map)",
                        description="Show two scans of the same view side by side with the map of "
                        "their depth difference (B - A), e.g. the geometric and rendered modes.")
-    p.add_argument("scan_a", metavar="SCAN_A", help="scan file (.exr, .npz)")
+    p.add_argument("scan_a", metavar="SCAN_A", help="scan file (.exr, .npz, a range-grid .ply, an organized .pcd)")
     p.add_argument("scan_b", metavar="SCAN_B", help="scan file of the same view and size")
     p.add_argument("--out", required=True, metavar="PNG", help="picture to write (.png)")
     p.add_argument("--labels", nargs=2, metavar=("A", "B"), help="panel titles (default: file stems)")

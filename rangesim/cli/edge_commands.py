@@ -14,23 +14,13 @@ from rangesim.cli.common import (
     json_safe,
     make_out_dir,
     positive,
+    require_grid,
     scene_files,
     write_json,
     write_together,
 )
 from rangesim.core.constants import MAX_TOLERANCE_PX
 from rangesim.core.errors import RangesimError
-
-
-def require_grid(scan, path: Path) -> None:
-    """Edge detectors need an organized range image, not a list of points."""
-    h, w = scan.shape
-    if min(h, w) == 1 or scan.meta.get("organized") is False:
-        raise RangesimError(f"not an organized range image ({w:,} x {h:,} points): the edge detectors need a "
-                            "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
-    if min(h, w) < 3:  # their 3 x 3 operators have no interior pixel
-        raise RangesimError(f"a {w} x {h} px image is too small for the edge detectors (at least 3 x 3)", source=path)
-
 
 #: ``--sensor`` of the commands that read a recording (detect, features)
 RECORDED_SENSOR_HELP = ("what recorded a .pcd frame (a preset such as kinect_v1, a sensor TOML, or auto: kinect_v1 "
@@ -66,16 +56,38 @@ def sensor_summary(scan, given) -> dict:
     return summary
 
 
-def _another_scans_map(path: Path, scan_id: str) -> bool:
-    """Whether ``path`` is an edge map ``rangesim detect`` wrote for another scan (a file that is
-    no such map, the input scan included, is never taken for one)."""
+def _map_scan(path: Path) -> str | None:
+    """The scan an edge map that ``rangesim detect`` wrote at ``path`` belongs to, or None (a file
+    that is no such map, the input scan included, is never taken for one)."""
     if not path.is_file():
-        return False
+        return None
     try:
         with np.load(path) as npz:
-            return {"method", "mask", "scan"} <= set(npz.files) and str(npz["scan"]) != scan_id
+            return str(npz["scan"]) if {"method", "mask", "scan"} <= set(npz.files) else None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile):  # not an NPZ (empty, broken): not ours
-        return False
+        return None
+
+
+def _another_scans_map(path: Path, scan_id: str) -> bool:
+    """Whether ``path`` is an edge map ``rangesim detect`` wrote for another scan."""
+    return _map_scan(path) not in (None, scan_id)
+
+
+def _earlier_scores(out: Path, scan_id: str, others: set[str], truth, args, sensor) -> dict[str, dict]:
+    """The scores in ``out/scores.json`` of the methods in ``others`` that an earlier ``detect``
+    of the same scan wrote with the same truth and settings, and whose maps are still there:
+    kept beside this run's (``--method gradient`` then ``--method normal`` into one folder)."""
+    try:
+        earlier = json.loads((out / "scores.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    same = (truth is not None and isinstance(earlier, dict) and isinstance(earlier.get("methods"), dict)
+            and str(Path(str(earlier.get("scan", ""))).resolve()) == scan_id
+            and earlier.get("truth") == truth.kind and earlier.get("tolerance_px") == args.tolerance
+            and earlier.get("crease_deg") == args.crease_deg and earlier.get("sensor") == json_safe(sensor))
+    if not same:
+        return {}
+    return {m: r for m, r in earlier["methods"].items() if m in others and _map_scan(out / f"{m}_edges.npz") == scan_id}
 
 
 def cmd_detect(args: argparse.Namespace) -> int:
@@ -146,6 +158,13 @@ def cmd_detect(args: argparse.Namespace) -> int:
     stale = [old for other in sorted(set(DETECTORS) - set(methods))
              if _another_scans_map(out / f"{other}_edges.npz", scan_id)
              for old in (out / f"{other}_edges.npz", out / f"{other}.png")]
+    sensor = sensor_summary(scan, args.sensor) if args.sensor is not None else None
+    kept = _earlier_scores(out, scan_id, set(DETECTORS) - set(methods), truth, args, sensor)
+    # this scan's maps of other methods whose scores cannot be kept (other settings): removed,
+    # so that the folder's maps and scores.json are one run's
+    stale += [old for other in sorted(set(DETECTORS) - set(methods) - set(kept))
+              if _map_scan(out / f"{other}_edges.npz") == scan_id
+              for old in (out / f"{other}_edges.npz", out / f"{other}.png")]
     writes = []
     for method, result in results.items():
         edge_map = result["edge_map"]
@@ -164,10 +183,10 @@ def cmd_detect(args: argparse.Namespace) -> int:
             "scan": str(path), "truth": truth.kind, "tolerance_px": args.tolerance, "crease_deg": args.crease_deg,
             # every prediction counted: rs.evaluate.score_edges(..., ignore_data_boundary=False) gives these
             "ignore_data_boundary": False,
-            "methods": {m: {"seconds": r["seconds"], **r["scores"]} for m, r in results.items()},
+            "methods": {**kept, **{m: {"seconds": r["seconds"], **r["scores"]} for m, r in results.items()}},
         }
-        if args.sensor is not None:
-            report["sensor"] = sensor_summary(scan, args.sensor)
+        if sensor is not None:
+            report["sensor"] = sensor
         writes.append((out / "ground_truth.png", lambda tmp: save_edge_overlay(
             scan, truth.edge_map(), tmp, title=f"ground truth ({truth.kind})")))
         writes.append((out / "scores.json", lambda tmp: write_json(report, tmp)))  # strict JSON: NaN as null
@@ -190,6 +209,8 @@ def cmd_detect(args: argparse.Namespace) -> int:
             s = r["scores"]
             line += "".join(f"{s[k]:>7.3f}" if s[k] == s[k] else f"{'-':>7}" for k in ("precision", "recall", "f1", "fom"))
         print(line)
+    if kept:
+        print(f"scores.json keeps {', '.join(sorted(kept))} from an earlier run on this scan (same truth and settings)")
     print(f"wrote {out}/")
     return 0
 

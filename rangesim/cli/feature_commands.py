@@ -46,7 +46,8 @@ def cmd_features(args: argparse.Namespace) -> int:
         from rangesim.evaluate.runs import load_scan_with_labels
 
         scan = load_scan_with_labels(args.scan, None, sensor=args.sensor)[0]
-    from rangesim.cli.edge_commands import describe_sensor, require_grid
+    from rangesim.cli.common import require_grid
+    from rangesim.cli.edge_commands import describe_sensor
 
     require_grid(scan, Path(args.scan))
     if not np.any(scan.valid & ~np.isnan(scan.depth)):  # (an infinite one: the detectors name it)

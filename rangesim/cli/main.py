@@ -36,11 +36,19 @@ from typing import Any, NoReturn
 import numpy as np
 
 from rangesim import __version__
-from rangesim.cli.common import MESH_UNITS, check_outputs, check_suffix, load_scene_arg, scene_files, write_together
+from rangesim.cli.common import (
+    MESH_UNITS,
+    check_outputs,
+    check_suffix,
+    is_point_list,
+    load_scene_arg,
+    scene_files,
+    write_together,
+)
 from rangesim.core.constants import Status, status_name
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import check_pose
-from rangesim.core.memory import check_memory
+from rangesim.core.memory import check_memory, format_bytes
 from rangesim.core.rangescan import RangeScan
 from rangesim.core.signals import signal_handler
 from rangesim.io import load_scan, save_scan
@@ -252,9 +260,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
                             "mode = \"rendered\" in the sensor file)", source=sensor.source)
     # the scan runs in bands when it must, but its result and the file's copy of it must fit
     pixels = float(sensor.width) * sensor.height
-    check_memory(BASE_BYTES + pixels * (RESULT_BYTES_PER_PIXEL + WRITE_BYTES_PER_PIXEL),
+    per_pixel = pixels * (RESULT_BYTES_PER_PIXEL + WRITE_BYTES_PER_PIXEL)
+    check_memory(BASE_BYTES + per_pixel,
                  f"camera.width x camera.height = {sensor.width:,} x {sensor.height:,} px "
-                 f"(the scan and its {Path(args.out).suffix or 'output'} file)", source=sensor.source)
+                 f"(the scan and its {Path(args.out).suffix or 'output'} file: {format_bytes(per_pixel)}, "
+                 f"on the renderer's fixed {format_bytes(BASE_BYTES)})", source=sensor.source)
     scene = load_scene_arg(args.scene, args.units)
     check_outputs(outputs, scene_files(scene))  # the meshes a scene file names
     with warnings.catch_warnings(record=True) as caught:
@@ -316,10 +326,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     h, w = result.shape
     total = h * w
     sensor = result.meta.get("sensor") or {}
-    lines = [
-        f"{args.scan_file}: {w} x {h} px (W x H), sensor {sensor.get('name', 'unknown')}, "
-        f"seed {result.meta.get('seed', 'unknown')}"
-    ]
+    # a point list (a point .ply) holds its measured points only: no grid, no unmeasured pixels
+    size = (f"{total:,} points (a point list, not an organized range image: unmeasured pixels are not in it)"
+            if is_point_list(result) else f"{w:,} x {h:,} px (W x H)")
+    lines = [f"{args.scan_file}: {size}, sensor {sensor.get('name', 'unknown')}, seed {result.meta.get('seed', 'unknown')}"]
     counts = _status_counts(result)
     label = max(len(name) for name, _ in counts)
     digits = max(len(f"{n:,}") for _, n in counts)
