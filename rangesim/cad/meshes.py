@@ -38,6 +38,10 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
         raise RangesimError("is a directory, not a mesh file", source=path)
     if not path.is_file():
         raise RangesimError("no such mesh file", source=path)
+    if path.suffix.lower().lstrip(".") not in trimesh.available_formats():
+        # (trimesh would answer NotImplementedError: file_type 'pcd' not supported)
+        raise RangesimError(f"unknown mesh file type {path.suffix!r}; use a mesh ({', '.join(MESH_SUFFIXES)})",
+                            source=path)
     cache = mesh_cache_dir()
     if cache is not None:
         return _cached_load(path, cache)
@@ -105,16 +109,19 @@ def _read_and_validate(path: Path) -> trimesh.Trimesh:
         loaded = trimesh.load(path, process=False)
     except Exception as exc:
         problem = diagnose_mesh_file(path, full=True)
-        raise RangesimError(problem or f"cannot read mesh ({type(exc).__name__}: {exc})", source=path) from exc
+        # the library's own words, without its exception's class name
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RangesimError(problem or f"cannot read mesh: {reason}", source=path) from exc
     if isinstance(loaded, trimesh.Scene):
         geometries = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
         if not geometries:  # trimesh's answer to a truncated, empty or 0-triangle STL
             raise RangesimError(diagnose_mesh_file(path, full=True) or "file holds no triangle mesh", source=path)
         loaded = trimesh.util.concatenate(geometries)
     if not isinstance(loaded, trimesh.Trimesh):
-        raise RangesimError(
-            f"file holds a {type(loaded).__name__}, not a triangle mesh", source=path
-        )
+        n = len(getattr(loaded, "vertices", ()))
+        what = (f"{n:,} vertices and no faces (a point cloud, or a mesh file cut short before its faces)" if n
+                else f"a {type(loaded).__name__}")
+        raise RangesimError(f"file holds {what}, not a triangle mesh", source=path)
     # a truncated OFF or OBJ, or an OBJ index 0, reads without an error as a wrong mesh
     problem = check_text_mesh(path, len(loaded.vertices), len(loaded.faces))
     if problem is not None:

@@ -53,6 +53,14 @@ def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
 POSE_ORTHONORMAL_TOL = 1e-3
 
 
+def _is_number(v: Any) -> bool:
+    try:
+        float(v)
+    except (TypeError, ValueError):
+        return False
+    return not isinstance(v, str)
+
+
 def check_pose(pose: Any, source: Any = None) -> np.ndarray:
     """``pose`` as a float64 (4, 4) rigid camera-to-world transform, or a one-line refusal.
 
@@ -73,13 +81,21 @@ def check_pose(pose: Any, source: Any = None) -> np.ndarray:
     >>> check_pose(np.eye(4)).shape
     (4, 4)
     """
+    given = pose
     try:
         pose = np.asarray(pose, dtype=np.float64)
     except (TypeError, ValueError):
-        pose = np.empty(0)
+        raw = np.asarray(pose, dtype=object)
+        if raw.shape == (4, 4):  # the right shape, an entry that is no number: name it
+            bad = next((i, j, v) for (i, j), v in np.ndenumerate(raw) if not _is_number(v))
+            raise RangesimError(f"pose entries must be numbers, got {bad[2]!r} at row {bad[0]}, column {bad[1]}",
+                                source=source) from None
+        what = f"a {type(pose).__name__}" if raw.ndim == 0 else f"{raw.shape[0]} rows of unequal or non-numeric entries"
+        raise RangesimError(f"pose must be a finite 4x4 camera-to-world matrix of numbers, got {what}",
+                            source=source) from None
     if pose.shape != (4, 4):
-        raise RangesimError(f"pose must be a finite 4x4 camera-to-world matrix, got shape {pose.shape}",
-                            source=source)
+        got = f"a {type(given).__name__}" if pose.ndim == 0 else f"shape {pose.shape}"
+        raise RangesimError(f"pose must be a finite 4x4 camera-to-world matrix, got {got}", source=source)
     if not np.all(np.isfinite(pose)):
         raise RangesimError("pose must be a finite 4x4 camera-to-world matrix (it holds NaN or infinity)",
                             source=source)

@@ -172,7 +172,7 @@ def load_task_scene(path: str | Path, overrides: dict[str, dict[str, Any]] | Non
     """
     from rangesim.scene import load_scene
 
-    path = Path(path).resolve()
+    given, path = Path(path), Path(path).resolve()
     overrides = overrides or {}
     # keyed on the scene file and every mesh it names (path, mtime, size): a mesh changed under
     # an unchanged scene file gets new task keys (scene_digest), and must not be served its old
@@ -182,7 +182,12 @@ def load_task_scene(path: str | Path, overrides: dict[str, dict[str, Any]] | Non
         _CACHE.move_to_end(cache_key)
         return _CACHE[cache_key]
     if not overrides:
-        scene = load_scene(path)
+        try:
+            scene = load_scene(path)
+        except RangesimError as exc:  # named as the user gave it (resolved only for the cache)
+            if str(given) == str(path) or str(path) not in str(exc):
+                raise
+            raise RangesimError(str(exc).replace(str(path), str(given))) from None
     else:
         data = apply_object_overrides(path, overrides)
         with tempfile.TemporaryDirectory(prefix="rangesim-scene-") as tmp:

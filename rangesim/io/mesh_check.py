@@ -31,6 +31,8 @@ _PLURAL = {"vertex": "vertices"}
 def _stl(raw: bytes, size: int) -> str | None:
     head = raw[:512].lstrip().lower()
     if head.startswith(b"solid") and (b"facet" in raw[:_PEEK].lower() or size < 84):
+        if b"facet" in raw[:_PEEK].lower() and not raw.rstrip().lower().rsplit(b"\n", 1)[-1].lstrip().startswith(b"endsolid"):
+            return "truncated ASCII STL: it ends inside its facets (no closing 'endsolid' line)"
         return None  # ASCII: trimesh's reader says what is wrong
     if size < 84:
         return f"truncated binary STL: {size:,} bytes, shorter than the 84-byte header"

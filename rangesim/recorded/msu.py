@@ -64,11 +64,16 @@ def read_msu(path: str | Path, *, units: str | None = None, conf: str | Path | N
     if units is not None:
         unit_scale(units, path)  # a bad unit before the file is read
     raw = read_bytes(path)
+    if Path(path).name.lower().endswith(".gz") and not raw.startswith(GZIP_MAGIC):
+        raise RangesimError("not a gzip file (the name ends .gz, the content has no gzip signature)", path)
     if raw.startswith(GZIP_MAGIC):
         try:
             raw = gzip.decompress(raw)
         except (OSError, EOFError, zlib.error) as exc:
             raise RangesimError(f"corrupt gzip data ({exc})", path) from None
+    head = raw[:4096]
+    if b"\0" in head or sum(b < 9 or 13 < b < 32 for b in head) > 0.05 * len(head):
+        raise RangesimError("not an MSU range image (binary data where its text should be)", path)
     parts = raw.split(b"\n", HEADER_LINES)
     if len(parts) <= HEADER_LINES:
         raise RangesimError(f"truncated: fewer than {HEADER_LINES} header lines", path)

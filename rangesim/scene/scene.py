@@ -394,7 +394,12 @@ def _object_from_table(t: dict, k: int, scene_mm: float, path: Path) -> SceneObj
                             source=path)
     if "mesh" in t:
         mesh_path = (path.parent / expand_data_path(str(t["mesh"]))).resolve()
-        mesh, origin = load_mesh(mesh_path), str(mesh_path)
+        try:
+            mesh, origin = load_mesh(mesh_path), str(mesh_path)
+        except RangesimError as exc:  # named as the scene names it, in the scene that does
+            reason = str(exc).removeprefix(f"{exc.source}: ")
+            raise RangesimError(f"{where} ({name}): mesh = {str(t['mesh'])!r} -> {mesh_path}: {reason}",
+                                source=path) from None
     elif "model" in t:
         built = _build_model(t, where, path)
         mesh, origin = built.mesh, f"model:{t['model']}"
