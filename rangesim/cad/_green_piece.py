@@ -71,7 +71,7 @@ def green_piece(**params) -> BuiltPart:
     ----------
     **params
         Any key of :data:`DEFAULTS` (millimetres, degrees): ``length``, ``width``,
-        ``thickness``; ``holes`` [(x, y, r)]; ``dent`` (x, y, sphere radius, depth);
+        ``thickness``; ``holes`` [(x, y, r)]; ``dent`` (x, y, sphere radius, depth), or ``[]`` / False for none;
         ``scratches`` [(x, y, angle_deg, length, width, depth)]; ``threads``
         [(x, y, major radius, pitch)]; ``segments``; ``divisions_per_turn``.
 
@@ -111,13 +111,15 @@ def green_piece(**params) -> BuiltPart:
                                              np.array([0, 0, 1.0]), r, 90.0, True, name))
     step1 = difference("plate_and_holes", plate, *holes, function="plate")
 
-    x, y, radius, depth = (float(v) for v in p["dent"])
-    sphere = manifold3d.Manifold.sphere(radius, 4 * n_seg).translate((x, y, T + radius - depth))
-    dent = solid("dent", "dent", sphere, x=x, y=y, sphere_radius=radius, depth=depth)
-    rim = math.sqrt(radius**2 - (radius - depth) ** 2)
-    features.circles.append(Circle3D("dent_rim", np.array([x, y, T]), np.array([0, 0, 1.0]), rim,
-                                     math.degrees(math.asin(rim / radius)), True, "dent"))
-    step2 = difference("with_dent", step1, dent, function="plate")
+    step2 = step1
+    if p["dent"] is not None:  # (dent = [] or false: a plate without it)
+        x, y, radius, depth = (float(v) for v in p["dent"])
+        sphere = manifold3d.Manifold.sphere(radius, 4 * n_seg).translate((x, y, T + radius - depth))
+        dent = solid("dent", "dent", sphere, x=x, y=y, sphere_radius=radius, depth=depth)
+        rim = math.sqrt(radius**2 - (radius - depth) ** 2)
+        features.circles.append(Circle3D("dent_rim", np.array([x, y, T]), np.array([0, 0, 1.0]), rim,
+                                         math.degrees(math.asin(rim / radius)), True, "dent"))
+        step2 = difference("with_dent", step1, dent, function="plate")
 
     scratches = []
     for k, (x, y, angle, length, width, depth) in enumerate(p["scratches"], start=1):
@@ -153,15 +155,17 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     for k, (x, y, r) in enumerate(holes, start=1):
         positive(m, **{f"holes[{k - 1}] radius": r})
         within(m, f"holes[{k - 1}]", x, y, r, L / 2, W / 2)
-    (dent,) = tuples(m, "dent", p["dent"], ("x", "y", "sphere radius", "depth"), many=False)
-    x, y, radius, depth = dent
-    positive(m, **{"dent sphere radius": radius, "dent depth": depth})
-    if depth >= min(2 * radius, T):
-        raise RangesimError(f"{m}: dent depth {depth:g} mm must be less than the sphere's diameter and the "
-                            f"thickness {T:g} mm")
-    # its widest section below the top: the rim, or the sphere's equator when deeper than its radius
-    dent_reach = radius if depth > radius else math.sqrt(radius**2 - (radius - depth) ** 2)
-    within(m, "dent", x, y, dent_reach, L / 2, W / 2)
+    dent = None
+    if p["dent"] is not False and p["dent"] is not None and not (isinstance(p["dent"], (list, tuple)) and not p["dent"]):
+        (dent,) = tuples(m, "dent", p["dent"], ("x", "y", "sphere radius", "depth"), many=False)
+        x, y, radius, depth = dent
+        positive(m, **{"dent sphere radius": radius, "dent depth": depth})
+        if depth >= min(2 * radius, T):
+            raise RangesimError(f"{m}: dent depth {depth:g} mm must be less than the sphere's diameter and the "
+                                f"thickness {T:g} mm")
+        # its widest section below the top: the rim, or the sphere's equator when deeper than its radius
+        dent_reach = radius if depth > radius else math.sqrt(radius**2 - (radius - depth) ** 2)
+        within(m, "dent", x, y, dent_reach, L / 2, W / 2)
     scratches = tuples(m, "scratches", p["scratches"], ("x", "y", "angle_deg", "length", "width", "depth"))
     for k, (x, y, angle, length, width, depth) in enumerate(scratches, start=1):
         positive(m, **{f"scratches[{k - 1}] length": length, f"scratches[{k - 1}] width": width,
@@ -189,7 +193,8 @@ def _checked_layout(p: dict, L: float, W: float, T: float) -> dict:
     # a hole, thread, dent or scratch overlapping another cuts away (or swallows) its rims
     footprints = [(f"holes[{k}]", _layout.circle(x, y, r)) for k, (x, y, r) in enumerate(holes)]
     footprints += [(f"threads[{k}]", _layout.circle(x, y, r)) for k, (x, y, r, _) in enumerate(threads)]
-    footprints.append(("dent", _layout.circle(dent[0], dent[1], dent_reach)))
+    if dent is not None:
+        footprints.append(("dent", _layout.circle(dent[0], dent[1], dent_reach)))
     for k, (x, y, angle, length, width, _) in enumerate(scratches):
         a = math.radians(angle)
         along, across = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)]) * width / 2

@@ -82,6 +82,11 @@ def visible_surface_points(
     SurfacePoints
         The visible samples, in sampling order.
     """
+    eye = np.asarray(viewpoint, dtype=np.float64).reshape(-1)
+    if eye.shape == (3,) and np.all(np.isfinite(eye)) and mesh.is_watertight and bool(mesh.contains(eye[None])[0]):
+        # (every point would face away or be hidden: an empty view that looks like a result)
+        raise RangesimError(f"the viewpoint ({', '.join(f'{c:g}' for c in eye)}) mm lies inside the part: "
+                            "nothing is seen from there")
     samples = surface_points(mesh, resolution, smooth=smooth, ends=ends)
     return visible_points(samples, mesh, viewpoint, tolerance=tolerance)
 

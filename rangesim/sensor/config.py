@@ -503,7 +503,17 @@ def _validate_render(params: dict[str, dict[str, Any]], source) -> None:
 def preset_dirs() -> list[Path]:
     """Folders searched for preset names: ``$RANGESIM_SENSORS`` first, then ``sensors/``."""
     dirs = [Path(p) for p in os.environ.get("RANGESIM_SENSORS", "").split(os.pathsep) if p]
+    for d in dirs:
+        if not d.is_dir() and str(d) not in _WARNED_DIRS:  # a misspelt folder: its presets silently unfound
+            import warnings
+
+            _WARNED_DIRS.add(str(d))
+            warnings.warn(f"RANGESIM_SENSORS: {d}: no such folder (its presets are not searched)", stacklevel=2)
     return dirs + [PRESET_DIR]
+
+
+#: the missing $RANGESIM_SENSORS folders warned about (once per process)
+_WARNED_DIRS: set[str] = set()
 
 
 def preset_names() -> list[str]:
