@@ -172,84 +172,180 @@ def _ellipse_vector(M, a1):  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT)
+def _real_ellipse_vector9(A00, A01, A02, A10, A11, A12, A20, A21, A22, tr, c1, det, p, q,
+                          a1):  # pragma: no cover - compiled
+    """:func:`_real_ellipse_vector` with the (3, 3) ``A`` as nine scalars (no array to
+    allocate per fit; the same arithmetic)."""
+    r = np.sqrt(max(-p / 3, 0.0))
+    phi = 0.0
+    if r != 0:
+        arg = min(max(-q / (2 * r ** 3), -1.0), 1.0)
+        phi = np.arccos(arg) / 3
+    best, found = -np.inf, False
+    for k in range(3):
+        lam = tr / 3 if r == 0 else tr / 3 + 2 * r * np.cos(phi - 2 * np.pi * k / 3)
+        for _ in range(2):  # Newton on the cubic: the closed form loses digits near double roots
+            f = ((lam - tr) * lam + c1) * lam - det
+            df = (3 * lam - 2 * tr) * lam + c1
+            if df == 0:
+                break
+            lam = lam - f / df
+        R00, R01, R02 = A00 - lam, A01, A02
+        R10, R11, R12 = A10, A11 - lam, A12
+        R20, R21, R22 = A20, A21, A22 - lam
+        n_best, w0, w1, w2 = -1.0, 0.0, 0.0, 0.0
+        for pair in range(3):
+            if pair == 0:
+                a0, a1_, a2, b0, b1, b2 = R00, R01, R02, R10, R11, R12
+            elif pair == 1:
+                a0, a1_, a2, b0, b1, b2 = R00, R01, R02, R20, R21, R22
+            else:
+                a0, a1_, a2, b0, b1, b2 = R10, R11, R12, R20, R21, R22
+            e0 = a1_ * b2 - a2 * b1
+            e1 = a2 * b0 - a0 * b2
+            e2 = a0 * b1 - a1_ * b0
+            n2 = abs(e0) ** 2 + abs(e1) ** 2 + abs(e2) ** 2
+            if n2 > n_best:
+                n_best, w0, w1, w2 = n2, e0, e1, e2
+        if not n_best > 1e-28:
+            continue
+        wb = w0
+        if abs(w1) > abs(wb):
+            wb = w1
+        if abs(w2) > abs(wb):
+            wb = w2
+        ph = wb / abs(wb)
+        x0, x1, x2 = w0 * ph, w1 * ph, w2 * ph
+        best, kept = _keep_ellipse(x0, x1, x2, best, a1)
+        found = found or kept
+    return found
+
+
+@numba.njit(**_JIT)
+def _ellipse_vector9(M00, M01, M02, M10, M11, M12, M20, M21, M22, a1):  # pragma: no cover - compiled
+    """:func:`_ellipse_vector` of nine scalars: the real-root case (most fits) without an
+    array; the complex case (rare) builds ``M`` and calls :func:`_ellipse_vector`."""
+    scale = 0.0
+    for x in (M00, M01, M02, M10, M11, M12, M20, M21, M22):
+        scale = max(scale, abs(x))
+    if not (scale > 0 and np.isfinite(scale)):
+        return False
+    A00, A01, A02 = M00 / scale, M01 / scale, M02 / scale
+    A10, A11, A12 = M10 / scale, M11 / scale, M12 / scale
+    A20, A21, A22 = M20 / scale, M21 / scale, M22 / scale
+    tr = A00 + A11 + A22
+    c1 = (A00 * A11 - A01 * A10 + A00 * A22 - A02 * A20
+          + A11 * A22 - A12 * A21)
+    det = (A00 * (A11 * A22 - A12 * A21) - A01 * (A10 * A22 - A12 * A20)
+           + A02 * (A10 * A21 - A11 * A20))
+    p = c1 - tr * tr / 3
+    q = -2 * tr ** 3 / 27 + tr * c1 / 3 - det
+    disc = q * q / 4 + p ** 3 / 27
+    if disc <= 0:
+        return _real_ellipse_vector9(A00, A01, A02, A10, A11, A12, A20, A21, A22, tr, c1, det, p, q, a1)
+    M = np.empty((3, 3))
+    M[0, 0], M[0, 1], M[0, 2] = M00, M01, M02
+    M[1, 0], M[1, 1], M[1, 2] = M10, M11, M12
+    M[2, 0], M[2, 1], M[2, 2] = M20, M21, M22
+    return _ellipse_vector(M, a1)
+
+
+@numba.njit(**{**_JIT, "inline": "always"})
+def _t_entry(i0, i1, i2, mom, k, det3):  # pragma: no cover - compiled
+    """T[r, k] = -sum_j inv[r, j] S2[k, j] / det3 (the sum from 0.0, j in order)."""
+    acc = 0.0
+    acc += i0 * mom[SCATTER[k, 3]]
+    acc += i1 * mom[SCATTER[k, 4]]
+    acc += i2 * mom[SCATTER[k, 5]]
+    return -acc / det3
+
+
+@numba.njit(**{**_JIT, "inline": "always"})
+def _mr_entry(mom, r, k, t0, t1, t2):  # pragma: no cover - compiled
+    """(S1 + S2 T)[r, k], the sum from S1[r, k], j in order."""
+    acc = mom[SCATTER[r, k]]
+    acc += mom[SCATTER[r, 3]] * t0
+    acc += mom[SCATTER[r, 4]] * t1
+    acc += mom[SCATTER[r, 5]] * t2
+    return acc
+
+
+@numba.njit(**_JIT)
 def direct_fit(mom, m0, m1, s, conic, v):  # pragma: no cover - compiled
     """Direct ellipse fit of one set from its 15 moments in the frame ``(xy - m) / s``.
 
     Writes the unit-norm pixel conic into ``conic`` (6,) and the normalised-frame solution
     into ``v`` (6,). Returns the fit's approximate RMS geometric residual, pixels (see
     :func:`rangesim.core.conics.fit_conics_moments`), or -1 when there is no fit (fewer than
-    5 points, a singular linear block, no ellipse-specific eigenvector).
+    5 points, a singular linear block, no ellipse-specific eigenvector). (All scalar: the
+    scatter matrix is read from ``mom`` through :data:`SCATTER`, the 3 x 3 blocks are locals,
+    so a fit allocates nothing; ``conic`` and ``v`` may hold anything after a failed fit.)
     """
     if not mom[0] >= 5:
         return -1.0
-    S = np.empty((6, 6))
-    for a in range(6):
-        for b in range(6):
-            S[a, b] = mom[SCATTER[a, b]]
-    # T = -S3^-1 S2^T by cofactors (the points are centred and scaled: S3 is well scaled)
-    a, b, c = S[3, 3], S[3, 4], S[3, 5]
-    d, e, f = S[4, 3], S[4, 4], S[4, 5]
-    g, h, i = S[5, 3], S[5, 4], S[5, 5]
+    a, b, c = mom[SCATTER[3, 3]], mom[SCATTER[3, 4]], mom[SCATTER[3, 5]]
+    d, e, f = mom[SCATTER[4, 3]], mom[SCATTER[4, 4]], mom[SCATTER[4, 5]]
+    g, h, i = mom[SCATTER[5, 3]], mom[SCATTER[5, 4]], mom[SCATTER[5, 5]]
     C0, C1, C2 = e * i - f * h, f * g - d * i, d * h - e * g
     det3 = a * C0 + b * C1 + c * C2
     big = max(abs(a), abs(b), abs(c), abs(d), abs(e), abs(f), abs(g), abs(h), abs(i))
     if not (abs(det3) > 1e-12 and abs(det3) > 1e-13 * big ** 3):  # (near) singular: collinear points
         return -1.0
-    inv = np.empty((3, 3))
-    inv[0, 0], inv[0, 1], inv[0, 2] = C0, c * h - b * i, b * f - c * e
-    inv[1, 0], inv[1, 1], inv[1, 2] = C1, a * i - c * g, c * d - a * f
-    inv[2, 0], inv[2, 1], inv[2, 2] = C2, b * g - a * h, a * e - b * d
-    T = np.empty((3, 3))  # T[r, k] = -sum_j inv[r, j] S2[k, j], S2 = S[:3, 3:]
-    for r in range(3):
-        for k in range(3):
-            acc = 0.0
-            for j in range(3):
-                acc += inv[r, j] * S[k, 3 + j]
-            T[r, k] = -acc / det3
-    Mr = np.empty((3, 3))  # S1 + S2 T
-    for r in range(3):
-        for k in range(3):
-            acc = S[r, k]
-            for j in range(3):
-                acc += S[r, 3 + j] * T[j, k]
-            Mr[r, k] = acc
-    M = np.empty((3, 3))  # C1^-1 (S1 + S2 T): rows (r2 / 2, -r1, r0 / 2)
-    for k in range(3):
-        M[0, k] = Mr[2, k] / 2
-        M[1, k] = -Mr[1, k]
-        M[2, k] = Mr[0, k] / 2
-    for r in range(3):
-        for k in range(3):
-            if not np.isfinite(M[r, k]):
-                return -1.0
-    a1 = np.empty(3)
-    if not _ellipse_vector(M, a1):
+    i00, i01, i02 = C0, c * h - b * i, b * f - c * e
+    i10, i11, i12 = C1, a * i - c * g, c * d - a * f
+    i20, i21, i22 = C2, b * g - a * h, a * e - b * d
+    T00, T01, T02 = _t_entry(i00, i01, i02, mom, 0, det3), _t_entry(i00, i01, i02, mom, 1, det3), \
+        _t_entry(i00, i01, i02, mom, 2, det3)
+    T10, T11, T12 = _t_entry(i10, i11, i12, mom, 0, det3), _t_entry(i10, i11, i12, mom, 1, det3), \
+        _t_entry(i10, i11, i12, mom, 2, det3)
+    T20, T21, T22 = _t_entry(i20, i21, i22, mom, 0, det3), _t_entry(i20, i21, i22, mom, 1, det3), \
+        _t_entry(i20, i21, i22, mom, 2, det3)
+    # M = C1^-1 (S1 + S2 T): rows (r2 / 2, -r1, r0 / 2)
+    M00 = _mr_entry(mom, 2, 0, T00, T10, T20) / 2
+    M01 = _mr_entry(mom, 2, 1, T01, T11, T21) / 2
+    M02 = _mr_entry(mom, 2, 2, T02, T12, T22) / 2
+    M10 = -_mr_entry(mom, 1, 0, T00, T10, T20)
+    M11 = -_mr_entry(mom, 1, 1, T01, T11, T21)
+    M12 = -_mr_entry(mom, 1, 2, T02, T12, T22)
+    M20 = _mr_entry(mom, 0, 0, T00, T10, T20) / 2
+    M21 = _mr_entry(mom, 0, 1, T01, T11, T21) / 2
+    M22 = _mr_entry(mom, 0, 2, T02, T12, T22) / 2
+    if not (np.isfinite(M00) and np.isfinite(M01) and np.isfinite(M02) and np.isfinite(M10)
+            and np.isfinite(M11) and np.isfinite(M12) and np.isfinite(M20) and np.isfinite(M21)
+            and np.isfinite(M22)):
         return -1.0
-    for r in range(3):
-        v[r] = a1[r]
-        v[3 + r] = T[r, 0] * a1[0] + T[r, 1] * a1[1] + T[r, 2] * a1[2]
+    if not _ellipse_vector9(M00, M01, M02, M10, M11, M12, M20, M21, M22, v):  # v[:3]: the eigenvector
+        return -1.0
+    a0, a1, a2 = v[0], v[1], v[2]
+    v[3] = T00 * a0 + T01 * a1 + T02 * a2
+    v[4] = T10 * a0 + T11 * a1 + T12 * a2
+    v[5] = T20 * a0 + T21 * a1 + T22 * a2
     A, B, C = v[0] / s ** 2, v[1] / s ** 2, v[2] / s ** 2
     D, E, F = v[3] / s, v[4] / s, v[5]
     conic[0], conic[1], conic[2] = A, B, C
     conic[3] = D - 2 * A * m0 - B * m1
     conic[4] = E - 2 * C * m1 - B * m0
     conic[5] = F + A * m0 ** 2 + B * m0 * m1 + C * m1 ** 2 - D * m0 - E * m1
-    nrm = np.sqrt(np.sum(conic ** 2))
+    n2 = 0.0
+    for k in range(6):
+        n2 += conic[k] ** 2
+    nrm = np.sqrt(n2)
     if not (np.isfinite(nrm) and nrm > 0):
         return -1.0
-    conic /= nrm
+    for k in range(6):
+        conic[k] /= nrm
     # residual: sum f^2 = v S v; the gradient (2A x + B y + D, B x + 2C y + E) is linear in
     # (x, y, 1), so sum |grad|^2 = g P g + h P h with P = S[3:, 3:]
     f2 = 0.0
     for r in range(6):
         for k in range(6):
-            f2 += v[r] * S[r, k] * v[k]
+            f2 += v[r] * mom[SCATTER[r, k]] * v[k]
     g0, g1, g2 = 2 * v[0], v[1], v[3]
     h0, h1, h2 = v[1], 2 * v[2], v[4]
     grad2 = 0.0
     for r, (gr, hr) in enumerate(((g0, h0), (g1, h1), (g2, h2))):
         for k, (gk, hk) in enumerate(((g0, h0), (g1, h1), (g2, h2))):
-            grad2 += (gr * gk + hr * hk) * S[3 + r, 3 + k]
+            grad2 += (gr * gk + hr * hk) * mom[SCATTER[3 + r, 3 + k]]
     rms = s * np.sqrt(max(f2, 0.0) / grad2) if grad2 > 0 else np.inf
     return rms if np.isfinite(rms) else np.inf
 

@@ -15,7 +15,7 @@ import numba
 import numpy as np
 
 from rangesim.core._conic_kernels import direct_fit, ellipse_row
-from rangesim.features._conic_kernels import _add_moments, band_moments, grouped_frames
+from rangesim.features._conic_kernels import _add_moments, grouped_frames
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 TWO_PI = 2 * np.pi
@@ -116,25 +116,60 @@ def curve_labels(x, y, theta, R, cos_link, sin_link, cos_adjacent):  # pragma: n
     ct, st = np.empty(n), np.empty(n)
     for i in range(n):
         ct[i], st[i] = np.cos(theta[i]), np.sin(theta[i])
+    # the half window's offsets: the 8-neighbours (always looked at), and the farther ones
+    # by the direction of the normal, in NB bins of theta mod pi: only those within the link
+    # angle of the bin's tangent (plus half a bin and a degree: a superset of the offsets the
+    # test below can pass, so the same links; the components do not depend on the order in
+    # which links are joined)
+    NB = 64
+    far_dx = np.empty(2 * R * R + 2 * R, np.int64)
+    far_dy = np.empty(2 * R * R + 2 * R, np.int64)
+    F = 0
+    for dy in range(0, R + 1):
+        for dx in range(-R, R + 1):
+            if (dy == 0 and dx <= 0) or max(abs(dx), abs(dy)) <= 1:
+                continue
+            far_dx[F], far_dy[F] = dx, dy
+            F += 1
+    cone = np.arcsin(min(sin_link, 1.0)) + np.pi / NB / 2 + np.pi / 180
+    tab = np.empty((NB + 1, F), np.int64)
+    tcount = np.zeros(NB + 1, np.int64)
+    for f in range(F):  # row NB: every offset (a normal that is not finite)
+        tab[NB, f] = f
+    tcount[NB] = F
+    for bn in range(NB):
+        tangent = (bn + 0.5) * np.pi / NB + np.pi / 2  # the bin's normal, turned
+        for f in range(F):
+            phi = np.arctan2(far_dy[f], far_dx[f]) - tangent
+            phi = abs(phi - np.pi * np.floor(phi / np.pi + 0.5))  # angle to the tangent line, 0 .. pi / 2
+            if phi <= cone:
+                tab[bn, tcount[bn]] = f
+                tcount[bn] += 1
     parent = np.arange(n)
     for i in range(n):
         ci, si = ct[i], st[i]
-        for dy in range(0, R + 1):
-            for dx in range(-R, R + 1):
-                if dy == 0 and dx <= 0:
-                    continue
-                k = index[y[i] + R + dy, x[i] + R + dx]
-                if k < 0:
-                    continue
-                if abs(ci * ct[k] + si * st[k]) < cos_link:  # cos(theta_i - theta_k)
-                    continue
-                step = np.sqrt(dx * dx + dy * dy)
-                lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
-                if abs(dx * ci + dy * si) > lim * step:
-                    continue
-                if abs(dx * ct[k] + dy * st[k]) > lim * step:
-                    continue
-                _union(parent, i, k)
+        bn = NB
+        if np.isfinite(theta[i]):
+            bn = min(max(int((theta[i] % np.pi) / np.pi * NB), 0), NB - 1)
+        for f in range(-4, tcount[bn]):
+            if f < 0:  # the 8-neighbours of the half window
+                dx, dy = (1, -1, 0, 1)[f + 4], (0, 1, 1, 1)[f + 4]
+            else:
+                dx, dy = far_dx[tab[bn, f]], far_dy[tab[bn, f]]
+            if R < 1 and f < 0:
+                continue
+            k = index[y[i] + R + dy, x[i] + R + dx]
+            if k < 0:
+                continue
+            if abs(ci * ct[k] + si * st[k]) < cos_link:  # cos(theta_i - theta_k)
+                continue
+            step = np.sqrt(dx * dx + dy * dy)
+            lim = sin_link if max(abs(dx), abs(dy)) > 1 else cos_adjacent
+            if abs(dx * ci + dy * si) > lim * step:
+                continue
+            if abs(dx * ct[k] + dy * st[k]) > lim * step:
+                continue
+            _union(parent, i, k)
     lab = np.full(n, -1, np.int64)
     out = np.empty(n, np.int64)
     m = 0
@@ -352,6 +387,7 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
     p_frame = np.empty((T * N, 3))
     tx = np.empty(N, np.int64)
     ty = np.empty(N, np.int64)
+    tb = np.empty(N, np.int64)
     P = 0
     at = 0
     n_tiles = 0
@@ -359,27 +395,35 @@ def arc_pieces(xy, curve, n_curves, tiles, min_points, pairs_per_tile, max_rms, 
         s = tiles[t // 2]
         o = 0 if t % 2 == 0 else s // 2
         x0, x1, y0, y1 = 1 << 62, -(1 << 62), 1 << 62, -(1 << 62)
+        if s > 0 and (s & (s - 1)) == 0:  # a power of two: (x + o) / s is (x + o) * (1 / s) to the bit
+            inv = 1.0 / s
+            for i in range(N):
+                tx[i] = np.int64(np.floor((xy[i, 0] + o) * inv))
+                ty[i] = np.int64(np.floor((xy[i, 1] + o) * inv))
+        else:
+            for i in range(N):
+                tx[i] = np.int64(np.floor((xy[i, 0] + o) / s))
+                ty[i] = np.int64(np.floor((xy[i, 1] + o) / s))
         for i in range(N):
-            tx[i] = np.int64(np.floor((xy[i, 0] + o) / s))
-            ty[i] = np.int64(np.floor((xy[i, 1] + o) / s))
             x0, x1, y0, y1 = min(x0, tx[i]), max(x1, tx[i]), min(y0, ty[i]), max(y1, ty[i])
         nx = x1 - x0 + 1
         nb = nx * (y1 - y0 + 1)
         bstart = np.zeros(nb + 1, np.int64)
         for i in range(N):
-            bstart[(ty[i] - y0) * nx + tx[i] - x0 + 1] += 1
+            tb[i] = (ty[i] - y0) * nx + tx[i] - x0  # the point's tile
+            bstart[tb[i] + 1] += 1
         for b in range(nb):
             bstart[b + 1] += bstart[b]
         for r in range(N):
             i = by_curve[r]
-            b = (ty[i] - y0) * nx + tx[i] - x0
+            b = tb[i]
             pts[at + bstart[b]] = i
             bstart[b] += 1
         # runs of (tile, curve) in that order: the pieces
         prev_b = -1
         for r in range(N):
             i = pts[at + r]
-            b = (ty[i] - y0) * nx + tx[i] - x0
+            b = tb[i]
             if b != prev_b:
                 n_tiles += 1
             if b != prev_b or curve[i] != p_curve[P - 1]:
@@ -812,6 +856,50 @@ def distinct_conics(conics, center_px, rel_size, max_px):  # pragma: no cover - 
 # -- growth -------------------------------------------------------------------------------------
 
 @numba.njit(**_JIT)
+def _band_pass(conics, seg, px, py, ct, st, band, cos_tol, last):  # pragma: no cover - compiled
+    """:func:`~._conic_kernels.band_moments` of pairs sorted by conic (conic k's pairs are
+    ``seg[k]:seg[k + 1]``): the same inliers, centroids, scales and moments to the bit (the
+    same arithmetic, summed in the same order), with each conic's coefficients held over its
+    run (a loop without gathers or branches, which the compiler vectorises) and, for the
+    ``last`` band, the inliers only."""
+    K, P = len(conics), len(px)
+    sel = np.zeros(P, np.bool_)
+    m = np.zeros((K, 2))
+    n = np.zeros(K)
+    for h in range(K):
+        a, b, c, d, e, f = conics[h, 0], conics[h, 1], conics[h, 2], conics[h, 3], conics[h, 4], conics[h, 5]
+        for k in range(seg[h], seg[h + 1]):
+            x, y = px[k], py[k]
+            gx = 2 * a * x + b * y + d
+            gy = b * x + 2 * c * y + e
+            val = a * x * x + b * x * y + c * y * y + d * x + e * y + f
+            gn = max(np.sqrt(gx * gx + gy * gy), 1e-12)
+            sel[k] = (abs(gx * ct[k] + gy * st[k]) >= cos_tol * gn) & (abs(val) <= band * gn)
+    s = np.zeros(K)
+    mom = np.zeros((K, 15))
+    if last:
+        return sel, m, s, mom
+    for h in range(K):
+        sx, sy, cnt = 0.0, 0.0, 0.0
+        for k in range(seg[h], seg[h + 1]):
+            if sel[k]:
+                sx += px[k]
+                sy += py[k]
+                cnt += 1.0
+        n[h] = cnt
+        m[h, 0], m[h, 1] = sx / max(cnt, 1.0), sy / max(cnt, 1.0)
+        sh = 0.0
+        for k in range(seg[h], seg[h + 1]):
+            if sel[k]:
+                sh = max(sh, abs(px[k] - m[h, 0]), abs(py[k] - m[h, 1]))
+        s[h] = max(sh, 1e-9) if cnt > 0 else 1.0
+        for k in range(seg[h], seg[h + 1]):
+            if sel[k]:
+                _add_moments(mom[h], (px[k] - m[h, 0]) / s[h], (py[k] - m[h, 1]) / s[h])
+    return sel, m, s, mom
+
+
+@numba.njit(**_JIT)
 def grow_conics(conics, xy, theta, bands, cos_tol, margin, cell_px):  # pragma: no cover - compiled
     """:func:`~._arc_ellipses.grow`: each conic refitted on the edge points near it whose
     normal agrees, over narrowing bands.
@@ -888,15 +976,29 @@ def grow_conics(conics, xy, theta, bands, cos_tol, margin, cell_px):  # pragma: 
                         pt[P] = i
                         P += 1
     hyp, pt = hyp[:P], pt[:P]
+    # each conic's run of pairs (the pairs are by conic)
+    seg = np.zeros(K + 1, np.int64)
+    for j in range(P):
+        seg[hyp[j] + 1] += 1
+    for k in range(K):
+        seg[k + 1] += seg[k]
+    # the normals' cosines and sines once per point (the same values as per pair)
+    ct_pt, st_pt = np.empty(N), np.empty(N)
+    done = np.zeros(N, np.bool_)
     px, py = np.empty(len(pt)), np.empty(len(pt))
     ct, st = np.empty(len(pt)), np.empty(len(pt))
     for j in range(len(pt)):
-        px[j], py[j], ct[j], st[j] = xy[pt[j], 0], xy[pt[j], 1], np.cos(theta[pt[j]]), np.sin(theta[pt[j]])
+        i = pt[j]
+        if not done[i]:
+            ct_pt[i], st_pt[i] = np.cos(theta[i]), np.sin(theta[i])
+            done[i] = True
+        px[j], py[j], ct[j], st[j] = xy[i, 0], xy[i, 1], ct_pt[i], st_pt[i]
     new, v = np.empty(6), np.empty(6)
     sel = np.zeros(len(pt), np.bool_)
     for b in range(len(bands)):
-        sel, m, s, mom = band_moments(conics, hyp, px, py, ct, st, bands[b], cos_tol)
-        if b == len(bands) - 1:
+        last = b == len(bands) - 1
+        sel, m, s, mom = _band_pass(conics, seg, px, py, ct, st, bands[b], cos_tol, last)
+        if last:
             break
         for k in range(K):
             if ok[k] and direct_fit(mom[k], m[k, 0], m[k, 1], s[k], new, v) >= 0 and mom[k, 0] >= 6:

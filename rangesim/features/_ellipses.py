@@ -13,6 +13,7 @@ from rangesim.core import params as P
 from rangesim.core.conics import (
     conic_normal_angle,
     ellipse_from_conic,
+    ellipse_params,
     fit_circle,
     fit_conic,
     sampson_distance,
@@ -428,10 +429,12 @@ def _turns(u: np.ndarray, theta: np.ndarray, ab: np.ndarray) -> float:
 def _free(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, labels: np.ndarray | None, min_points: int,
           min_support: float, axes_range: tuple[float, float], hypotheses: str | None = None) -> list[Ellipse]:
     """The model-free ellipses (:func:`~._arc_ellipses.free_ellipses`) as Ellipse."""
-    out = []
-    for conic, _, _, rms, n in free_ellipses(xy, theta, min_points=min_points, min_support=min_support,
-                                             axes_range=axes_range, pixels=pixels, labels=labels,
-                                             hypotheses=hypotheses):
-        e = ellipse_from_conic(conic)
-        out.append(Ellipse((float(e[0][0]), float(e[0][1])), (float(e[1][0]), float(e[1][1])), float(e[2]), rms, n))
-    return out
+    found = free_ellipses(xy, theta, min_points=min_points, min_support=min_support, axes_range=axes_range,
+                          pixels=pixels, labels=labels, hypotheses=hypotheses)
+    if not found:
+        return []
+    # the accepted conics are real ellipses: their parameters in one compiled call (the rows of
+    # ellipse_from_conic)
+    c, axes, angle, _ = ellipse_params(np.array([f[0] for f in found]))
+    return [Ellipse((float(c[k, 0]), float(c[k, 1])), (float(axes[k, 0]), float(axes[k, 1])), float(angle[k]), rms, n)
+            for k, (_, _, _, rms, n) in enumerate(found)]
