@@ -87,7 +87,12 @@ def test_visible_truth_and_one_call_scores(lblock):
     assert not truth[~scan.valid].any()
     assert (truth == EdgeLabel.JUMP).any() and (truth == EdgeLabel.CONVEX).any() and (truth == EdgeLabel.CONCAVE).any()
     full = rs.ground_truth_edges(scan, scene)
-    assert np.array_equal(truth, np.where(scan.valid, full, 0))
+    # the full truth on measured pixels, but for contours whose own pixel was not measured,
+    # marked on a measured neighbour (tests/test_truth_data_end.py)
+    changed = truth != np.where(scan.valid, full, 0)
+    lost = ndimage.binary_dilation((full == EdgeLabel.JUMP) & ~scan.valid, np.ones((3, 3), bool))
+    assert np.all(truth[changed] == EdgeLabel.JUMP) and np.all(lost[changed])
+    assert changed.sum() < 0.2 * (truth == EdgeLabel.JUMP).sum()
     # the truth scores itself perfectly, per type too
     s = score_edges(rs.edges.EdgeMap(mask=truth != 0, labels=truth, strength=np.zeros(truth.shape), method="truth"), scan, scene)
     assert s["f1"] == 1.0 and all(v["f1"] == 1.0 for v in s["per_label"].values())

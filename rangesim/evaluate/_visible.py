@@ -16,7 +16,7 @@ from rangesim.core import params as P
 from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
 from rangesim.evaluate._edge_scores import RIM, _as_mask_labels, check_tolerance, edge_scores
-from rangesim.evaluate.ground_truth import ground_truth_edges
+from rangesim.evaluate.ground_truth import JUMP_ANGLE_DEG, ground_truth_edges
 
 __all__ = ["visible_truth", "data_boundary", "score_edges"]
 
@@ -31,7 +31,11 @@ def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: An
     :func:`~rangesim.evaluate.ground_truth.ground_truth_edges` (occluding contours one
     pixel wide on the occluding side, visible creases one pixel wide, contact creases),
     with every pixel that ``scan.valid`` does not hold set to NONE: an edge inside a laser
-    shadow, a dropout or beyond the working range is nobody's to find.
+    shadow, a dropout or beyond the working range is nobody's to find. One exception: an
+    occluding contour whose own pixel is unmeasured (a block matcher's window straddling the
+    step, a dropout at the silhouette) while its neighbour on the occluding surface is
+    measured is marked on that neighbour, where the data end within a pixel of it
+    (:func:`_contours_at_data_end`).
 
     Label types (:class:`~rangesim.core.constants.EdgeLabel`): 0 none; 1 jump (an occluding
     contour, the near side of a depth discontinuity, also against empty space); 2 convex
@@ -53,7 +57,8 @@ def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: An
     Returns
     -------
     (H, W) uint8
-        EdgeLabel per pixel, 0 wherever ``scan.valid`` is False.
+        EdgeLabel per pixel, 0 wherever ``scan.valid`` is False; equal to the full truth on
+        measured pixels but for the contours moved onto the data's end.
 
     Examples
     --------
@@ -70,8 +75,49 @@ def visible_truth(scan: Any, scene: Any, crease_deg: float = 20.0, **options: An
     labels = ground_truth_edges(scan, scene, crease_deg, **options)
     # measured = valid with a depth, as the detectors read it (a pixel marked valid without a
     # depth is a hole to them; truth kept there was unfindable)
-    labels[~(np.asarray(scan.valid, dtype=bool) & np.isfinite(np.asarray(scan.depth, dtype=np.float64)))] = EdgeLabel.NONE
+    measured = np.asarray(scan.valid, dtype=bool) & np.isfinite(np.asarray(scan.depth, dtype=np.float64))
+    lost = (labels == EdgeLabel.JUMP) & ~measured
+    labels[~measured] = EdgeLabel.NONE
+    if lost.any():
+        jump_angle = float(options.get("jump_angle_deg", JUMP_ANGLE_DEG))
+        _contours_at_data_end(labels, lost, measured, scan, 1.0 / np.tan(np.radians(jump_angle)))
     return labels
+
+
+#: 8-neighbour offsets (row, column), the 4-neighbours first
+_NEIGHBOURS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
+
+
+def _contours_at_data_end(labels: np.ndarray, lost: np.ndarray, measured: np.ndarray, scan: Any,
+                          jump_steps: float) -> None:
+    """Mark the occluding contours whose own pixel the scanner lost on the data's end beside them.
+
+    A block matcher's window that straddles a depth step returns no depth, or a dropout at
+    grazing incidence takes the outermost pixel of a silhouette: the contour pixel is not
+    measured, while its neighbour on the occluding surface is. The scan then shows the
+    contour there, within a pixel of the true one; dropping it from the truth would count
+    the detector that finds it as wrong. Each lost contour pixel goes to its measured
+    8-neighbour (4-neighbours first) on the same surface -- the true points less than the
+    jump rule's ``jump_steps`` pixel footprints apart, the continuation of the occluder, not
+    the background beyond the step -- unless that pixel holds a label already. So the contour
+    stays one line where the data's end runs a pixel inside it (its measured pixels beside
+    the moved ones, 8-connected). In place.
+    """
+    h, w = labels.shape
+    xyz = np.asarray(scan.xyz_true, dtype=np.float64)
+    fx = float(np.asarray(scan.K)[0, 0])
+    lr, lc = np.nonzero(lost)
+    reach = jump_steps * np.abs(xyz[lr, lc, 2]) / fx  # mm: the jump rule at the contour's depth
+    target = np.full(lr.size, -1, np.int64)
+    for dr, dc in _NEIGHBOURS:
+        r, c = lr + dr, lc + dc
+        ok = (target < 0) & (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        r, c = np.where(ok, r, 0), np.where(ok, c, 0)
+        with np.errstate(invalid="ignore"):
+            ok &= measured[r, c] & (labels[r, c] == EdgeLabel.NONE)
+            ok &= np.linalg.norm(xyz[r, c] - xyz[lr, lc], axis=-1) < reach
+        target[ok] = r[ok] * w + c[ok]
+    labels.ravel()[target[target >= 0]] = EdgeLabel.JUMP
 
 
 def data_boundary(valid: np.ndarray) -> np.ndarray:
