@@ -394,7 +394,11 @@ def find_discontinuities(
         next to it is a rim even where the search across the gap calls it occluded (the
         search extrapolates the pixel's surface from one neighbour, so on noisy scans a
         long gap can make it look occluded). Otherwise (recorded data) an occluded pixel
-        is the far end of a shadow and no rim.
+        is the far end of a shadow and no rim. Known empty pixels are also looked for
+        across a gap: a surface whose search meets up to :data:`EMPTY_GAP_PX` unmeasured
+        pixels and then an empty one, before any measured pixel, ends in that gap against
+        nothing (a block matcher's window that straddled its silhouette, a dropout at a
+        grazing outline) and is a rim too.
     unlit, caster_test : optional
         Laser-shadow pixels (H, W) bool and a caster test (:func:`~._self_shadow.shadow_gaps`).
         A pixel whose search finds no farther surface beyond a gap is a rim when the gap's
@@ -556,6 +560,15 @@ def find_discontinuities(
             rim[si[a], sj[a]] = True
             direction[si[a], sj[a]] = np.mod(np.arctan2(sy[a], sx[a]), np.pi)
             across.append((si[a], sj[a], sx[a], sy[a]))
+    gap_end = None
+    if ii.size and empty is not None and max_search > 0 and empty_certain:
+        # a few unmeasured pixels (a dropout at a silhouette, a block matcher's window that
+        # straddled the edge) and then nothing: the surface ends within that gap, against nothing
+        reach = _empty_within(np.asarray(empty, bool), valid, si, sj, sx, sy, EMPTY_GAP_PX) & ~ok
+        reach &= ~near_empty[moving] & ~occluding[si, sj]
+        near_empty[np.flatnonzero(moving)[reach]] = True
+        # (no empty neighbour to point to it: the surface ends along the search)
+        gap_end = (si[reach], sj[reach], sx[reach], sy[reach])
     if ii.size and empty is not None:
         # the measured surface ends against nothing: see the docstring
         e_i, e_j = ii[near_empty], jj[near_empty]
@@ -572,6 +585,8 @@ def find_discontinuities(
             ex += e * dc
             ey += e * dr
         across.append((e_i, e_j, ex, ey))
+        if gap_end is not None:  # after: their (ex, ey) above are 0, the last entry wins
+            across.append(gap_end)
 
     # direction across the jump from the broken neighbour pairs (gradient of "is far")
     ei, ej = nonzero2((occluding | occluded) & np.isnan(direction))
@@ -599,6 +614,31 @@ def find_discontinuities(
         contour[ci, cj] = contour_offsets(np.column_stack([cx, cy]), connectivity)
     return Discontinuities(occluding, occluded, nan_boundary, pairs, direction, rim, contour=contour,
                            gap_fold=gap_fold)
+
+
+#: longest gap of unmeasured pixels (px) between a measured surface and empty pixels (the
+#: camera ray hit nothing) across which the surface is taken to end against nothing: half the
+#: presets' 9 px matching window (the block matcher loses up to that beside an edge); a laser
+#: scanner's dropout at a silhouette is 1-2 px
+EMPTY_GAP_PX = 4
+
+
+def _empty_within(empty: np.ndarray, valid: np.ndarray, si: np.ndarray, sj: np.ndarray, sx: np.ndarray,
+                  sy: np.ndarray, steps: int) -> np.ndarray:
+    """For each pixel (si, sj) stepping along (sx, sy): whether an empty pixel comes within
+    ``steps`` steps with no measured pixel and no image border before it."""
+    h, w = empty.shape
+    reach = np.zeros(si.size, bool)
+    stopped = np.zeros(si.size, bool)
+    for k in range(1, steps + 1):
+        gi = si + np.rint(sy * np.float32(k)).astype(np.intp)
+        gj = sj + np.rint(sx * np.float32(k)).astype(np.intp)
+        stopped |= (gi < 0) | (gi >= h) | (gj < 0) | (gj >= w)
+        gi, gj = np.clip(gi, 0, h - 1), np.clip(gj, 0, w - 1)
+        hit = ~stopped & empty[gi, gj]
+        reach |= hit
+        stopped |= hit | valid[gi, gj]
+    return reach
 
 
 def _continued(z0: np.ndarray, slope: np.ndarray, steps, perspective: bool) -> np.ndarray:
