@@ -74,6 +74,10 @@ def test_a_pose_entry_that_is_no_number_is_named():
         check_pose(bad)
     with pytest.raises(RangesimError, match="got a str"):
         check_pose("abc")
+    numeric_text = [["1", "0", 0, 0], [0, 1, 0, 0], [0, 0, 1, "5"], [0, 0, 0, 1]]
+    assert check_pose(numeric_text)[2, 3] == 5.0  # as NumPy reads it
+    with pytest.raises(RangesimError, match="got 'a' at row 0, column 1"):
+        check_pose([["1", "a", 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
 
 
 def test_detect_keeps_this_scans_scores_of_another_method(plate_files, tmp_path, capsys):
@@ -115,6 +119,11 @@ def test_truncated_text_meshes_say_so(tmp_path):
         load_mesh(tmp_path / "cut.stl")
     (tmp_path / "whole.stl").write_text(stl)
     assert len(load_mesh(tmp_path / "whole.stl").faces) == len(sphere.faces)
+    # padding after 'endsolid' (NULs, a DOS end-of-file byte) is no truncation
+    from rangesim.io.mesh_check import diagnose_mesh_file
+
+    (tmp_path / "padded.stl").write_bytes(stl.encode() + b"\n\x1a\0\0")
+    assert diagnose_mesh_file(tmp_path / "padded.stl", full=True) is None
 
 
 def test_a_missing_sensors_folder_is_named(monkeypatch, tmp_path):
@@ -162,3 +171,31 @@ def test_the_memory_refusal_separates_pixels_from_the_fixed_cost(tmp_path, capsy
     monkeypatch.setenv("RANGESIM_MEMORY_LIMIT", "1K")
     err = _error(capsys, ["scan", GREEN, "--out", tmp_path / "m.npz", *TINY])
     assert "64 x 48 px" in err and "on the renderer's fixed 300.0 MB" in err
+
+
+def test_detect_merges_only_the_same_scan_file_and_keeps_maps_without_truth(tmp_path, capsys):
+    """A scan rewritten in place (another seed) is another scan: its earlier scores are not kept.
+    Without ground truth there is no scores.json to keep in step: the other maps stay."""
+    scan, out = tmp_path / "g.exr", tmp_path / "det"
+    small = ["--set", "camera.width=96", "--set", "camera.height=90"]
+    assert main(["scan", GREEN, "--out", str(scan), *small]) == 0
+    assert main(["detect", str(scan), "--method", "gradient", "--out", str(out)]) == 0
+    assert main(["scan", GREEN, "--out", str(scan), "--seed", "7", *small]) == 0
+    assert main(["detect", str(scan), "--method", "normal", "--out", str(out)]) == 0
+    assert "keeps" not in capsys.readouterr().out
+    assert sorted(json.loads((out / "scores.json").read_text())["methods"]) == ["normal"]
+    assert not (out / "gradient_edges.npz").exists()
+    bare, out2 = tmp_path / "bare.npz", tmp_path / "det2"
+    rs.datasets.plate_scan().save(bare)  # no scene named: no truth
+    assert main(["detect", str(bare), "--method", "gradient", "--out", str(out2)]) == 0
+    assert main(["detect", str(bare), "--method", "normal", "--out", str(out2)]) == 0
+    assert (out2 / "gradient_edges.npz").is_file() and (out2 / "normal_edges.npz").is_file()
+
+
+def test_a_one_row_grid_is_no_point_list(tmp_path, capsys):
+    row = tmp_path / "row.npz"
+    assert main(["scan", GREEN, "--out", str(row), "--set", "camera.width=64", "--set", "camera.height=1"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(row)]) == 0
+    assert "64 x 1 px" in capsys.readouterr().out
+    assert main(["diff", str(row), str(row), "--out", str(tmp_path / "d.png")]) == 0

@@ -40,8 +40,8 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
         raise RangesimError("no such mesh file", source=path)
     if path.suffix.lower().lstrip(".") not in trimesh.available_formats():
         # (trimesh would answer NotImplementedError: file_type 'pcd' not supported)
-        raise RangesimError(f"unknown mesh file type {path.suffix!r}; use a mesh ({', '.join(MESH_SUFFIXES)})",
-                            source=path)
+        kind = f"unknown mesh file type {path.suffix!r}" if path.suffix else "no file suffix to tell the mesh format"
+        raise RangesimError(f"{kind}; use a mesh ({', '.join(MESH_SUFFIXES)})", source=path)
     cache = mesh_cache_dir()
     if cache is not None:
         return _cached_load(path, cache)

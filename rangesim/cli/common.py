@@ -292,8 +292,9 @@ def check_conf(scan_path: Path | str, conf: str | None) -> None:
 
 def is_point_list(scan) -> bool:
     """True for a scan read from an unorganized point list (a point .ply: one row of points,
-    its unmeasured pixels absent), not a grid of rows and columns."""
-    return min(scan.shape) == 1 or scan.meta.get("organized") is False
+    its unmeasured pixels absent; the readers say so in ``meta["organized"]``), not a grid of
+    rows and columns (which may be one row: a scan of camera.height 1)."""
+    return scan.meta.get("organized") is False
 
 
 def require_grid(scan, path: Path | str, needs: str = "the edge detectors need", operators: bool = True) -> None:
@@ -301,6 +302,9 @@ def require_grid(scan, path: Path | str, needs: str = "the edge detectors need",
     and, for the edge detectors (``operators``), an image under 3 x 3 px."""
     h, w = scan.shape
     if is_point_list(scan):
+        raise RangesimError(f"not an organized range image ({w:,} x {h:,} points): {needs} a "
+                            "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
+    if operators and min(h, w) == 1:  # a single row or column: no neighbours across it
         raise RangesimError(f"not an organized range image ({w:,} x {h:,} points): {needs} a "
                             "grid of rows and columns (a range-grid .ply, an organized .pcd, .exr, .npz)", source=path)
     if operators and min(h, w) < 3:  # their 3 x 3 operators have no interior pixel

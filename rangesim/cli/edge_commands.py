@@ -73,19 +73,25 @@ def _another_scans_map(path: Path, scan_id: str) -> bool:
     return _map_scan(path) not in (None, scan_id)
 
 
-def _earlier_scores(out: Path, scan_id: str, others: set[str], truth, args, sensor) -> dict[str, dict]:
+def _run_key(path: Path, args, sensor) -> dict:
+    """What makes two ``detect`` runs' scores comparable: the scan file (resolved path, size and
+    modification time: rewritten, it is another scan), the scene behind the truth and the
+    scoring settings."""
+    stat = path.stat()
+    return json_safe({"scan": str(path.resolve()), "size": stat.st_size, "mtime_ns": stat.st_mtime_ns,
+                      "scene": None if args.scene is None else str(Path(args.scene).resolve()),
+                      "tolerance_px": args.tolerance, "crease_deg": args.crease_deg, "sensor": sensor})
+
+
+def _earlier_scores(out: Path, scan_id: str, others: set[str], run: dict) -> dict[str, dict]:
     """The scores in ``out/scores.json`` of the methods in ``others`` that an earlier ``detect``
-    of the same scan wrote with the same truth and settings, and whose maps are still there:
-    kept beside this run's (``--method gradient`` then ``--method normal`` into one folder)."""
+    wrote for the same run key (:func:`_run_key`), and whose maps are still there: kept beside
+    this run's (``--method gradient`` then ``--method normal`` into one folder)."""
     try:
         earlier = json.loads((out / "scores.json").read_text())
     except (OSError, ValueError):
         return {}
-    same = (truth is not None and isinstance(earlier, dict) and isinstance(earlier.get("methods"), dict)
-            and str(Path(str(earlier.get("scan", ""))).resolve()) == scan_id
-            and earlier.get("truth") == truth.kind and earlier.get("tolerance_px") == args.tolerance
-            and earlier.get("crease_deg") == args.crease_deg and earlier.get("sensor") == json_safe(sensor))
-    if not same:
+    if not (isinstance(earlier, dict) and isinstance(earlier.get("methods"), dict) and earlier.get("run") == run):
         return {}
     return {m: r for m, r in earlier["methods"].items() if m in others and _map_scan(out / f"{m}_edges.npz") == scan_id}
 
@@ -159,12 +165,15 @@ def cmd_detect(args: argparse.Namespace) -> int:
              if _another_scans_map(out / f"{other}_edges.npz", scan_id)
              for old in (out / f"{other}_edges.npz", out / f"{other}.png")]
     sensor = sensor_summary(scan, args.sensor) if args.sensor is not None else None
-    kept = _earlier_scores(out, scan_id, set(DETECTORS) - set(methods), truth, args, sensor)
-    # this scan's maps of other methods whose scores cannot be kept (other settings): removed,
-    # so that the folder's maps and scores.json are one run's
-    stale += [old for other in sorted(set(DETECTORS) - set(methods) - set(kept))
-              if _map_scan(out / f"{other}_edges.npz") == scan_id
-              for old in (out / f"{other}_edges.npz", out / f"{other}.png")]
+    kept: dict[str, dict] = {}
+    if truth is not None:
+        run = _run_key(path, args, sensor)
+        kept = _earlier_scores(out, scan_id, set(DETECTORS) - set(methods), run)
+        # this scan's maps of other methods whose scores cannot be kept (another run key):
+        # removed, so that the folder's maps and scores.json are one run's
+        stale += [old for other in sorted(set(DETECTORS) - set(methods) - set(kept))
+                  if _map_scan(out / f"{other}_edges.npz") == scan_id
+                  for old in (out / f"{other}_edges.npz", out / f"{other}.png")]
     writes = []
     for method, result in results.items():
         edge_map = result["edge_map"]
@@ -183,6 +192,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
             "scan": str(path), "truth": truth.kind, "tolerance_px": args.tolerance, "crease_deg": args.crease_deg,
             # every prediction counted: rs.evaluate.score_edges(..., ignore_data_boundary=False) gives these
             "ignore_data_boundary": False,
+            "run": run,
             "methods": {**kept, **{m: {"seconds": r["seconds"], **r["scores"]} for m, r in results.items()}},
         }
         if sensor is not None:

@@ -55,10 +55,10 @@ POSE_ORTHONORMAL_TOL = 1e-3
 
 def _is_number(v: Any) -> bool:
     try:
-        float(v)
+        float(v)  # as np.asarray(..., float64) takes it (a numeric string too)
     except (TypeError, ValueError):
         return False
-    return not isinstance(v, str)
+    return True
 
 
 def check_pose(pose: Any, source: Any = None) -> np.ndarray:

@@ -31,8 +31,11 @@ _PLURAL = {"vertex": "vertices"}
 def _stl(raw: bytes, size: int) -> str | None:
     head = raw[:512].lstrip().lower()
     if head.startswith(b"solid") and (b"facet" in raw[:_PEEK].lower() or size < 84):
-        if b"facet" in raw[:_PEEK].lower() and not raw.rstrip().lower().rsplit(b"\n", 1)[-1].lstrip().startswith(b"endsolid"):
-            return "truncated ASCII STL: it ends inside its facets (no closing 'endsolid' line)"
+        # (padding after the last line: NULs, a DOS end-of-file byte)
+        last = raw.rstrip(b" \t\r\n\0\x1a").lower().rsplit(b"\n", 1)[-1].strip()
+        if b"facet" in raw[:_PEEK].lower() and not last.startswith(b"endsolid"):
+            return "truncated ASCII STL: no closing 'endsolid' line" + (
+                "" if last.startswith(b"endfacet") else " (it ends inside a facet)")
         return None  # ASCII: trimesh's reader says what is wrong
     if size < 84:
         return f"truncated binary STL: {size:,} bytes, shorter than the 84-byte header"

@@ -37,7 +37,8 @@ _NOT_FINITE = re.compile(r"\b(nan|inf|infinity)\b", re.IGNORECASE)
 
 
 def read_msu(path: str | Path, *, units: str | None = None, conf: str | Path | None = None) -> RangeScan:
-    """Read an MSU range image (plain or gzipped, recognised by content).
+    """Read an MSU range image (plain or gzipped, recognised by content; a name ending ``.gz``
+    must hold gzip data).
 
     Parameters
     ----------

@@ -508,7 +508,8 @@ def preset_dirs() -> list[Path]:
             import warnings
 
             _WARNED_DIRS.add(str(d))
-            warnings.warn(f"RANGESIM_SENSORS: {d}: no such folder (its presets are not searched)", stacklevel=2)
+            what = "a file, not a folder" if d.exists() else "no such folder"
+            warnings.warn(f"RANGESIM_SENSORS: {d}: {what} (its presets are not searched)", stacklevel=2)
     return dirs + [PRESET_DIR]
 
 
