@@ -62,9 +62,10 @@ def test_a_surface_ending_in_a_short_gap_before_nothing_is_a_rim(box_on_table):
     edges = rs.edges.gradient(scan)
     empty = ~scan.valid & (scan.status == Status.MISS)
     reach = ndimage.binary_dilation(empty, np.ones((3, 3), bool), iterations=EMPTY_GAP_PX + 1)
+    assert EMPTY_GAP_PX == 1  # the contour pixel lost, as visible_truth moves it
     table_end = (truth == EdgeLabel.JUMP) & (scan.part == 0) & reach
     assert table_end.sum() > 100
     found = ndimage.distance_transform_edt(~edges.mask)[table_end] <= 2
     assert found.mean() > 0.9
     s = score_edges(edges, scan, truth=truth)
-    assert s["per_label"]["jump"]["recall"] > 0.85 and s["per_label"]["jump"]["precision"] > 0.85
+    assert s["per_label"]["jump"]["recall"] > 0.85 and s["per_label"]["jump"]["precision"] > 0.9

@@ -395,10 +395,12 @@ def find_discontinuities(
         search extrapolates the pixel's surface from one neighbour, so on noisy scans a
         long gap can make it look occluded). Otherwise (recorded data) an occluded pixel
         is the far end of a shadow and no rim. Known empty pixels are also looked for
-        across a gap: a surface whose search meets up to :data:`EMPTY_GAP_PX` unmeasured
-        pixels and then an empty one, before any measured pixel, ends in that gap against
-        nothing (a block matcher's window that straddled its silhouette, a dropout at a
-        grazing outline) and is a rim too.
+        across a gap: a surface whose search meets at most :data:`EMPTY_GAP_PX` (1)
+        unmeasured pixel and then an empty one, before any measured pixel, ends in that gap
+        against nothing (a block matcher's window that straddled its silhouette, a dropout
+        at a grazing outline) and is a rim too. (Behind a thin nearer object that went
+        wholly unmeasured such a pixel would be the occluded side; one pixel leaves no room
+        for one.)
     unlit, caster_test : optional
         Laser-shadow pixels (H, W) bool and a caster test (:func:`~._self_shadow.shadow_gaps`).
         A pixel whose search finds no farther surface beyond a gap is a rim when the gap's
@@ -564,7 +566,7 @@ def find_discontinuities(
     if ii.size and empty is not None and max_search > 0 and empty_certain:
         # a few unmeasured pixels (a dropout at a silhouette, a block matcher's window that
         # straddled the edge) and then nothing: the surface ends within that gap, against nothing
-        reach = _empty_within(np.asarray(empty, bool), valid, si, sj, sx, sy, EMPTY_GAP_PX) & ~ok
+        reach = _empty_within(np.asarray(empty, bool), valid, si, sj, sx, sy, EMPTY_GAP_PX + 1) & ~ok
         reach &= ~near_empty[moving] & ~occluding[si, sj]
         near_empty[np.flatnonzero(moving)[reach]] = True
         # (no empty neighbour to point to it: the surface ends along the search)
@@ -617,16 +619,19 @@ def find_discontinuities(
 
 
 #: longest gap of unmeasured pixels (px) between a measured surface and empty pixels (the
-#: camera ray hit nothing) across which the surface is taken to end against nothing: half the
-#: presets' 9 px matching window (the block matcher loses up to that beside an edge); a laser
-#: scanner's dropout at a silhouette is 1-2 px
-EMPTY_GAP_PX = 4
+#: camera ray hit nothing) across which the surface is taken to end against nothing: the
+#: contour pixel itself lost (a block matcher's window straddling the silhouette, a dropout at
+#: a grazing outline), as :func:`rangesim.evaluate.visible_truth` marks such a contour on the
+#: data's end beside it; a wider gap's far side is not known to be the silhouette (a thin
+#: nearer object could stand there unmeasured)
+EMPTY_GAP_PX = 1
 
 
 def _empty_within(empty: np.ndarray, valid: np.ndarray, si: np.ndarray, sj: np.ndarray, sx: np.ndarray,
                   sy: np.ndarray, steps: int) -> np.ndarray:
     """For each pixel (si, sj) stepping along (sx, sy): whether an empty pixel comes within
-    ``steps`` steps with no measured pixel and no image border before it."""
+    ``steps`` steps (after at most ``steps - 1`` unmeasured ones) with no measured pixel and
+    no image border before it."""
     h, w = empty.shape
     reach = np.zeros(si.size, bool)
     stopped = np.zeros(si.size, bool)
