@@ -62,55 +62,10 @@ def _keep_ellipse(x0, x1, x2, best, a1):  # pragma: no cover - compiled
 
 @numba.njit(**_JIT)
 def _real_ellipse_vector(A, tr, c1, det, p, q, a1):  # pragma: no cover - compiled
-    """:func:`_ellipse_vector` when the cubic's three roots are real (most fits), in real
-    arithmetic: the complex form's values to the bit (every imaginary part there is a signed
-    zero, which adds, multiplies and divides out exactly), without its complex products and
-    the hypot of each complex modulus."""
-    r = np.sqrt(max(-p / 3, 0.0))
-    phi = 0.0
-    if r != 0:
-        arg = min(max(-q / (2 * r ** 3), -1.0), 1.0)
-        phi = np.arccos(arg) / 3
-    best, found = -np.inf, False
-    for k in range(3):
-        lam = tr / 3 if r == 0 else tr / 3 + 2 * r * np.cos(phi - 2 * np.pi * k / 3)
-        for _ in range(2):  # Newton on the cubic: the closed form loses digits near double roots
-            f = ((lam - tr) * lam + c1) * lam - det
-            df = (3 * lam - 2 * tr) * lam + c1
-            if df == 0:
-                break
-            lam = lam - f / df
-        # the largest cross product of two rows of A - lam I (_cross_rows)
-        R00, R01, R02 = A[0, 0] - lam, A[0, 1], A[0, 2]
-        R10, R11, R12 = A[1, 0], A[1, 1] - lam, A[1, 2]
-        R20, R21, R22 = A[2, 0], A[2, 1], A[2, 2] - lam
-        n_best, w0, w1, w2 = -1.0, 0.0, 0.0, 0.0
-        for pair in range(3):
-            if pair == 0:
-                a0, a1_, a2, b0, b1, b2 = R00, R01, R02, R10, R11, R12
-            elif pair == 1:
-                a0, a1_, a2, b0, b1, b2 = R00, R01, R02, R20, R21, R22
-            else:
-                a0, a1_, a2, b0, b1, b2 = R10, R11, R12, R20, R21, R22
-            e0 = a1_ * b2 - a2 * b1
-            e1 = a2 * b0 - a0 * b2
-            e2 = a0 * b1 - a1_ * b0
-            n2 = abs(e0) ** 2 + abs(e1) ** 2 + abs(e2) ** 2
-            if n2 > n_best:
-                n_best, w0, w1, w2 = n2, e0, e1, e2
-        if not n_best > 1e-28:
-            continue  # a double root (rank 1): no unique eigenvector; a degenerate set
-        # geev's normalisation: the largest component positive
-        wb = w0
-        if abs(w1) > abs(wb):
-            wb = w1
-        if abs(w2) > abs(wb):
-            wb = w2
-        ph = wb / abs(wb)
-        x0, x1, x2 = w0 * ph, w1 * ph, w2 * ph
-        best, kept = _keep_ellipse(x0, x1, x2, best, a1)
-        found = found or kept
-    return found
+    """:func:`_ellipse_vector` when the cubic's three roots are real (most fits):
+    :func:`_real_ellipse_vector9` of the (3, 3) ``A``'s entries."""
+    return _real_ellipse_vector9(A[0, 0], A[0, 1], A[0, 2], A[1, 0], A[1, 1], A[1, 2], A[2, 0], A[2, 1], A[2, 2],
+                                 tr, c1, det, p, q, a1)
 
 
 @numba.njit(**_JIT)
@@ -174,8 +129,11 @@ def _ellipse_vector(M, a1):  # pragma: no cover - compiled
 @numba.njit(**_JIT)
 def _real_ellipse_vector9(A00, A01, A02, A10, A11, A12, A20, A21, A22, tr, c1, det, p, q,
                           a1):  # pragma: no cover - compiled
-    """:func:`_real_ellipse_vector` with the (3, 3) ``A`` as nine scalars (no array to
-    allocate per fit; the same arithmetic)."""
+    """:func:`_ellipse_vector` when the cubic's three roots are real (most fits), in real
+    arithmetic, with the (3, 3) ``A`` as nine scalars (no array to allocate per fit): the
+    complex form's values to the bit (every imaginary part there is a signed zero, which adds,
+    multiplies and divides out exactly), without its complex products and the hypot of each
+    complex modulus."""
     r = np.sqrt(max(-p / 3, 0.0))
     phi = 0.0
     if r != 0:
@@ -190,6 +148,7 @@ def _real_ellipse_vector9(A00, A01, A02, A10, A11, A12, A20, A21, A22, tr, c1, d
             if df == 0:
                 break
             lam = lam - f / df
+        # the largest cross product of two rows of A - lam I (_cross_rows)
         R00, R01, R02 = A00 - lam, A01, A02
         R10, R11, R12 = A10, A11 - lam, A12
         R20, R21, R22 = A20, A21, A22 - lam
@@ -208,7 +167,8 @@ def _real_ellipse_vector9(A00, A01, A02, A10, A11, A12, A20, A21, A22, tr, c1, d
             if n2 > n_best:
                 n_best, w0, w1, w2 = n2, e0, e1, e2
         if not n_best > 1e-28:
-            continue
+            continue  # a double root (rank 1): no unique eigenvector; a degenerate set
+        # geev's normalisation: the largest component positive
         wb = w0
         if abs(w1) > abs(wb):
             wb = w1

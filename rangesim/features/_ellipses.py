@@ -435,6 +435,7 @@ def _free(xy: np.ndarray, theta: np.ndarray, pixels: np.ndarray, labels: np.ndar
         return []
     # the accepted conics are real ellipses: their parameters in one compiled call (the rows of
     # ellipse_from_conic)
-    c, axes, angle, _ = ellipse_params(np.array([f[0] for f in found]))
+    c, axes, angle, ok = ellipse_params(np.array([f[0] for f in found]))
+    assert ok.all(), "free_ellipses accepted a conic that is no real ellipse"
     return [Ellipse((float(c[k, 0]), float(c[k, 1])), (float(axes[k, 0]), float(axes[k, 1])), float(angle[k]), rms, n)
             for k, (_, _, _, rms, n) in enumerate(found)]
