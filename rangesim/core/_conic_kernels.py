@@ -60,6 +60,19 @@ def _keep_ellipse(x0, x1, x2, best, a1):  # pragma: no cover - compiled
     return best, False
 
 
+@numba.njit(**{**_JIT, "inline": "always"})
+def _polish_root(lam, tr, c1, det):  # pragma: no cover - compiled
+    """Two Newton steps on ``lambda^3 - tr lambda^2 + c1 lambda - det`` from ``lam`` (real or
+    complex): the closed form loses digits near double roots."""
+    for _ in range(2):
+        f = ((lam - tr) * lam + c1) * lam - det
+        df = (3 * lam - 2 * tr) * lam + c1
+        if df == 0:
+            break
+        lam = lam - f / df
+    return lam
+
+
 @numba.njit(**_JIT)
 def _real_ellipse_vector(A, tr, c1, det, p, q, a1):  # pragma: no cover - compiled
     """:func:`_ellipse_vector` when the cubic's three roots are real (most fits):
@@ -102,12 +115,7 @@ def _ellipse_vector(M, a1):  # pragma: no cover - compiled
     w = np.empty(3, np.complex128)
     for k in range(3):
         lam = roots[k]
-        for _ in range(2):  # Newton on the cubic: the closed form loses digits near double roots
-            f = ((lam - tr) * lam + c1) * lam - det
-            df = (3 * lam - 2 * tr) * lam + c1
-            if df == 0:
-                break
-            lam = lam - f / df
+        lam = _polish_root(lam, tr, c1, det)
         for i in range(3):
             for j in range(3):
                 R[i, j] = A[i, j]
@@ -142,12 +150,7 @@ def _real_ellipse_vector9(A00, A01, A02, A10, A11, A12, A20, A21, A22, tr, c1, d
     best, found = -np.inf, False
     for k in range(3):
         lam = tr / 3 if r == 0 else tr / 3 + 2 * r * np.cos(phi - 2 * np.pi * k / 3)
-        for _ in range(2):  # Newton on the cubic: the closed form loses digits near double roots
-            f = ((lam - tr) * lam + c1) * lam - det
-            df = (3 * lam - 2 * tr) * lam + c1
-            if df == 0:
-                break
-            lam = lam - f / df
+        lam = _polish_root(lam, tr, c1, det)
         # the largest cross product of two rows of A - lam I (_cross_rows)
         R00, R01, R02 = A00 - lam, A01, A02
         R10, R11, R12 = A10, A11 - lam, A12
