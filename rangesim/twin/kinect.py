@@ -324,12 +324,19 @@ def kinect_twin(recorded: RangeScan, labels: np.ndarray, sensor: Any = "kinect_v
     return twin_scan, shapes
 
 
-def _depth_binned(residual: np.ndarray, depth: np.ndarray) -> dict[str, dict[str, float]]:
+def _by_depth(values: np.ndarray, depth: np.ndarray, statistic, name: str, count: str
+              ) -> dict[str, dict[str, float]]:
+    """Per :data:`DEPTH_BINS` bin (mm) of ``depth``: ``statistic`` of the finite ``values`` there
+    (as ``name``) and how many there are (as ``count``)."""
     out = {}
     for lo, hi in DEPTH_BINS:
-        sel = np.isfinite(residual) & (depth >= lo) & (depth < hi)
-        out[f"{lo:.0f}-{hi:.0f}"] = {"robust_std": robust_std(residual[sel]), "count": int(np.count_nonzero(sel))}
+        sel = np.isfinite(values) & (depth >= lo) & (depth < hi)
+        out[f"{lo:.0f}-{hi:.0f}"] = {name: statistic(values[sel]), count: int(np.count_nonzero(sel))}
     return out
+
+
+def _depth_binned(residual: np.ndarray, depth: np.ndarray) -> dict[str, dict[str, float]]:
+    return _by_depth(residual, depth, robust_std, "robust_std", "count")
 
 
 def _z2_coefficient(residual: np.ndarray, depth: np.ndarray) -> float:
@@ -383,12 +390,7 @@ def _plane_through(design: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 
 def _local_plane_binned(stds: np.ndarray, depths: np.ndarray) -> dict[str, dict[str, float]]:
-    out = {}
-    for lo, hi in DEPTH_BINS:
-        sel = (depths >= lo) & (depths < hi)
-        out[f"{lo:.0f}-{hi:.0f}"] = {"median_std": float(np.median(stds[sel])) if sel.any() else float("nan"),
-                                     "tiles": int(np.count_nonzero(sel))}
-    return out
+    return _by_depth(stds, depths, lambda v: float(np.median(v)) if v.size else float("nan"), "median_std", "tiles")
 
 
 def _level_gaps_in_steps(depth: np.ndarray, fb: float) -> dict[str, float]:
