@@ -750,6 +750,10 @@ def test_part_seen_from_cap_needs_the_working_range():
     # a cap of distances reaching into the range is seen
     cap = {"target": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "cap_deg": 0.0, "distance": [10.0, far + 100]}
     assert _part_seen_from_cap(cap, vertices, sensor)
+    # and so is a wide range whose even grid of distances (100, 575, ... 2000 mm) steps over
+    # the whole working range (250-450 mm) between two of its points
+    cap["distance"] = [100.0, 2000.0]
+    assert _part_seen_from_cap(cap, vertices, sensor)
 
 
 def test_sweep_refuses_a_target_away_from_the_part(sweep_dir, tmp_path):

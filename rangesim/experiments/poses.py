@@ -171,7 +171,9 @@ def check_distance_in_range(cap: Mapping[str, Any], scene: Any, sensor: Any, sou
             f"{float(cap['cap_deg']):g} deg): every view would be empty; aim the target at the part", source=source)
 
 
-#: the grid of poses over a cap that :func:`_part_seen_from_cap` tries: polar angles, azimuths, distances
+#: the grid of poses over a cap that :func:`_part_seen_from_cap` tries: polar angles, azimuths,
+#: distances (over the cap's range, and again over the part of it that can put the part within
+#: the working range)
 CAP_GRID = (9, 24, 5)
 
 
@@ -193,7 +195,14 @@ def _part_seen_from_cap(cap: Mapping[str, Any], vertices: np.ndarray, sensor: An
     u, v = np.meshgrid(np.linspace(0.0, 1.0, n_polar), np.arange(n_azimuth) / n_azimuth)
     directions = cap_directions(u.ravel(), v.ravel(), np.asarray(cap["axis"], dtype=np.float64), cap["cap_deg"])
     lo, hi = (float(x) for x in cap["distance"])
+    near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
+    # the distances over the whole range, and as many over the part of it that can hold the
+    # sphere within near..far (a wide range's even grid can step over a narrow working range)
+    reach = sphere + float(np.linalg.norm(centre - target))
+    d_lo, d_hi = max(lo, near - reach), min(hi, far + reach)
     distances = np.linspace(lo, hi, n_distance)
+    if d_lo <= d_hi:
+        distances = np.concatenate([distances, np.linspace(d_lo, d_hi, n_distance)])
     positions = target + distances[:, None, None] * directions[None]  # (D, N, 3)
     to_part = centre - positions
     dist = np.linalg.norm(to_part, axis=-1)
@@ -208,7 +217,6 @@ def _part_seen_from_cap(cap: Mapping[str, Any], vertices: np.ndarray, sensor: An
         widening = np.arcsin(np.clip(sphere / dist, 0.0, 1.0))
     inside = dist <= sphere
     in_cone = inside | (off_axis <= cone + widening)
-    near, far = float(sensor.params["range"]["near"]), float(sensor.params["range"]["far"])
     # the working range bounds depth along the optical axis, not distance: the sphere's nearest
     # depth is at most dist cos(the least off-axis angle it spans) - sphere (an off-centre part
     # farther than far in a straight line can lie within it); its farthest at most dist + sphere
