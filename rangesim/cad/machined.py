@@ -213,7 +213,8 @@ def machined_part(seed: int = 0, *, segments: int = 64, **design: Any) -> BuiltP
     base = machined_design(seed)
     unknown = sorted(set(design) - set(base))
     if unknown:
-        raise RangesimError(f"unknown machined_part parameter(s) {', '.join(unknown)}; known: {', '.join(base)}")
+        raise RangesimError(f"unknown machined_part parameter(s) {', '.join(unknown)}; known: seed, segments, "
+                            f"{', '.join(base)}")
     segments = P.whole(segments, "machined_part: segments", 3, MAX_SEGMENTS)
     p = {**base, **design}
     if isinstance(design.get("holes"), (list, tuple)):

@@ -96,7 +96,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
     positive("--sigma-mm", args.sigma_mm, allow_zero=True)
-    positive("--tolerance", args.tolerance, at_most=MAX_TOLERANCE_PX)
+    positive("--tolerance", args.tolerance, allow_zero=True, at_most=MAX_TOLERANCE_PX)
     if args.min_cos is not None and not 0 <= args.min_cos < 1:
         raise RangesimError(f"--min-cos must lie in [0, 1), got {args.min_cos:g}")
     for name in ("theta_deg", "alpha_deg"):

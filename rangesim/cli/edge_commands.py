@@ -105,7 +105,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise RangesimError("output must be a directory", source=out)
-    positive("--tolerance", args.tolerance, at_most=MAX_TOLERANCE_PX)
+    positive("--tolerance", args.tolerance, allow_zero=True, at_most=MAX_TOLERANCE_PX)
     positive("--crease-deg", args.crease_deg, upper=180)
     path = Path(args.scan)
     check_conf(path, args.conf)

@@ -26,6 +26,7 @@ from rangesim.core.constants import EdgeLabel
 from rangesim.core.errors import RangesimError
 from rangesim.core.geometry import circle_basis, project_circle
 from rangesim.core.rangescan import RangeScan
+from rangesim.core.scene_of_scan import check_scene_of_scan
 
 #: default jump rule: the 3D step between two neighbours within this angle of the viewing ray
 JUMP_ANGLE_DEG = 15.0
@@ -144,66 +145,6 @@ def _camera(scan: RangeScan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise RangesimError("ground truth needs the scan's pinhole intrinsics (scan.meta['K'])")
     inv = np.linalg.inv(scan.pose)
     return inv[:3, :3], inv[:3, 3], K
-
-
-#: a scan's true hits must lie on the scene faces they name within this many mm plus this
-#: share of their depth (float32 hits lie within ~1e-4 mm at 1 m; a scene moved by 0.1 mm misses)
-FACE_TOL_MM, FACE_TOL_REL = 0.01, 1e-4
-#: ... on at least this share of the hit pixels (the scene that made the scan: all of them)
-MIN_ON_FACE = 0.9
-
-
-def check_scene_of_scan(scan: RangeScan, scene: Any, R: np.ndarray, t: np.ndarray) -> None:
-    """Refuse a scene that is not the one a synthetic scan was made from, before any truth is drawn.
-
-    Every hit pixel names its object (``scan.part``) and triangle (``scan.face``); both must
-    exist in ``scene``, and the pixel's noise-free point (``xyz_true``, camera frame, taken to
-    the world by the pose) must lie on that triangle's plane within :data:`FACE_TOL_MM` +
-    :data:`FACE_TOL_REL` x depth on at least :data:`MIN_ON_FACE` of the hit pixels. A scene
-    with other faces or another placement drew truth for another object (its scores were
-    meaningless, and a face index past its mesh raised IndexError).
-
-    Parameters
-    ----------
-    scan : RangeScan
-        Synthetic scan (``part``, ``face``, ``xyz_true``).
-    scene : Scene
-    R, t : (3, 3), (3,) arrays
-        World-to-camera rotation and translation of the scan's pose.
-    """
-    part, face = np.asarray(scan.part), np.asarray(scan.face)
-    n_objects = len(scene.objects)
-    if part.max(initial=-1) >= n_objects:
-        raise RangesimError(f"scan hits object {int(part.max())} but the scene has {n_objects}: "
-                            "give the scene the scan was made from")
-    truth = np.asarray(scan.xyz_true, dtype=np.float64)
-    hit = (part >= 0) & np.isfinite(truth).all(axis=-1)
-    if not hit.any():
-        return
-    hits = truth[hit]
-    world = (hits - t) @ R  # camera -> world: x_w = R^T (x_c - t)
-    k_hit, f_hit = part[hit], face[hit]
-    on_face = np.zeros(k_hit.size, dtype=bool)
-    for k in np.unique(k_hit):
-        mesh = scene.objects[int(k)].mesh
-        mine = k_hit == k
-        f = f_hit[mine]
-        n_faces = len(mesh.faces)
-        if f.min() < 0 or f.max() >= n_faces:
-            raise RangesimError(f"scan hits triangle {int(f.max() if f.max() >= n_faces else f.min())} of object "
-                                f"{int(k)}, whose mesh in this scene has {n_faces:,}: give the scene the scan was "
-                                "made from")
-        normals = np.asarray(mesh.face_normals, dtype=np.float64)[f]
-        corner = np.asarray(mesh.vertices, dtype=np.float64)[np.asarray(mesh.faces)[f, 0]]
-        off = np.abs(np.einsum("nk,nk->n", world[mine] - corner, normals))
-        # plus float32's rounding of world coordinates far from the origin (Mitsuba's vertices)
-        tol = FACE_TOL_MM + FACE_TOL_REL * np.abs(hits[mine, 2]) + 1e-6 * np.abs(world[mine]).max(axis=1)
-        on_face[mine] = off <= tol
-    share = float(np.count_nonzero(on_face)) / on_face.size
-    if share < MIN_ON_FACE:
-        raise RangesimError(f"the scene is not the one this scan was made from: {100 * share:.1f} % of the scan's "
-                            f"true hits lie on the scene triangles they name (at least {100 * MIN_ON_FACE:.0f} % "
-                            "needed)")
 
 
 def _project(K: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -857,6 +798,7 @@ def ground_truth_features(
     P.number(spacing_px, "spacing_px", MIN_FEATURE_SPACING_PX, unit="pixels")
     scene = load_scene(scene)
     R, t, K = _camera(scan)
+    check_scene_of_scan(scan, scene, R, t)
     shift = np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1.0]])
     Kc = shift @ K  # x = column, y = row with integers at pixel centres
     circles: list[ImageEllipse] = []

@@ -19,6 +19,7 @@ from rangesim.core.conics import (
     sampson_distance,
 )
 from rangesim.core.errors import RangesimError
+from rangesim.core.scene_of_scan import check_scene_of_scan
 from rangesim.features._arc_ellipses import free_ellipses
 from rangesim.features._edge_points import check_range, check_scan_shape, edge_mask, edge_points, point_labels
 
@@ -325,6 +326,8 @@ def ellipses(
     mask = edge_mask(edge_map)
     if scan is not None:
         check_scan_shape(scan, mask)
+    if scene is not None:  # the model's circles are another part's on a scan of something else
+        check_scene_of_scan(scan, scene)
     axes_range = check_range(axes_range, "axes_range")
     H, W = mask.shape
     xy, theta, pixels = edge_points(edge_map, return_pixels=True)

@@ -206,8 +206,13 @@ def read_xyz(path: str | Path, *, units: str = "mm", conf: str | Path | None = N
     raw = read_bytes(path)
     numbered = [(k, line) for k, line in enumerate(raw.splitlines(), start=1)
                 if line.strip() and not line.lstrip().startswith((b"#", b"//"))]
+    header = None
     if numbered and _numbers_in(_xyz_fields(numbered[0][1])) == 0:
-        numbered = numbered[1:]  # column names
+        header, numbered = numbered[0], numbered[1:]  # column names
+    if not numbered and header is not None:
+        raise RangesimError(f"no points in the file: its only data line, line {header[0]} "
+                            f"{header[1].decode(errors='replace').strip()[:60]!r}, holds no number (taken for "
+                            "column names)", path)
     if not numbered:
         raise RangesimError("no points in the file", path)
     separated = b"," in raw or b";" in raw  # (a comment's comma only costs the per-line path)

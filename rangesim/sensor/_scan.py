@@ -55,6 +55,10 @@ PATTERN_BYTES = 2 * 16 * 4
 REFERENCE_BYTES = 100
 #: a scan with fewer valid pixels than this fraction (or none) is reported by :func:`empty_scan_reason`
 ALMOST_EMPTY = 0.001
+#: a scene under two pixels yet at least this many mm across is blamed on the camera's pixels
+#: (an extreme field of view or a tiny image), a smaller one on its units (a part written in
+#: metres or inches comes out 25-1000x too small: a 10 m or 400 mm part)
+PLAUSIBLE_SCENE_MM = 10.0
 
 
 class EmptyScanWarning(UserWarning):
@@ -141,9 +145,14 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
     distance = float(np.linalg.norm(eye - scene.bounds.mean(axis=0)))
     size = 2 * scene.bounding_radius
     footprint = max(distance, 1e-9) / sensor.focal_px
-    if size < 2 * footprint:
-        return (f"{head}: the scene is only {size:.3g} mm across, under {max(size / footprint, 0):.2g} pixel at "
-                f"{distance:.0f} mm (a bare mesh in metres or inches? give its units: a scene .toml's `units`, or "
+    if size < 2 * footprint and n_hits == 0:  # with hits, their statuses below say more
+        across = f"{head}: the scene is only {size:.3g} mm across, {max(size / footprint, 0):.2g} pixel at {distance:.0f} mm"
+        fov = float(sensor.params["camera"]["fov_deg"])
+        pixel_deg = fov / sensor.width  # the mean over the (horizontal) field
+        if size >= PLAUSIBLE_SCENE_MM:  # the camera's pixels, not the scene's units
+            return (f"{across}: each pixel spans {pixel_deg:.2g} degrees (a {fov:g} degree field of view over "
+                    f"{sensor.width} x {sensor.height} pixels)")
+        return (f"{across} (a bare mesh in metres or inches? give its units: a scene .toml's `units`, or "
                 f"`rangesim scan --units m` for a mesh file)")
     lo, hi = scene.bounds
     nearest = float(np.linalg.norm(eye - np.clip(eye, lo, hi)))

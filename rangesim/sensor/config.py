@@ -138,16 +138,21 @@ OPTIONAL_KEYS = {"tilt_deg", "theta_deg", "min_cos", "reference"}
 _RENDER_KEYS = tuple(f"render.{k}" for k in SCHEMA["render"])
 _MATCHING_KEYS = tuple(f"structured_light.{k}" for k in SCHEMA["structured_light"])
 UNUSED_BY_MODE: dict[str, tuple[str, ...]] = {
-    "geometric": ("camera.full_well_e", "camera.read_noise_e", *_RENDER_KEYS, *_MATCHING_KEYS),
+    "geometric": ("camera.full_well_e", "camera.read_noise_e", "laser.step", *_RENDER_KEYS, *_MATCHING_KEYS),
     "structured_light": ("camera.psf_px", "laser.sweep", "laser.step", "laser.stripe_width", "laser.tilt_deg",
                          "noise.sigma_px", "noise.quantization_px", "noise.min_signal", "noise.signal_px",
                          "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast", *_RENDER_KEYS),
     "rendered": ("camera.psf_px", "noise.sigma_px", "noise.quantization_px", "noise.signal_px",
                  "noise.correlation_mm", "noise.edge_gain", "noise.signal_contrast", *_MATCHING_KEYS),
 }
+#: keys of :data:`UNUSED_BY_MODE` that a sensor file of that mode may carry for another mode
+#: without a warning (the presets set ``laser.step``, the rendered mode's sheet spacing, for a
+#: switch to it); set by ``with_params``, ``--set`` or a sweep they still get one
+CARRIED_FOR_OTHER_MODES: dict[str, tuple[str, ...]] = {"geometric": ("laser.step",)}
 _WHY_UNUSED = {
-    "geometric": "the render and structured_light keys and the camera's full well and read noise are the "
-                 "rendered and structured-light modes' (its noise is the stripe model's)",
+    "geometric": "laser.step (the rendered mode's frame spacing), the render and structured_light keys and the "
+                 "camera's full well and read noise are the rendered and structured-light modes' (its noise is the "
+                 "stripe model's)",
     "structured_light": "its noise comes from the IR image and the block matcher (the structured_light keys)",
     "rendered": "its range error comes from the rendered frames",
 }
@@ -288,7 +293,8 @@ def sensor_from_dict(data: Mapping[str, Any], source: str = "dict", *, warn_unus
             f"mode {mode!r} is not available; available: {', '.join(MODES)}", source=source
         )
     _validate(params, source, mode)
-    unused = [k for k in unused_keys(params, mode) if warn_unused is None or k in warn_unused]
+    unused = [k for k in unused_keys(params, mode)
+              if (k not in CARRIED_FOR_OTHER_MODES.get(mode, ()) if warn_unused is None else k in warn_unused)]
     if unused:  # a sweep or a --set over them would change nothing, silently
         warnings.warn(f"{source}: the {mode} mode does not use {', '.join(unused)}: {_WHY_UNUSED[mode]}; "
                       "they change nothing in its scans", UnusedSensorKeyWarning, stacklevel=3)
