@@ -465,6 +465,61 @@ def test_jump_rule_allows_for_the_predicted_noise(name):
     assert jumps[True][1] >= 0.95, jumps       # the step: a jump in (nearly) every row
 
 
+def _noisy_frontal_step(sigma_fp: float, step_fp: float = 30.0) -> RangeScan:
+    """A frontal plane at 400 mm (footprint z / f = 1.33 mm) with Gaussian depth noise of
+    ``sigma_fp`` footprints, its sigma attached, and a step of ``step_fp`` footprints down at
+    column 48."""
+    K, rays = pinhole_rays(96, 300.0)
+    fp = 400.0 / 300.0
+    depth = np.full((96, 96), 400.0)
+    depth[:, 48:] += step_fp * fp
+    depth += sigma_fp * fp * np.random.default_rng(2).standard_normal(depth.shape)
+    return grid_scan(rays * depth[..., None], K, np.full(depth.shape, sigma_fp * fp, np.float32))
+
+
+@pytest.mark.parametrize("name", ["gradient", "normal"])
+def test_jump_rule_keeps_a_false_alarm_floor_under_heavy_noise(name, monkeypatch):
+    """Noise of 2 footprints on a frontal plane: a pair's difference has std 2.83 footprints,
+    and the footprint rule plus one std (3.73 + 2.83) is 2.3 std, crossed by 2 % of the
+    ~18,000 neighbour pairs; the floor of FALSE_JUMP_Z = 3.9 std crosses 1e-4 of them (about
+    2 pairs), and a 30-footprint step (7.5 std) stays a jump in every row."""
+    import rangesim.edges._discontinuities as disc
+    assert disc.FALSE_JUMP_Z == 3.9
+    scan = _noisy_frontal_step(2.0)
+    counts = {}
+    for floor in (0.0, disc.FALSE_JUMP_Z):
+        monkeypatch.setattr(disc, "FALSE_JUMP_Z", floor)
+        em = DETECTORS[name](scan)
+        jump = em.mask & (em.labels == EdgeLabel.JUMP)
+        cols = np.arange(96)
+        counts[floor] = (int(jump[:, (cols < 45) | (cols > 50)].sum()), jump[2:-2, 45:51].any(axis=1).mean())
+    assert counts[0.0][0] >= 100, counts
+    assert counts[disc.FALSE_JUMP_Z][0] <= 12, counts
+    assert counts[disc.FALSE_JUMP_Z][1] >= 0.95, counts
+
+
+def test_line_fit_marks_no_crease_where_noise_passes_its_largest_tolerance():
+    """A roof (faces 30 degrees either side of frontal: a 60 degree crease at column 32) whose
+    right third, on one face, has 10 footprints of noise (a face at grazing incidence): a unit
+    vector one footprint out swings there by atan(2.25 sqrt(2) 10) = 88 degrees, past the
+    largest opposite-pair tolerance (MAX_TOL_DEG, 60), so no crease can be told from the noise
+    and none is marked (828 were); the quiet part's 0.3 footprints give a tolerance of 44
+    degrees, and its 60 degree crease is found."""
+    import rangesim.edges._line_fit as lf
+    assert lf.MAX_TOL_DEG == 60.0
+    K, rays = pinhole_rays(96, 300.0)
+    fp = 400.0 / 300.0
+    cols = np.arange(96)
+    sigma = np.where(cols < 64, 0.3 * fp, 10.0 * fp).astype(np.float32)[None, :].repeat(96, 0)
+    depth = 400.0 + np.tan(np.radians(30.0)) * fp * np.abs(cols - 32)[None, :] \
+        + sigma * np.random.default_rng(3).standard_normal(sigma.shape)
+    em = DETECTORS["line_fit"](grid_scan(rays * depth[..., None], K, sigma))
+    crease = em.mask & np.isin(em.labels, [EdgeLabel.CONVEX, EdgeLabel.CONCAVE])
+    assert crease[:, 68:].sum() == 0
+    assert crease[4:-4, 30:35].any(axis=1).mean() >= 0.9           # the roof's crease
+    assert crease[:, :60].sum() - crease[:, 30:35].sum() <= 20      # and little else
+
+
 def _two_noise_plane(with_sigma: bool) -> RangeScan:
     """A frontal plane at 400 mm, depth noise 0.15 mm on the left two thirds, 0.6 mm on the
     right third (a far or grazing part of a scene), the noise model's sigma attached or not."""

@@ -167,7 +167,7 @@ def _planar(p, idx, centre, cos_opp, cos_sep):  # pragma: no cover - compiled
 
 #: noisy scans: the opposite-pair tolerance is ``atan(NOISE_K_LINE * sqrt(2) * noise)``
 #: (the angle noise of a unit vector to a neighbour one footprint away is ~sqrt(2) noise
-#: radians), at least 15 and at most 60 degrees
+#: radians), at least 15 and at most :data:`MAX_TOL_DEG` degrees
 NOISE_K_LINE = 3.0
 #: the same per pixel, where the scan's predicted noise says how noisy each pixel is: the
 #: margin the scan-wide figure needs for its noisiest faces is not needed (chosen on the
@@ -198,11 +198,19 @@ def _pixel_noise(scan: Any, valid: np.ndarray, footprint: np.ndarray, noise: flo
     return k, noise * np.where(ok, sigma_fp / np.median(sigma_fp[ok]), 1.0)
 
 
+#: the largest opposite-pair tolerance, degrees (beyond it the test would pass any bend). A
+#: pixel whose predicted noise (the scan's ``sigma``) asks for more (a face at grazing
+#: incidence, 10-20 footprints of noise) can tell no crease from its noise and marks none: its noise would otherwise be a salt of creases
+#: where the jump rule's false-alarm floor leaves no jumps
+#: (:data:`~rangesim.edges._discontinuities.FALSE_JUMP_Z`)
+MAX_TOL_DEG = 60.0
+
+
 def _noise_tolerance(k: float | np.ndarray, noise_p: float | np.ndarray, gain: np.ndarray | float = 1.0) -> float | np.ndarray:
     """The opposite-pair tolerance (degrees) of a noisy scan, ``atan(k sqrt(2) noise_p gain)``
     clipped to 15..60: a number, or (H, W) float32 per pixel (see :func:`_pixel_noise`; ``gain``
     the bend noise of the pixel's stride over that of stride 1, :mod:`~rangesim.edges._line_rings`)."""
-    tolerance = np.clip(np.degrees(np.arctan(k * np.sqrt(2) * noise_p * gain)), 15.0, 60.0)
+    tolerance = np.clip(np.degrees(np.arctan(k * np.sqrt(2) * noise_p * gain)), 15.0, MAX_TOL_DEG)
     return float(tolerance) if np.ndim(tolerance) == 0 else tolerance.astype(np.float32)
 
 
@@ -309,7 +317,8 @@ def line_fit(
         preset's 0.25: creases below that are not found, but noise is not an edge); where
         the scan carries its noise model's ``sigma``, per pixel, ``atan(2.25 sqrt(2)
         noise_p)`` with ``noise_p`` the scan's noise times the pixel's predicted noise over
-        the median pixel's (:data:`NOISE_K_LINE_LOCAL`).
+        the median pixel's (:data:`NOISE_K_LINE_LOCAL`), and a pixel whose tolerance would
+        exceed :data:`MAX_TOL_DEG` (60) marks no crease.
     line_sep_deg : float
         Least angle between two lines for them to count as distinct, degrees in (0, 90] (default 30; lines of
         a square grid are 45 degrees apart).
@@ -377,6 +386,7 @@ def line_fit(
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
     tolerance: float | np.ndarray = 15.0 if angle_tol_deg is None else float(angle_tol_deg)
     stride = None
+    saturated = None
     window = matching_window(scan) if angle_tol_deg is None else None
     sl_info: dict = {}
     if window is not None:
@@ -396,8 +406,13 @@ def line_fit(
                                       RING_TOL_DEG, gains)
                 gain = gains[np.maximum(stride, 1)]
             tolerance = _noise_tolerance(k_noise, noise_p, gain)
+            if np.ndim(k_noise):  # per pixel, where the scan's sigma says how noisy each one is
+                saturated = (k_noise == NOISE_K_LINE_LOCAL) & (
+                    k_noise * np.sqrt(2) * noise_p * gain > np.tan(np.radians(MAX_TOL_DEG)))
     if window is None:
         edge = _point_edges(xyz, z, valid, stride, tolerance, k, line_sep_deg, workers)
+        if saturated is not None:  # noise past the largest tolerance: no crease can be told from it
+            edge &= ~(saturated & ~(disc.occluding | disc.rim))
     # one-sided neighbourhoods that are the image's doing: an invalid or missing neighbour
     vpad = np.pad(valid, 1, constant_values=False)
     h, w = z.shape
