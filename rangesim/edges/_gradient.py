@@ -29,7 +29,14 @@ from rangesim.edges._noise import (
     raised_noise_threshold,
 )
 from rangesim.edges._scan_access import scan_depth
-from rangesim.edges._thinning import JUMP_CLEARANCE, near_mask, nonmax_suppress, ridge_offsets, thin_staircases
+from rangesim.edges._thinning import (
+    JUMP_CLEARANCE,
+    near_mask,
+    nonmax_suppress,
+    ridge_offsets,
+    stripe_clearance,
+    thin_staircases,
+)
 from rangesim.edges._trig import above_tan_half, atan2, bend_degrees
 from rangesim.edges.edgemap import RIM, EdgeMap
 
@@ -933,6 +940,68 @@ def crease_sigma(z: np.ndarray, pairs: np.ndarray, touching: np.ndarray, footpri
     return best
 
 
+#: the distances (px from a broken pair) :func:`step_noise_gain` raises the threshold at
+#: are those of the smoothing's reach, ``ceil(3 sigma)``; measured on this many rows and draws
+GAIN_ROWS, GAIN_DRAWS = 64, 64
+
+
+@functools.lru_cache(maxsize=32)
+def step_gain_profile(sigma: float) -> np.ndarray:
+    """The operators' response noise ``d`` px from a step (index d = 0, 1, ...), over an open
+    face's, after :func:`~rangesim.edges._gradient_steps.step_smooth` of ``sigma`` px (>= 1).
+
+    Beside a broken pair the step-preserving smoothing continues each run by the point
+    reflection ``2 z(e) - z(e - m)`` of its own pixels: the run's end pixel is not smoothed
+    across the step (its reflected taps cancel its neighbours'), and the pixels next to it
+    average few independent depths, so their responses are several times noisier than an open
+    face's, whose noise sets the threshold. Measured once per sigma (seeded) on a straight
+    step across :data:`GAIN_ROWS` rows of unit white noise, :data:`GAIN_DRAWS` times: the RMS
+    of the largest |response| per distance over the RMS far from the step.
+    """
+    from rangesim.edges._gradient_steps import step_smooth
+
+    reach = int(np.ceil(3 * sigma)) + 2
+    w = 2 * (2 * reach + 8)
+    c = w // 2 - 1                                     # the break between columns c and c + 1
+    pairs = np.zeros((4, GAIN_ROWS, w), bool)
+    pairs[0][:, c] = True
+    rng = np.random.default_rng(20261205)
+    acc = np.zeros(w, np.float64)
+    for _ in range(GAIN_DRAWS):
+        n = rng.standard_normal((GAIN_ROWS, w)).astype(np.float32)
+        resp = second_differences(step_smooth(n, pairs, sigma), pairs)
+        mag = np.abs(resp[0])
+        for r in resp[1:]:
+            np.fmax(mag, np.abs(r), out=mag)
+        acc += (np.nan_to_num(mag[4:-4].astype(np.float64)) ** 2).sum(axis=0)
+    rms = np.sqrt(acc)
+    far = float(np.mean(rms[6:c - reach]))
+    left = rms[c::-1][:reach + 1] / far                # d = 0 at the pair's own pixel
+    right = rms[c + 1:][:reach + 1] / far
+    return np.maximum(np.maximum(left, right), 1.0).astype(np.float32)
+
+
+def step_noise_gain(touching: np.ndarray, sigma: float) -> np.ndarray:
+    """Per pixel, :func:`step_gain_profile` at its chessboard distance ``d`` from the nearest
+    pixel of a jump (``touching``: :func:`gradient` passes the jumps' occluding and occluded
+    pixels, the set its ``jump_clearance`` is measured from) for ``d <= ceil(sigma)``, where the
+    reflected taps carry a third or more of the kernel (1.7-9 times the noise at 1.75 px); 1
+    beyond (1.2 times at 3 px, 1.75: raised there, a 45-degree crease 3 px from a step at
+    the INRIA preset's noise is lost in most rows)."""
+    prof = step_gain_profile(float(sigma))[:int(np.ceil(sigma)) + 1]
+    gain = np.ones(touching.shape, np.float32)
+    ring = np.asarray(touching, bool)
+    seen = ring.copy()
+    gain[ring] = prof[0]
+    for d in range(1, prof.size):
+        grown = _near(ring, 1, border=False)
+        new = grown & ~seen
+        gain[new] = prof[d]
+        seen |= new
+        ring = new
+    return gain
+
+
 def matching_stride(window: int | None) -> int:
     """Default half-width (pixels) of the crease operators for a block matcher's ``window``.
 
@@ -958,7 +1027,7 @@ def gradient(
     nms: bool = True,
     sigma: float | None = None,
     max_search: int = 50,
-    jump_clearance: int = JUMP_CLEARANCE,
+    jump_clearance: int | None = None,
     stride: int | None = None,
 ) -> EdgeMap:
     """Roof (crease) and jump edges from the paper's four 3x3 second-derivative operators.
@@ -1020,7 +1089,11 @@ def gradient(
         ``max(15, k * median)`` of
         ``2 atan(response)`` over valid pixels (the noise's bend, as if the neighbour
         across responded as much), ``k`` = :data:`~rangesim.edges._noise.NOISE_K_GRADIENT`
-        = 3 (~4 sigma of the bend estimate; 20 degrees at the preset noise).
+        = 3 (~4 sigma of the bend estimate; 20 degrees at the preset noise). On smoothed
+        noisy scans the crease test (not the thinning's candidates) raises it further within
+        the smoothing's reach of a broken pair by :func:`step_noise_gain` (the
+        step-preserving smoothing leaves the pixels beside a step barely smoothed: 2.2 / 1.7 /
+        1.2 times an open face's response noise 1 / 2 / 3 px from it at 1.75 px).
     jump_threshold : float
         Depth-discontinuity threshold in pixel footprints (finite, > 0): neighbours whose depths differ by
         more than this many footprints (``z / f`` mm) are a jump. Default
@@ -1031,7 +1104,7 @@ def gradient(
         Thin creases by non-maximum suppression across the edge direction (1 px wide),
         then drop the inner corners of the staircases it leaves on diagonal edges
         (:func:`~rangesim.edges._thinning.thin_staircases`: 8-connected, 1 px diagonals).
-        Either way no crease is kept within :data:`JUMP_CLEARANCE` (2) px of a jump
+        Either way no crease is kept within ``jump_clearance`` px of a jump
         (occluding or occluded side): the crest beside a jump is the jump itself.
     sigma : float, optional
         Gaussian pre-smoothing of the depth, pixels, 0 to 42.5 (0: none). Noisy scans need it: the
@@ -1048,9 +1121,14 @@ def gradient(
         block-matched scans (structured light): the matcher has smoothed over its window.
     max_search : int
         Pixels searched across NaN gaps for the jump rule, >= 0 (0: only direct neighbours).
-    jump_clearance : int
+    jump_clearance : int, optional
         No crease is kept within this many pixels (an integer >= 0) of a jump (the crest beside an occluding
-        edge is the jump itself); 0 keeps them, e.g. for fitting circles to whole rims.
+        edge is the jump itself); 0 keeps them, e.g. for fitting circles to whole rims. Default
+        (None): :func:`~rangesim.edges._thinning.stripe_clearance`, the pixels a laser stripe of
+        the scan's width rounds a step over, plus the operator's reach (2 px for the White
+        Scanner and Cyberware presets, 1 px for the INRIA preset, whose stripe images under a
+        pixel wide); :data:`JUMP_CLEARANCE` (2) where the scan does not say (recordings,
+        block-matched scans).
     stride : int, optional
         Half-width of the operators, pixels (an integer from 1 to 255): 1 is the paper's 3 x 3; ``s`` dilates them (a
         trous: second differences between pixels ``s`` apart, parts across a jump or a gap
@@ -1101,7 +1179,7 @@ def gradient(
     nms = P.flag(nms, "nms")
     # the kernel reaches 3 sigma: no wider than the largest window a detector takes
     sigma = P.number(sigma, "sigma", 0, P.MAX_WINDOW_PX / 6, unit="pixels", none=True)
-    jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels")
+    jump_clearance = P.whole(jump_clearance, "jump_clearance", 0, unit="pixels", none=True)
     stride = P.whole(stride, "stride", 1, P.MAX_WINDOW_PX, unit="pixels", none=True)
     z, valid = scan_depth(scan)
     disc, geo = discontinuities(scan, z, jump_threshold, max_search)
@@ -1134,6 +1212,8 @@ def gradient(
     if auto_threshold:
         threshold = 15.0
     fp = geo.footprint
+    if jump_clearance is None:
+        jump_clearance = stripe_clearance(scan, fp, valid)
     inv_fp = np.float32(1) / fp
     near_jump = None
     if sigma > 0 and stride == 1:
@@ -1226,8 +1306,15 @@ def gradient(
     # (a strided response is not split between two pixels: a crease between centres gives
     # both (s - 1/2) / s of it, and the neighbour's share would count it twice)
     bend = bend_degrees(t, half)
+    # (the crease test only, not the NMS candidates: a jump's own pixels keep thinning their
+    # neighbours as before) raised beside broken pairs, where the step-preserving smoothing
+    # leaves the depth barely smoothed and the responses noisier than the threshold's median
+    crease_threshold = pixel_threshold
+    if auto_threshold and noisy and sigma > 0 and stride == 1 and near_jump is None:
+        crease_threshold = np.minimum(np.asarray(pixel_threshold, np.float32) * step_noise_gain(disc.occluding | disc.occluded, sigma),
+                                      np.float32(89.0))
     with np.errstate(invalid="ignore"):
-        crease = bend > pixel_threshold
+        crease = bend > crease_threshold
     if nms:
         crease &= thin
     jump = disc.occluding
@@ -1264,7 +1351,7 @@ def gradient(
     np.copyto(direction, disc.direction, where=np.isfinite(disc.direction))
     params = {
         "threshold": float(threshold), "jump_threshold": float(jump_threshold), "nms": bool(nms),
-        "sigma": float(sigma), "max_search": int(max_search), "stride": stride,
+        "sigma": float(sigma), "max_search": int(max_search), "stride": stride, "jump_clearance": int(jump_clearance),
         "noise": None if noise is None else float(noise),
     }
     mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid
