@@ -506,12 +506,18 @@ def _contour_jumps(
     if len(pts) == 0:
         return
     across, y_major = minor
-    # which way across the line the seen face lies: a small step into it, projected
-    step = pts + (1e-4 * pts[:, 2])[:, None] * inward[seg]
-    uv0, uv1 = _project(K, pts), _project(K, step)
+    # which way across the line the seen face lies: a small step into it, projected, less its
+    # share along the line (a face seen nearly edge-on, a chamfer beside its foot, projects
+    # its step mostly along the line: the image coordinate alone then takes the wrong side)
+    eps = (1e-4 * pts[:, 2])[:, None]
+    uv0 = _project(K, pts)
+    into = _project(K, pts + eps * inward[seg]) - uv0
+    line = _project(K, pts + eps * along[seg]) - uv0
     axis = np.where(y_major, 0, 1)  # image coordinate across the line: u (0) or v (1)
     ar = np.arange(len(pts))
-    side = np.sign(uv1[ar, axis] - uv0[ar, axis])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        side = np.sign(into[ar, axis] - line[ar, axis] / line[ar, 1 - axis] * into[ar, 1 - axis])
+    side = np.nan_to_num(side)
     base = np.ceil(across - 0.5).astype(np.intp)  # first pixel whose centre lies past the line
     near = np.where(side > 0, base, base - 1)
     far = np.where(side > 0, base - 1, base)
