@@ -428,7 +428,7 @@ def _plate_solid(L: float, W: float, T: float, outline: str, size: float, n: int
         low = manifold3d.Manifold.cube((L, W, T - c)).translate((-L / 2, -W / 2, 0))
         # a frustum whose sides move in by c over its height c: 45 degree faces
         cap = manifold3d.Manifold.extrude(manifold3d.CrossSection.square((L, W), True), c, 0, 0.0,
-                                          ((L - 2 * c) / L, (W - 2 * c) / W)).translate((0, 0, T - c - 1e-9))
+                                          ((L - 2 * c) / L, (W - 2 * c) / W)).translate((0, 0, T - c))
         return low + cap
     raise RangesimError(f"machined_part: outline must be plain, chamfer or fillet, got {outline!r}")
 
