@@ -98,3 +98,22 @@ def test_detect_takes_tolerance_zero_as_the_library_does(tmp_path):
     assert (tmp_path / "d").is_dir()
     exact = rs.evaluate.score_edges(rs.edges.gradient(scan), scan, rs.datasets.plate_scene(), tolerance_px=0)
     assert np.isfinite(exact["f1"])
+
+
+@pytest.mark.parametrize(("size_fp", "words"), [
+    (1.05, r"only 0\.\d+ mm across.*--units m"),               # under two pixels, every hit measured
+    (6.0, r"every hit was measured, but the scene covers only \d+ of the 76,800 pixels"),
+])
+def test_an_almost_empty_scan_of_measured_hits_says_why(size_fp, words):
+    """A part of a few pixels whose hits are all measured fell through to the status branch,
+    which said '0 of the 4 hits lie outside the working range'."""
+    from rangesim.core.geometry import look_at
+    from rangesim.sensor._scan import EmptyScanWarning
+
+    sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 320, "camera.height": 240})
+    side = size_fp * 350.0 / sensor.focal_px
+    with pytest.warns(EmptyScanWarning, match=words) as caught:
+        scan = rs.scan([trimesh.creation.box(extents=(side, side, side))], sensor,
+                       pose=look_at((0, 0, 350), (0, 0, 0), up=(0, 1, 0)))
+    assert scan.valid.sum() >= 1
+    assert not any("0 of the" in str(w.message) for w in caught)

@@ -63,7 +63,10 @@ SIGMA_STEPS = 1.0
 #: the footprint rule plus :data:`SIGMA_STEPS` is the higher and decides alone. The value
 #: follows from the tail; it was checked (not chosen) on a White Scanner view with the
 #: stripe noise raised 8-16x (edge F1 0.60 / 0.37 -> 0.93 / 0.90, gradient) and on the machined
-#: parts' tuning seeds
+#: parts' tuning seeds. Where part of the noise is spatially correlated (``noise.correlation_mm``:
+#: cyberware_3030's 0.42 mm, ~0.8 px) neighbours share it and their difference is smaller, so
+#: the floor is that much more conservative there (about 7 standard deviations of its
+#: correlated part)
 FALSE_JUMP_Z = 3.9
 
 #: a nearer surface found across a laser-shadow gap by more than this many jump thresholds
@@ -133,7 +136,9 @@ def discontinuities(
     the least over the pixel's 5 x 5 neighbourhood, :func:`~rangesim.edges._noise.predicted_noise`):
     noise grows steeply with incidence, and a face seen at 70-75 degrees, whose neighbours
     already differ by 3 footprints, is otherwise a band of jumps wherever the noise adds
-    the rest (on the machined parts' seeds 0-7, inria_laser's noisy gradient F1 0.63 -> 0.81).
+    the rest (on the machined parts' seeds 0-7, inria_laser's noisy gradient F1 0.63 -> 0.81);
+    and never under :data:`FALSE_JUMP_Z` (3.9) such standard deviations where the scan is not
+    block-matched (a face noisier than ~0.9 footprints).
     Rounding moves each of two neighbours by at most half a quantum, so their
     difference by at most one, and a structured-light matcher errs by whole disparity
     levels on top of that: a Kinect's quantised table (steps of 1.5-3 footprints at 1-2 m)

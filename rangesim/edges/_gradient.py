@@ -978,7 +978,9 @@ def step_gain_profile(sigma: float) -> np.ndarray:
     far = float(np.mean(rms[6:c - reach]))
     left = rms[c::-1][:reach + 1] / far                # d = 0 at the pair's own pixel
     right = rms[c + 1:][:reach + 1] / far
-    return np.maximum(np.maximum(left, right), 1.0).astype(np.float32)
+    profile = np.maximum(np.maximum(left, right), 1.0).astype(np.float32)
+    profile.setflags(write=False)  # cached: shared by every caller
+    return profile
 
 
 def step_noise_gain(touching: np.ndarray, sigma: float) -> np.ndarray:
@@ -1126,9 +1128,11 @@ def gradient(
         edge is the jump itself); 0 keeps them, e.g. for fitting circles to whole rims. Default
         (None): :func:`~rangesim.edges._thinning.stripe_clearance`, the pixels a laser stripe of
         the scan's width rounds a step over, plus the operator's reach (2 px for the White
-        Scanner and Cyberware presets, 1 px for the INRIA preset, whose stripe images under a
-        pixel wide); :data:`JUMP_CLEARANCE` (2) where the scan does not say (recordings,
-        block-matched scans).
+        Scanner and Cyberware presets at their own resolutions, 1 px for the INRIA preset, whose
+        stripe images under a pixel wide, and for a White Scanner scan at a quarter of its
+        resolution); :data:`JUMP_CLEARANCE` (2) where the scan does not say (recordings read
+        without a laser sensor, block-matched scans). On noisy scans the crease threshold beside
+        a jump is raised (above) whatever the clearance, 0 included.
     stride : int, optional
         Half-width of the operators, pixels (an integer from 1 to 255): 1 is the paper's 3 x 3; ``s`` dilates them (a
         trous: second differences between pixels ``s`` apart, parts across a jump or a gap

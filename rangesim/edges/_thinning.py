@@ -12,6 +12,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from rangesim.core.params import MAX_WINDOW_PX
 from rangesim.edges._grid import nonzero2
 
 __all__ = ["nearest_axis", "nonmax_suppress", "ridge_offsets", "thin_staircases", "JUMP_CLEARANCE", "near_mask", "stripe_clearance",
@@ -267,15 +268,17 @@ def stripe_clearance(scan: Any, footprint: np.ndarray, valid: np.ndarray) -> int
     straddling a step mixes the light of both surfaces in the peak
     (:mod:`rangesim.sensor.mixed_pixels`): a pixel ``d`` pixels from the step is moved while
     more than 1 % of the profile (:data:`MIXING_SIGMAS` sigma_w) lies beyond it, i.e. for
-    ``d < MIXING_SIGMAS sigma_w / footprint`` (frontal: the stripe's widest image). The jump's
+    ``d < MIXING_SIGMAS sigma_w / footprint`` (the stripe's image on a face square to the sheet;
+    the mixing reaches further at grazing laser incidence, by up to 1 / cos of it). The jump's
     own pixel lies about half a pixel from the step, the k-th pixel beyond it k + 1/2: the
     mixed ones beyond the jump pixel are ``m = max(0, ceil(MIXING_SIGMAS sigma_w / fp - 3/2))``
     and a 3 x 3 operator sees one of them (or the jump pixel) up to ``m + 1`` px from the
     jump, the clearance returned. ``fp`` is the median footprint of the measured pixels.
-    White Scanner (0.5 mm stripe, 0.27 mm footprints): 2; Cyberware (1 mm, 0.5 mm): 2; INRIA
-    (1.5 mm, 1.45 mm: its stripe images under a pixel wide): 1. Scans without a laser stripe
-    in ``meta["sensor"]`` (recordings, block-matched scans, whose matcher rounds a step over
-    its window) keep :data:`JUMP_CLEARANCE`.
+    White Scanner (0.5 mm stripe, 0.27 mm footprints at its own resolution): 2; Cyberware
+    (1 mm, 0.5 mm): 2; INRIA (1.5 mm, 1.45 mm: its stripe images under a pixel wide): 1; at
+    most :data:`~rangesim.core.params.MAX_WINDOW_PX`. Scans without a laser stripe in
+    ``meta["sensor"]`` (recordings read without a laser sensor, block-matched scans, whose
+    matcher rounds a step over its window) keep :data:`JUMP_CLEARANCE`.
     """
     meta = getattr(scan, "meta", None) or {}
     sensor = meta.get("sensor") if isinstance(meta, dict) else None
@@ -290,7 +293,7 @@ def stripe_clearance(scan: Any, footprint: np.ndarray, valid: np.ndarray) -> int
     if fp.size == 0 or not np.isfinite(fwhm) or fwhm < 0:
         return JUMP_CLEARANCE
     reach = MIXING_SIGMAS * fwhm / (2.0 * np.sqrt(2.0 * np.log(2.0))) / float(np.median(fp))
-    return 1 + max(0, int(np.ceil(reach - 1.5)))
+    return min(1 + max(0, int(np.ceil(reach - 1.5))), MAX_WINDOW_PX)
 
 
 def near_mask(where: np.ndarray, ref: np.ndarray, r: int) -> np.ndarray:

@@ -145,7 +145,8 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
     distance = float(np.linalg.norm(eye - scene.bounds.mean(axis=0)))
     size = 2 * scene.bounding_radius
     footprint = max(distance, 1e-9) / sensor.focal_px
-    if size < 2 * footprint and n_hits == 0:  # with hits, their statuses below say more
+    invalid_hits = counts[Status.OUT_OF_RANGE] + counts[Status.SHADOW] + counts[Status.DROPOUT]
+    if size < 2 * footprint and invalid_hits == 0:  # hits that failed: their statuses below say more
         across = f"{head}: the scene is only {size:.3g} mm across, {max(size / footprint, 0):.2g} pixel at {distance:.0f} mm"
         fov = float(sensor.params["camera"]["fov_deg"])
         pixel_deg = fov / sensor.width  # the mean over the (horizontal) field
@@ -162,6 +163,9 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
     if n_hits == 0:
         return (f"{head}: the camera sees no surface (nothing of the scene within its "
                 f"{sensor.params['camera']['fov_deg']:g} degree field of view from this pose)")
+    if invalid_hits == 0:  # every hit measured: the scene covers too few pixels
+        return (f"{head}: every hit was measured, but the scene covers only {n_hits:,} of the {total:,} pixels "
+                f"({size:.3g} mm across, {size / footprint:.3g} pixels at {distance:.0f} mm)")
     worst = max((Status.OUT_OF_RANGE, Status.SHADOW, Status.DROPOUT), key=lambda code: counts[code])
     if worst == Status.OUT_OF_RANGE and result.xyz_true is not None:
         z = np.asarray(result.xyz_true, float)[..., 2][result.status == Status.OUT_OF_RANGE]
