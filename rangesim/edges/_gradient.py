@@ -1315,8 +1315,8 @@ def gradient(
     # leaves the depth barely smoothed and the responses noisier than the threshold's median
     crease_threshold = pixel_threshold
     if auto_threshold and noisy and sigma > 0 and stride == 1 and near_jump is None:
-        crease_threshold = np.minimum(np.asarray(pixel_threshold, np.float32) * step_noise_gain(disc.occluding | disc.occluded, sigma),
-                                      np.float32(89.0))
+        gain = step_noise_gain(disc.occluding | disc.occluded, sigma)
+        crease_threshold = np.minimum(np.asarray(pixel_threshold, np.float32) * gain, np.float32(89.0))
     with np.errstate(invalid="ignore"):
         crease = bend > crease_threshold
     if nms:
@@ -1355,7 +1355,8 @@ def gradient(
     np.copyto(direction, disc.direction, where=np.isfinite(disc.direction))
     params = {
         "threshold": float(threshold), "jump_threshold": float(jump_threshold), "nms": bool(nms),
-        "sigma": float(sigma), "max_search": int(max_search), "stride": stride, "jump_clearance": int(jump_clearance),
+        "sigma": float(sigma), "max_search": int(max_search), "stride": stride,
+        "jump_clearance": int(jump_clearance),
         "noise": None if noise is None else float(noise),
     }
     mask = with_gap_creases(crease | jump | rim, labels, disc, offset) & valid

@@ -200,9 +200,9 @@ def _pixel_noise(scan: Any, valid: np.ndarray, footprint: np.ndarray, noise: flo
 
 #: the largest opposite-pair tolerance, degrees (beyond it the test would pass any bend). A
 #: pixel whose predicted noise (the scan's ``sigma``) asks for more (a face at grazing
-#: incidence, 10-20 footprints of noise) can tell no crease from its noise and marks none: its noise would otherwise be a salt of creases
-#: where the jump rule's false-alarm floor leaves no jumps
-#: (:data:`~rangesim.edges._discontinuities.FALSE_JUMP_Z`)
+#: incidence, 10-20 footprints of noise) can tell no crease from its noise and marks none:
+#: its noise would otherwise be a salt of creases where the jump rule's false-alarm floor
+#: leaves no jumps (:data:`~rangesim.edges._discontinuities.FALSE_JUMP_Z`)
 MAX_TOL_DEG = 60.0
 
 

@@ -15,8 +15,8 @@ from scipy import ndimage
 from rangesim.core.params import MAX_WINDOW_PX
 from rangesim.edges._grid import nonzero2
 
-__all__ = ["nearest_axis", "nonmax_suppress", "ridge_offsets", "thin_staircases", "JUMP_CLEARANCE", "near_mask", "stripe_clearance",
-           "hysteresis", "drop_specks", "SPECK_MAX_PX"]
+__all__ = ["nearest_axis", "nonmax_suppress", "ridge_offsets", "thin_staircases", "JUMP_CLEARANCE", "near_mask",
+           "stripe_clearance", "hysteresis", "drop_specks", "SPECK_MAX_PX"]
 
 
 def nearest_axis(direction: np.ndarray) -> np.ndarray:

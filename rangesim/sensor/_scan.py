@@ -146,8 +146,9 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
     size = 2 * scene.bounding_radius
     footprint = max(distance, 1e-9) / sensor.focal_px
     invalid_hits = counts[Status.OUT_OF_RANGE] + counts[Status.SHADOW] + counts[Status.DROPOUT]
-    if size < 2 * footprint and invalid_hits == 0:  # hits that failed: their statuses below say more
-        across = f"{head}: the scene is only {size:.3g} mm across, {max(size / footprint, 0):.2g} pixel at {distance:.0f} mm"
+    if size < 2 * footprint and invalid_hits == 0:  # (failed hits: their statuses below say why)
+        across = (f"{head}: the scene is only {size:.3g} mm across, {max(size / footprint, 0):.2g} pixel at "
+                  f"{distance:.0f} mm")
         fov = float(sensor.params["camera"]["fov_deg"])
         pixel_deg = fov / sensor.width  # the mean over the (horizontal) field
         if size >= PLAUSIBLE_SCENE_MM:  # the camera's pixels, not the scene's units
