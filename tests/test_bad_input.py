@@ -240,11 +240,11 @@ def test_reused_dataset_folder_loses_stale_views(tmp_path):
 
     views = tmp_path / "views"
     views.mkdir()
-    for name in ("0000_a.exr", "0000_a_truth.npz", "0000_a.json", "0001_b.exr", "0001_b.json", "0000_a.npz",
-                 "notes.txt"):
+    a, b = "000000_0123456789", "000001_abcdefabcd"  # the dataset's own names: index_key
+    for name in (f"{a}.exr", f"{a}_truth.npz", f"{a}.json", f"{b}.exr", f"{b}.json", f"{a}.npz", "notes.txt"):
         (views / name).write_text("x")
-    assert _remove_stale_views(views, ["0000_a"], "exr") == 1  # one view of the other plan (its record)
-    assert sorted(p.name for p in views.iterdir()) == ["0000_a.exr", "0000_a.json", "0000_a_truth.npz", "notes.txt"]
+    assert _remove_stale_views(views, [a], "exr") == 1  # one view of the other plan (its record)
+    assert sorted(p.name for p in views.iterdir()) == [f"{a}.exr", f"{a}.json", f"{a}_truth.npz", "notes.txt"]
 
 
 def test_a_dataset_over_another_says_it_replaced_it(tmp_path, capsys):

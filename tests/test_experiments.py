@@ -833,3 +833,30 @@ def test_a_misspelt_model_parameter_is_refused_before_any_task(sweep_dir, tmp_pa
     message = str(info.value)
     assert "\n" not in message and "thicknes" in message and "no task's scene can be built" in message, message
     assert not (tmp_path / "out").exists()
+
+
+def test_a_reused_folder_keeps_the_users_own_files(sweep_dir, serial_run, tmp_path):
+    """A sweep rerun into its folder rebuilds its own plots (f1_vs_*.png) and no other
+    picture; a dataset's views folder loses only the view files of an earlier plan (its own
+    names: index_key.exr / .npz / _truth.npz / .json), not a user's files beside them."""
+    import shutil
+
+    from rangesim.experiments.dataset import _remove_stale_views
+
+    out = tmp_path / "reused"
+    shutil.copytree(sweep_dir / "serial", out)
+    (out / "plots" / "my_figure.png").write_bytes(b"\x89PNG mine")
+    run_sweep(sweep_dir / "sweep.toml", out, workers=0, progress=False)
+    assert (out / "plots" / "my_figure.png").read_bytes() == b"\x89PNG mine"
+    assert (out / "plots" / "f1_vs_snr.png").is_file()
+
+    views = tmp_path / "views"
+    views.mkdir()
+    mine = ["photo.exr", "data.npz", "readme.json", "12_a.exr", "000001_abcdef012x.json"]
+    kept = ["000000_0123456789.exr", "000000_0123456789_truth.npz", "000000_0123456789.json"]
+    stale = ["000007_fedcba9876.exr", "000007_fedcba9876_truth.npz", "000007_fedcba9876.json",
+             "000000_0123456789.npz"]                            # the kept view in another format
+    for name in mine + kept + stale:
+        (views / name).write_text("x")
+    assert _remove_stale_views(views, ["000000_0123456789"], "exr") == 1
+    assert sorted(p.name for p in views.iterdir()) == sorted(mine + kept)

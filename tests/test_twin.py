@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -129,13 +130,18 @@ def test_cli_writes_metrics_and_picture(data_dir, tmp_path):
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
 
-def test_cli_without_mesh_on_mosd(data_dir, tmp_path):
+def test_cli_without_mesh_on_mosd(data_dir, tmp_path, monkeypatch):
+    """(Given as a path relative to the working folder, the recording is written to
+    metrics.json as an absolute one: read from the output folder, the relative one pointed
+    nowhere.)"""
     pcd = data_dir / "mosd-kinect" / "test0.pcd"
     out = tmp_path / "mosd"
-    assert _cli([pcd, "--sensor", "kinect", "--out", out]) == 0
+    monkeypatch.chdir(data_dir)
+    assert _cli([Path("mosd-kinect") / "test0.pcd", "--sensor", "kinect", "--out", out]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["truth"] == "regions"
     assert all("f1" in e for e in metrics["edges"].values())
+    assert Path(metrics["recorded"]) == pcd.resolve()
 
 
 # -- the shared noise model, joint calibration and realism metrics -------------------------------

@@ -117,3 +117,20 @@ def test_an_almost_empty_scan_of_measured_hits_says_why(size_fp, words):
                        pose=look_at((0, 0, 350), (0, 0, 0), up=(0, 1, 0)))
     assert scan.valid.sum() >= 1
     assert not any("0 of the" in str(w.message) for w in caught)
+
+
+def test_a_scene_behind_the_camera_is_said_to_be_behind_it():
+    """A pose looking away from the part said the scene lay 2,000 mm away, beyond the working
+    range; looking at it from as far, that is the reason."""
+    from rangesim.sensor._scan import EmptyScanWarning
+
+    sensor = rs.load_sensor("white_scanner").with_params({"camera.width": 32, "camera.height": 24})
+    box = trimesh.creation.box(extents=(60.0, 60.0, 20.0))
+    away = np.diag([1.0, -1.0, -1.0, 1.0])
+    away[2, 3] = -2000.0                       # at z = -2000 mm, looking along -z: away from the box
+    with pytest.warns(EmptyScanWarning, match="the scene lies behind the camera"):
+        rs.scan([box], sensor, pose=away)
+    towards = away.copy()
+    towards[2, 3] = 2000.0                     # at z = +2000 mm, looking along -z: at the box
+    with pytest.warns(EmptyScanWarning, match="beyond the end of white_scanner's working range"):
+        rs.scan([box], sensor, pose=towards)

@@ -30,7 +30,7 @@ def _detectors_only(scan, labels, args, out: Path) -> tuple[dict, dict, Any]:
 
     truth = scan_truth(scan, None, labels)
     metrics: dict[str, Any] = {
-        "recorded": str(args.recorded), "mesh": None, "valid": int(scan.valid.sum()),
+        "recorded": str(Path(args.recorded).resolve()), "mesh": None, "valid": int(scan.valid.sum()),
         "truth": None if truth is None else truth.kind, "edges": {},
         **_recorded_sensor(scan, args),
     }
@@ -74,7 +74,9 @@ def _kinect_twin(scan, labels, args, out: Path) -> int:
         if exc.source is not None:
             raise
         raise RangesimError(str(exc), source=args.recorded) from exc  # (no table, no object: the frame's)
-    metrics = {"recorded": str(args.recorded), "mesh": None, "sensor": args.sensor, **_recorded_sensor(scan, args),
+    # absolute paths: metrics.json is read from its own folder
+    metrics = {"recorded": str(Path(args.recorded).resolve()), "mesh": None, "sensor": args.sensor,
+               **_recorded_sensor(scan, args),
                **metrics}
     _write_outputs(out, metrics, lambda tmp: save_comparison(scan, twin_scan, metrics, tmp, detector=args.detector,
                                                              edge_maps=edge_maps))
@@ -154,7 +156,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise
         # the twin's refusals (no overlap) concern the mesh against the recording, as calibrate's do
         raise RangesimError(str(exc), source=f"{args.mesh} with {path}") from exc
-    metrics = {"recorded": str(path), "mesh": str(args.mesh), "sensor": args.sensor, **_recorded_sensor(scan, args),
+    metrics = {"recorded": str(Path(path).resolve()), "mesh": str(Path(args.mesh).resolve()), "sensor": args.sensor,
+               **_recorded_sensor(scan, args),
                **metrics}
     _write_outputs(out, metrics, lambda tmp: save_comparison(scan, twin_scan, metrics, tmp, detector=args.detector,
                                                              edge_maps=edge_maps))

@@ -76,7 +76,7 @@ def cmd_dataset(args: argparse.Namespace) -> int:
         raise RangesimError(f"--views must be at least 1, got {args.views}")
     if args.seed < 0:
         raise RangesimError(f"--seed must not be negative, got {args.seed}")
-    positive("--cap-deg", args.cap_deg, allow_zero=True, upper=180.0001)
+    positive("--cap-deg", args.cap_deg, allow_zero=True, at_most=180.0)  # 180: the whole sphere
     positive("--crease-deg", args.crease_deg, upper=180)
     distance = None
     if args.distance is not None:

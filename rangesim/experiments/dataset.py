@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -291,13 +292,18 @@ def make_dataset(scene: str | Path, sensor: Any = "white_scanner", views: int = 
                       where, records, sorted(empty), replaced)
 
 
+#: the files a dataset writes in its views folder (:func:`_stem`: index, then the key's first
+#: 10 hex digits): only these are ever removed from a reused folder
+_VIEW_FILE = re.compile(r"\d{6}_[0-9a-f]{10}(_truth\.npz|\.exr|\.npz|\.json)")
+
+
 def _remove_stale_views(views_dir: Path, stems: list[str], fmt: str) -> int:
     """Delete view files of an earlier plan (other views, counts or formats) left in a reused
-    folder; the number of views (their records) removed."""
+    folder, and no other file; the number of views (their records) removed."""
     keep = {name for stem in stems for name in (f"{stem}.{fmt}", f"{stem}_truth.npz", f"{stem}.json")}
     removed = 0
     for path in views_dir.glob("*"):
-        if path.is_file() and path.name not in keep and path.suffix in (".exr", ".npz", ".json"):
+        if path.is_file() and path.name not in keep and _VIEW_FILE.fullmatch(path.name):
             removed += path.suffix == ".json"
             path.unlink(missing_ok=True)
     return removed

@@ -133,7 +133,7 @@ def run_sweep(sweep: str | Path | SweepSpec, out: str | Path, *, keep_scans: boo
         # this sweep.json
         stale = [out / name for name in TABLE_NAMES]
         if plots or replaced:
-            stale += (out / "plots").glob("*.png")
+            stale += (out / "plots").glob("f1_vs_*.png")  # the sweep's own plots, no other picture
         for path in stale:
             path.unlink(missing_ok=True)
         if todo:

@@ -158,6 +158,10 @@ def empty_scan_reason(result: RangeScan, scene: Scene, sensor: Sensor) -> str | 
                 f"`rangesim scan --units m` for a mesh file)")
     lo, hi = scene.bounds
     nearest = float(np.linalg.norm(eye - np.clip(eye, lo, hi)))
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    in_camera = (corners - eye) @ pose[:3, :3]  # world -> camera frame (the camera looks along +z)
+    if n_hits == 0 and np.all(in_camera[:, 2] <= 0):
+        return f"{head}: the scene lies behind the camera (the pose looks away from it)"
     if n_hits == 0 and nearest > far:
         return (f"{head}: the scene lies {nearest:,.0f} mm or more from the camera, beyond the end of "
                 f"{sensor.name}'s working range {near:g}-{far:g} mm")
