@@ -860,3 +860,30 @@ def test_a_reused_folder_keeps_the_users_own_files(sweep_dir, serial_run, tmp_pa
         (views / name).write_text("x")
     assert _remove_stale_views(views, ["000000_0123456789"], "exr") == 1
     assert sorted(p.name for p in views.iterdir()) == sorted(mine + kept)
+
+
+def test_a_grid_key_one_sensor_does_not_read_repeats_its_scans(sweep_dir, tmp_path):
+    """structured_light.window swept over a laser sensor and a structured-light one: the laser
+    sensor's scans are the same at every value (the same noise seed: the planner's warning says
+    they repeat; they drew new noise per value, and its plot showed the noise as an effect),
+    the structured-light sensor's differ."""
+    import shutil
+
+    from rangesim.experiments.grid import plan_sweep
+    from rangesim.experiments.sweep_file import load_sweep
+
+    for name in ("scene.toml", "tiny.toml"):
+        shutil.copy(sweep_dir / name, tmp_path / name)
+    (tmp_path / "s.toml").write_text(
+        'name = "mixed"\nscenes = ["scene.toml"]\nsensors = ["tiny.toml", "kinect_v1"]\nviews = 1\nseed = 3\n'
+        'detectors = ["gradient"]\n[pose]\ncap_deg = 10\ndistance = [600, 700]\n'
+        '[grid]\n"structured_light.window" = [7, 9]\n')
+    with pytest.warns(UserWarning, match="which tiny.toml .* does not use: those scans repeat"):
+        spec = load_sweep(tmp_path / "s.toml")
+    seeds = {}
+    for task in plan_sweep(spec):
+        seeds.setdefault(task.columns["sensor"], []).append(task.payload["noise_seed"])
+    laser, = (v for k, v in seeds.items() if k.startswith("tiny"))
+    matched, = (v for k, v in seeds.items() if not k.startswith("tiny"))
+    assert len(laser) == 2 and laser[0] == laser[1]
+    assert len(matched) == 2 and matched[0] != matched[1]

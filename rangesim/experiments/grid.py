@@ -12,7 +12,8 @@ repeat), each with a key and seeds derived from its parameters.
   parameters that make the thing seeded. The pose seed covers the scene, its object
   overrides, the pose table and the view index, not the sensor: every sensor setting of a
   sweep sees the same views (paired comparisons). The noise seed covers everything the scan
-  depends on (scene, overrides, sensor, pose table, view, repeat). Neither depends on the
+  depends on (scene, overrides, sensor, pose table, view, repeat): of the sensor, the settings
+  its mode reads (a grid key only some sensors read repeats the others' scans exactly). Neither depends on the
   detectors, on the order tasks run in or on how many workers run them.
 """
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 
 from rangesim.core.errors import RangesimError
 from rangesim.experiments.sweep_file import SweepSpec, split_overrides
-from rangesim.sensor.config import UnusedSensorKeyWarning
+from rangesim.sensor.config import UNUSED_BY_MODE, UnusedSensorKeyWarning
 
 #: bump when a task's output changes meaning: old task files then no longer match any key
 TASK_FORMAT = 1
@@ -146,6 +147,16 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
                     warnings.simplefilter("ignore", UnusedSensorKeyWarning)
                     sensor = sensors[sensor_ref.label].with_params(changes) if changes else sensors[sensor_ref.label]
                 sensor_data = sensor.to_dict()
+                # the noise seed sees only the settings the sensor reads: a swept key its mode
+                # leaves idle repeats its scans exactly, as the planner's warning says
+                read = {k: v for k, v in changes.items() if k not in UNUSED_BY_MODE.get(sensor.mode, ())}
+                if read != changes:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", UnusedSensorKeyWarning)
+                        seeded = (sensors[sensor_ref.label].with_params(read) if read
+                                  else sensors[sensor_ref.label]).to_dict()
+                else:
+                    seeded = sensor_data
                 objects = _merge_objects(fixed_objects, object_changes)
                 pose_table = None if spec.views == 0 else {**spec.pose, **fixed_pose, **pose_changes}
                 for view in range(max(spec.views, 1)):
@@ -153,7 +164,7 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
                     pose_seed = derive_seed(spec.seed, pose_id)
                     for repeat in range(spec.repeats):
                         scan_id = {**pose_id, "sensor": sensor_data, "repeat": repeat}
-                        noise_seed = derive_seed(spec.seed, scan_id)
+                        noise_seed = derive_seed(spec.seed, {**scan_id, "sensor": seeded})
                         key = task_key({"format": TASK_FORMAT, "code": code_fingerprint(), "seed": spec.seed,
                                         "scan": scan_id, "evaluation": evaluation})
                         columns = {"scene": scene.label, "sensor": sensor_ref.label, **combo,
