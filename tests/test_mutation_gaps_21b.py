@@ -146,26 +146,17 @@ def _one_pose(d):
     return {"target": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "cap_deg": 0.0, "distance": [d, d]}
 
 
-def test_part_seen_from_cap_takes_the_spheres_near_side_against_far():
-    """white_scanner: far = 450 mm. A 40 mm sphere on the axis at 480 mm spans depths 440-520:
-    its near side is within range (seen); at 495 mm it spans 455-535 (not seen)."""
+@pytest.mark.parametrize(("limit", "seen_at", "unseen_at"), [("far", 480.0, 495.0), ("near", 220.0, 205.0)])
+def test_part_seen_from_cap_takes_the_spheres_extent_against_the_range(limit, seen_at, unseen_at):
+    """white_scanner: near 250, far 450 mm. A 40 mm sphere on the axis at 480 mm spans depths
+    440-520: its near side is within range (seen); at 495 mm it spans 455-535 (not seen). At
+    220 mm it spans 180-260: its far side is within range (seen); at 205 mm 165-245 (not seen)."""
     from rangesim.experiments.poses import _part_seen_from_cap
 
     sensor = _cone_sensor()
-    assert sensor.params["range"]["far"] == 450.0
-    assert _part_seen_from_cap(_one_pose(480.0), _ball((0, 0, 0), 40.0), sensor)
-    assert not _part_seen_from_cap(_one_pose(495.0), _ball((0, 0, 0), 40.0), sensor)
-
-
-def test_part_seen_from_cap_takes_the_spheres_far_side_against_near():
-    """white_scanner: near = 250 mm. A 40 mm sphere on the axis at 220 mm spans depths 180-260:
-    its far side is within range (seen); at 205 mm it spans 165-245 (not seen)."""
-    from rangesim.experiments.poses import _part_seen_from_cap
-
-    sensor = _cone_sensor()
-    assert sensor.params["range"]["near"] == 250.0
-    assert _part_seen_from_cap(_one_pose(220.0), _ball((0, 0, 0), 40.0), sensor)
-    assert not _part_seen_from_cap(_one_pose(205.0), _ball((0, 0, 0), 40.0), sensor)
+    assert sensor.params["range"][limit] == {"near": 250.0, "far": 450.0}[limit]
+    assert _part_seen_from_cap(_one_pose(seen_at), _ball((0, 0, 0), 40.0), sensor)
+    assert not _part_seen_from_cap(_one_pose(unseen_at), _ball((0, 0, 0), 40.0), sensor)
 
 
 @pytest.mark.parametrize("radius_deg, seen", [(3.0, True), (1.0, False)])
