@@ -267,3 +267,25 @@ def test_the_crease_threshold_is_raised_from_both_sides_of_a_jump(monkeypatch):
     touching = seen[0]
     assert touching[2:-2, 47].all() and touching[2:-2, 48].all()
     assert not touching[:, :46].any() and not touching[:, 50:].any()
+
+
+def test_the_jump_floor_leaves_block_matched_scans_alone(monkeypatch):
+    """FALSE_JUMP_Z bounds the threshold by the pair noise of pixels whose errors are their own;
+    a block matcher's errors are shared over its window and cancel between neighbours, so its
+    scans keep the quantum rule. With the floor made absurd (1e6 standard deviations) a
+    kinect_v1 scan of a box on a floor keeps every jump, while a laser scan of it loses them."""
+    import rangesim.edges._discontinuities as disc
+    from tests.conftest import box, plane, top_down_pose
+
+    scene = [plane(), box([-40, -40, 0], [40, 40, 60])]
+    kinect = rs.scan(scene, rs.load_sensor("kinect_v1").with_params({"camera.width": 320, "camera.height": 240}),
+                     pose=top_down_pose(800.0), seed=0)
+    laser = rs.scan(scene, rs.load_sensor("white_scanner").with_params({"camera.width": 160, "camera.height": 120}),
+                    pose=top_down_pose(380.0), seed=0)
+    jumps = {}
+    for key, z in (("as is", disc.FALSE_JUMP_Z), ("absurd", 1e6)):
+        monkeypatch.setattr(disc, "FALSE_JUMP_Z", z)
+        jumps[key] = [int((rs.edges.gradient(s).labels == EdgeLabel.JUMP).sum()) for s in (kinect, laser)]
+    assert min(jumps["as is"]) > 50, jumps
+    assert jumps["absurd"][0] == jumps["as is"][0], jumps
+    assert jumps["absurd"][1] < 0.1 * jumps["as is"][1], jumps
