@@ -1,7 +1,12 @@
 """Codes defined once and imported everywhere (status codes, file channel names)."""
 from __future__ import annotations
 
+import math
 from enum import IntEnum
+
+#: a Gaussian profile's full width at half maximum per standard deviation, 2 sqrt(2 ln 2): the
+#: laser sheet's thickness (``laser.stripe_width``) is given as a FWHM
+FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
 
 
 class Status(IntEnum):

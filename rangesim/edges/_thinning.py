@@ -12,6 +12,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from rangesim.core.constants import FWHM_PER_SIGMA
 from rangesim.core.params import MAX_WINDOW_PX
 from rangesim.edges._grid import nonzero2
 
@@ -292,7 +293,7 @@ def stripe_clearance(scan: Any, footprint: np.ndarray, valid: np.ndarray) -> int
     fp = fp[np.asarray(valid, bool) & np.isfinite(fp)] if fp.ndim else fp
     if fp.size == 0 or not np.isfinite(fwhm) or fwhm < 0:
         return JUMP_CLEARANCE
-    reach = MIXING_SIGMAS * fwhm / (2.0 * np.sqrt(2.0 * np.log(2.0))) / float(np.median(fp))
+    reach = MIXING_SIGMAS * fwhm / FWHM_PER_SIGMA / float(np.median(fp))
     return min(1 + max(0, int(np.ceil(reach - 1.5))), MAX_WINDOW_PX)
 
 

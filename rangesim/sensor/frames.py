@@ -21,12 +21,12 @@ Image noise (electrons, per pixel and frame, independent between frames):
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from rangesim.core import constants
+
 #: FWHM of a Gaussian in units of its standard deviation
-FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
+FWHM_PER_SIGMA = constants.FWHM_PER_SIGMA
 #: vertices light the frames within this many sheet sigmas
 PROFILE_CUTOFF = 4.5
 

@@ -48,8 +48,9 @@ import math
 import drjit as dr
 
 from rangesim.core.backend import mitsuba, opaque_scalar
+from rangesim.core.constants import FWHM_PER_SIGMA
 
-FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+FWHM_TO_SIGMA = 1.0 / FWHM_PER_SIGMA
 MAX_WINDOW_PX = 16
 #: smallest centroid shift (pixels) that counts as mixing: below the peak resolution of every
 #: preset (1/16 px quantisation, 0.03-0.2 px noise)

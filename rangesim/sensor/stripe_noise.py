@@ -107,6 +107,7 @@ import numpy as np
 from scipy import ndimage, special
 
 from rangesim.core.backend import aligned
+from rangesim.core.constants import FWHM_PER_SIGMA
 
 __all__ = [
     "StripeNoise", "stripe_width_px", "dorsch_sigma_mm", "partial_stripe_shift_mm",
@@ -115,7 +116,7 @@ __all__ = [
     "NumPyDraws", "PixelDraws",
 ]
 
-FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+FWHM_TO_SIGMA = 1.0 / FWHM_PER_SIGMA
 #: below this cosine the footprint formulas are clipped (the stripe covers the whole cell)
 MIN_COS = 0.02
 #: the noise keys of the model and their defaults (all off: a quiet sensor stays exact)
