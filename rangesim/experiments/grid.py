@@ -143,20 +143,12 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
             for combo in combos:
                 sensor_changes, pose_changes, object_changes = split_overrides(combo)
                 changes = {**fixed_sensor, **sensor_changes}
-                with warnings.catch_warnings():  # a swept mode leaves the other mode's keys idle: no news
-                    warnings.simplefilter("ignore", UnusedSensorKeyWarning)
-                    sensor = sensors[sensor_ref.label].with_params(changes) if changes else sensors[sensor_ref.label]
+                sensor = _with_changes(sensors[sensor_ref.label], changes)
                 sensor_data = sensor.to_dict()
                 # the noise seed sees only the settings the sensor reads: a swept key its mode
                 # leaves idle repeats its scans exactly, as the planner's warning says
                 read = {k: v for k, v in changes.items() if k not in UNUSED_BY_MODE.get(sensor.mode, ())}
-                if read != changes:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", UnusedSensorKeyWarning)
-                        seeded = (sensors[sensor_ref.label].with_params(read) if read
-                                  else sensors[sensor_ref.label]).to_dict()
-                else:
-                    seeded = sensor_data
+                seeded = sensor_data if read == changes else _with_changes(sensors[sensor_ref.label], read).to_dict()
                 objects = _merge_objects(fixed_objects, object_changes)
                 pose_table = None if spec.views == 0 else {**spec.pose, **fixed_pose, **pose_changes}
                 for view in range(max(spec.views, 1)):
@@ -177,6 +169,16 @@ def plan_sweep(spec: SweepSpec, keep_scans: bool = False) -> list[SweepTask]:
                         tasks.append(SweepTask(len(tasks), key, columns, payload))
     _refuse_repeated_tasks(tasks, spec)
     return tasks
+
+
+def _with_changes(base: Any, changes: dict[str, Any]) -> Any:
+    """``base.with_params(changes)`` (``base`` itself without changes), quietly: a swept mode
+    leaves the other mode's keys idle, which is no news in a plan."""
+    if not changes:
+        return base
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedSensorKeyWarning)
+        return base.with_params(changes)
 
 
 def _refuse_repeated_tasks(tasks: list[SweepTask], spec: SweepSpec) -> None:
